@@ -1,0 +1,368 @@
+//! Tether configuration: plain serde data, validated before a model is built.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Result, TetherError};
+use crate::material::Material;
+
+/// Standard gravity, m/s^2 (ISO 80000-3).
+pub const STANDARD_GRAVITY: f64 = 9.80665;
+
+/// Physical and numerical parameters of one tether. SI units throughout.
+///
+/// The tether is `segments` identical rigid rods of length `l = length / segments` and mass
+/// `m = mass_per_length * l` (rod inertia `m l^2 / 12` about axes normal to the rod), hung from the
+/// towing aircraft through one axial visco-elastic element and carrying a lumped tip mass.
+///
+/// Damping follows the paper's Table 3, which gives coefficients *per unit mass*:
+/// * joint (bending) damping `c_b = joint_damping_per_mass * m` (N m s), i.e. scaled by the mass of
+///   one segment, as in Fritzkowski & Kaminski's equations divided through by the segment mass;
+/// * axial damping `c_s = axial_damping_per_mass * m_tot` (N s/m), scaled by the total tether mass
+///   `m_tot = mass_per_length * length` that the axial element carries. For Table 3 this gives a
+///   damping ratio of about 0.85 of the axial mode with a 50 kg tip body.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TetherConfig {
+    /// Number of rigid segments n (1 ..= 1000). Default 30 (Table 3).
+    pub segments: usize,
+    /// Unstretched length L, m (0, 5000]. Default 250 (Table 3).
+    pub length: f64,
+    /// Mass per unit length, kg/m (0, 100]. Default 0.329 (Table 3: 82.25 kg over 250 m).
+    pub mass_per_length: f64,
+    /// Diameter d, m (0, 0.5]; sets the aerodynamic areas. Default 0.024.
+    pub diameter: f64,
+    /// Axial stiffness k of the whole tether (EA / L), N/m (0, 1e12]. Default 157431.5 (Table 3).
+    pub axial_stiffness: f64,
+    /// Axial damping per unit tether mass c_k, N s/(m kg) [0, 1e6]. Default 100 (Table 3).
+    pub axial_damping_per_mass: f64,
+    /// Flexural rigidity EI of the joints' bending springs (the paper's k_t), N m^2 [0, 1e9].
+    /// Default 170 (Table 3).
+    pub flexural_rigidity: f64,
+    /// Joint damping per unit segment mass c1, N m s/kg [0, 1e6]. Default 1 (Table 3).
+    pub joint_damping_per_mass: f64,
+    /// Cross-flow (normal) drag coefficient C_n [0, 5]. Default 0.4: the tether's Reynolds number
+    /// (about 1.8e5) is at the cylinder drag crisis, and the paper's settled depths imply a value
+    /// well under the subcritical 1.2 (see README).
+    pub normal_drag_coefficient: f64,
+    /// Skin-friction (tangential) drag coefficient C_t [0, 1], on the wetted area pi d l.
+    /// Default 0.01.
+    pub tangential_drag_coefficient: f64,
+    /// Lumped mass at the free end (the capturing device), kg [0, 1e6]. Default 0.
+    pub tip_mass: f64,
+    /// Breaking (maximum allowable) tension, N (0, 1e9]. Default 550e3 (Table 2, UHMWPE 24 mm).
+    /// Not used by the dynamics; reported so that users can detect overload.
+    pub breaking_tension: f64,
+    /// Gravitational acceleration, m/s^2 [0, 100], acting along +z of the towing-aircraft frame.
+    /// Default 9.80665.
+    pub gravity: f64,
+    /// Fixed RK4 step, s (0, 1]. Default 0.01 (paper section 4).
+    pub time_step: f64,
+}
+
+impl Default for TetherConfig {
+    fn default() -> Self {
+        TetherConfig::table3()
+    }
+}
+
+/// The checks of one numeric field: name, value, lower bound (inclusive?), upper bound, unit.
+struct Range {
+    field: &'static str,
+    value: f64,
+    lo: f64,
+    lo_open: bool,
+    hi: f64,
+    unit: &'static str,
+}
+
+impl Range {
+    fn check(&self) -> Result<()> {
+        let lo_ok = if self.lo_open { self.value > self.lo } else { self.value >= self.lo };
+        if self.value.is_finite() && lo_ok && self.value <= self.hi {
+            return Ok(());
+        }
+        let open = if self.lo_open { "(" } else { "[" };
+        let unit = if self.unit.is_empty() { String::new() } else { format!(" {}", self.unit) };
+        Err(TetherError::invalid_config(
+            self.field,
+            self.value,
+            &format!("{open}{}, {}]{unit}", self.lo, self.hi),
+        ))
+    }
+}
+
+impl TetherConfig {
+    /// Table 3 of the paper: the tether selected for In-Air Capturing (24 mm UHMWPE, 250 m, n = 30).
+    pub fn table3() -> Self {
+        let length = 250.0;
+        let total_mass = 82.25;
+        TetherConfig {
+            segments: 30,
+            length,
+            mass_per_length: total_mass / length,
+            diameter: 0.024,
+            axial_stiffness: 157_431.5,
+            axial_damping_per_mass: 100.0,
+            flexural_rigidity: 170.0,
+            joint_damping_per_mass: 1.0,
+            normal_drag_coefficient: 0.4,
+            tangential_drag_coefficient: 0.01,
+            tip_mass: 0.0,
+            breaking_tension: 550e3,
+            gravity: STANDARD_GRAVITY,
+            time_step: 0.01,
+        }
+    }
+
+    /// Table 1 of the paper: the 10 m verification case (n = 4, m_tot = 5 kg, k = 10 kN/m,
+    /// c1 = 20 N m s/kg), hanging in vacuum.
+    ///
+    /// Table 1 gives one damping coefficient, c1; we apply it to the joints and to the axial
+    /// element alike. It gives no bending stiffness, diameter or breaking tension: bending is off,
+    /// the drag coefficients are zero (the case is in vacuum), and the diameter (10 mm) and breaking
+    /// tension (100 kN) only fill their fields.
+    pub fn table1() -> Self {
+        let length = 10.0;
+        let total_mass = 5.0;
+        let c1 = 20.0;
+        TetherConfig {
+            segments: 4,
+            length,
+            mass_per_length: total_mass / length,
+            diameter: 0.01,
+            axial_stiffness: 10_000.0,
+            axial_damping_per_mass: c1,
+            flexural_rigidity: 0.0,
+            joint_damping_per_mass: c1,
+            normal_drag_coefficient: 0.0,
+            tangential_drag_coefficient: 0.0,
+            tip_mass: 0.0,
+            breaking_tension: 100e3,
+            gravity: STANDARD_GRAVITY,
+            time_step: 0.01,
+        }
+    }
+
+    /// A tether of Table 2's `material` with the given `length` (m) and `diameter` (m), discretised
+    /// into Table 3's 30 segments, with Table 3's damping and drag (see [`crate::material`] for
+    /// how stiffness and mass follow from material and diameter).
+    pub fn from_material(material: Material, length: f64, diameter: f64) -> Result<Self> {
+        Range { field: "length", value: length, lo: 0.0, lo_open: true, hi: 5000.0, unit: "m" }.check()?;
+        Range { field: "diameter", value: diameter, lo: 0.0, lo_open: true, hi: 0.5, unit: "m" }
+            .check()?;
+        let config = TetherConfig {
+            length,
+            diameter,
+            mass_per_length: material.mass_per_length(diameter),
+            axial_stiffness: material.axial_rigidity(diameter) / length,
+            flexural_rigidity: material.flexural_rigidity(diameter),
+            breaking_tension: material.max_tension(diameter),
+            ..TetherConfig::table3()
+        };
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// Looks up a preset by name: `table1`, `table3`, or `<material>-<length m>m-<diameter mm>mm`
+    /// such as `steel-250m-24mm`.
+    pub fn preset(name: &str) -> Result<Self> {
+        match name {
+            "table1" => return Ok(Self::table1()),
+            "table3" => return Ok(Self::table3()),
+            _ => {}
+        }
+        let bad = || {
+            TetherError::invalid_config(
+                "preset",
+                name,
+                "table1, table3, or <uhmwpe|kevlar|steel>-<L>m-<d>mm (e.g. uhmwpe-300m-24mm)",
+            )
+        };
+        let parts: Vec<&str> = name.split('-').collect();
+        let [material, length, diameter] = parts.as_slice() else { return Err(bad()) };
+        let material = Material::from_name(material).map_err(|_| bad())?;
+        let length: f64 = length.strip_suffix('m').and_then(|v| v.parse().ok()).ok_or_else(bad)?;
+        let diameter_mm: f64 =
+            diameter.strip_suffix("mm").and_then(|v| v.parse().ok()).ok_or_else(bad)?;
+        Self::from_material(material, length, diameter_mm * 1e-3)
+    }
+
+    /// Parses a JSON document, rejecting unknown keys, and validates it. Missing keys take
+    /// Table 3's values.
+    pub fn from_json(text: &str) -> Result<Self> {
+        let config: TetherConfig =
+            serde_json::from_str(text).map_err(|e| TetherError::ConfigParse { message: e.to_string() })?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// Serializes to JSON.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string(self).expect("a config of plain numbers always serializes")
+    }
+
+    /// Checks every field against its allowed range.
+    pub fn validate(&self) -> Result<()> {
+        if !(1..=1000).contains(&self.segments) {
+            return Err(TetherError::invalid_config("segments", self.segments, "[1, 1000]"));
+        }
+        let ranges = [
+            Range { field: "length", value: self.length, lo: 0.0, lo_open: true, hi: 5000.0, unit: "m" },
+            Range {
+                field: "mass_per_length",
+                value: self.mass_per_length,
+                lo: 0.0,
+                lo_open: true,
+                hi: 100.0,
+                unit: "kg/m",
+            },
+            Range { field: "diameter", value: self.diameter, lo: 0.0, lo_open: true, hi: 0.5, unit: "m" },
+            Range {
+                field: "axial_stiffness",
+                value: self.axial_stiffness,
+                lo: 0.0,
+                lo_open: true,
+                hi: 1e12,
+                unit: "N/m",
+            },
+            Range {
+                field: "axial_damping_per_mass",
+                value: self.axial_damping_per_mass,
+                lo: 0.0,
+                lo_open: false,
+                hi: 1e6,
+                unit: "N s/(m kg)",
+            },
+            Range {
+                field: "flexural_rigidity",
+                value: self.flexural_rigidity,
+                lo: 0.0,
+                lo_open: false,
+                hi: 1e9,
+                unit: "N m^2",
+            },
+            Range {
+                field: "joint_damping_per_mass",
+                value: self.joint_damping_per_mass,
+                lo: 0.0,
+                lo_open: false,
+                hi: 1e6,
+                unit: "N m s/kg",
+            },
+            Range {
+                field: "normal_drag_coefficient",
+                value: self.normal_drag_coefficient,
+                lo: 0.0,
+                lo_open: false,
+                hi: 5.0,
+                unit: "",
+            },
+            Range {
+                field: "tangential_drag_coefficient",
+                value: self.tangential_drag_coefficient,
+                lo: 0.0,
+                lo_open: false,
+                hi: 1.0,
+                unit: "",
+            },
+            Range { field: "tip_mass", value: self.tip_mass, lo: 0.0, lo_open: false, hi: 1e6, unit: "kg" },
+            Range {
+                field: "breaking_tension",
+                value: self.breaking_tension,
+                lo: 0.0,
+                lo_open: true,
+                hi: 1e9,
+                unit: "N",
+            },
+            Range { field: "gravity", value: self.gravity, lo: 0.0, lo_open: false, hi: 100.0, unit: "m/s^2" },
+            Range { field: "time_step", value: self.time_step, lo: 0.0, lo_open: true, hi: 1.0, unit: "s" },
+        ];
+        ranges.iter().try_for_each(Range::check)
+    }
+
+    /// Segment length l = L / n, m.
+    pub fn segment_length(&self) -> f64 {
+        self.length / self.segments as f64
+    }
+
+    /// Segment mass m = mu l, kg.
+    pub fn segment_mass(&self) -> f64 {
+        self.mass_per_length * self.segment_length()
+    }
+
+    /// Total tether mass mu L, kg.
+    pub fn total_mass(&self) -> f64 {
+        self.mass_per_length * self.length
+    }
+
+    /// Joint damping coefficient c_b = c1 m, N m s.
+    pub fn joint_damping(&self) -> f64 {
+        self.joint_damping_per_mass * self.segment_mass()
+    }
+
+    /// Axial damping coefficient c_s = c_k m_tot, N s/m.
+    pub fn axial_damping(&self) -> f64 {
+        self.axial_damping_per_mass * self.total_mass()
+    }
+
+    /// Number of generalized coordinates, 2n + 1.
+    pub fn dofs(&self) -> usize {
+        2 * self.segments + 1
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn presets_are_valid() {
+        TetherConfig::table1().validate().unwrap();
+        TetherConfig::table3().validate().unwrap();
+        for name in ["steel-250m-24mm", "uhmwpe-300m-24mm", "uhmwpe-150m-16mm", "kevlar-250m-20mm"] {
+            TetherConfig::preset(name).unwrap().validate().unwrap();
+        }
+    }
+
+    #[test]
+    fn table3_derived_quantities() {
+        let c = TetherConfig::table3();
+        assert!((c.total_mass() - 82.25).abs() < 1e-12);
+        assert_eq!(c.dofs(), 61);
+        assert!((c.segment_length() - 250.0 / 30.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn bad_values_name_field_value_and_range() {
+        let mut c = TetherConfig::table3();
+        c.length = -3.0;
+        let msg = c.validate().unwrap_err().to_string();
+        assert!(msg.contains("`length`") && msg.contains("-3") && msg.contains("(0, 5000] m"), "{msg}");
+        let mut c = TetherConfig::table3();
+        c.time_step = f64::NAN;
+        assert!(c.validate().unwrap_err().to_string().contains("time_step"));
+        let mut c = TetherConfig::table3();
+        c.segments = 0;
+        assert!(c.validate().unwrap_err().to_string().contains("[1, 1000]"));
+    }
+
+    #[test]
+    fn json_rejects_unknown_keys_and_fills_defaults() {
+        let err = TetherConfig::from_json(r#"{"lenght": 3}"#).unwrap_err().to_string();
+        assert!(err.contains("lenght"), "{err}");
+        let c = TetherConfig::from_json(r#"{"length": 300}"#).unwrap();
+        assert_eq!(c.length, 300.0);
+        assert_eq!(c.segments, 30);
+        let round = TetherConfig::from_json(&c.to_json()).unwrap();
+        assert_eq!(round, c);
+        assert!(TetherConfig::from_json(r#"{"length": -1}"#).is_err());
+    }
+
+    #[test]
+    fn preset_names_parse() {
+        let c = TetherConfig::preset("steel-250m-24mm").unwrap();
+        assert!((c.mass_per_length - 2.34).abs() < 1e-12);
+        assert!(TetherConfig::preset("steel-250-24").is_err());
+        assert!(TetherConfig::preset("nope").unwrap_err().to_string().contains("preset"));
+    }
+}

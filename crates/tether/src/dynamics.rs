@@ -1,0 +1,526 @@
+//! Equations of motion of the tether (paper section 3.1, Eq. 12), derived from the kinematics
+//! (Eq. 3) by the projection (Kane / Lagrange) method rather than transcribed from the Appendix.
+//!
+//! # Coordinates
+//! `q = [s, phi_1, psi_1, ..., phi_n, psi_n]` (2n + 1 entries): the elongation `s` of the axial
+//! visco-elastic element at the attachment point (section 2.3.6), then the two angles of each
+//! segment (see [`crate::direction`]), segment 1 at the aircraft.
+//!
+//! # Kinematics
+//! The axial element lies along segment 1, so segment 1 starts at `s e_1` and
+//!
+//! ```text
+//! c_i = s e_1 + l sum_{j<i} e_j + (l/2) e_i        centre of segment i
+//! p_t = s e_1 + l sum_{j<=n} e_j                    tip body (centre of gravity of the ACCD)
+//! ```
+//!
+//! # Equations
+//! With kinetic energy `T = sum_i (m/2 |c_i'|^2 + I/2 |e_i'|^2) + M_t/2 |p_t'|^2`, `I = m l^2/12`,
+//! Lagrange's equations read `M(q) q'' = Q(t, q, q')`, where
+//!
+//! * `M = sum_i m J_ci^T J_ci + I J_ei^T J_ei + M_t J_t^T J_t`. Writing `a_ik` for the coefficient
+//!   of `e_k` in `c_i`, the angle block is `M_(j,a)(k,b) = W_jk (de_j/da . de_k/db)` with the scalar
+//!   `W_jk = sum_i m a_ij a_ik + M_t a_tj a_tk + I delta_jk`, which has the closed forms used below
+//!   (the Appendix's `b_i`, `c_i` factors are the special cases s = 0).
+//! * `Q = sum_i J_ci^T (F_i - m c_i''|_{q''=0}) - I J_ei^T e_i''|_{q''=0} + J_t^T (F_t - M_t p_t''|_{q''=0})
+//!   + Q_M + Q_D - [k s + c_s s', 0, ...]`: external forces `F_i` on the segment centres
+//!   (gravity, the apparent force -m a_TA of Eq. 10, aerodynamics of section 2.3.4), the tip force
+//!   `F_t` (Eq. 8), the convective inertia terms (the paper's `f`), bending (Eq. 5) and damping
+//!   (Eq. 7) in the coordinate-free forms below, and the axial element.
+//!
+//! **Bending.** A joint between segments j and j+1 at angle theta stores
+//! `U = -(4 EI / l) ln cos(theta/2) = -(2 EI / l) ln((1 + e_j . e_{j+1}) / 2)`, whose moment
+//! `dU/dtheta = EI (2/l) tan(theta/2) = EI kappa` is section 2.3.1's nonlinear spring; it grows
+//! without bound as theta -> pi. For small angles `U = EI theta^2 / (2 l)`.
+//!
+//! **Damping.** Rayleigh's function `R = c_b/2 sum_j |w_{j+1} - w_j|^2` over the relative angular
+//! velocities of adjacent segments, `w_i = e_i x e_i'` (Eq. 6 without reference to a coordinate
+//! chart), and `c_s s'` on the axial element.
+//!
+//! **Aerodynamics.** Per segment, from the air velocity relative to its centre,
+//! `v = v_air(c_i) - c_i'`, split into `v_t = (v . e_i) e_i` and `v_n = v - v_t`:
+//! `F = 1/2 rho d l (C_n |v_n| v_n + pi C_t |v_t| v_t)`.
+//!
+//! All of `Q` costs O(n) through suffix sums; the dense solve of `M` costs O(n^3) and is the
+//! reference formulation.
+
+use nalgebra::{DMatrix, Vector3};
+
+use crate::config::TetherConfig;
+use crate::direction::DirectionJet;
+use crate::error::{Result, TetherError};
+use crate::surroundings::Surroundings;
+
+type V3 = Vector3<f64>;
+
+/// Below this |cos psi| a segment is taken to have reached the coordinate singularity.
+const SINGULAR_COS_PSI: f64 = 1e-6;
+/// Below this 1 + cos(theta) a joint is taken to have folded back on itself.
+const FOLDED_JOINT: f64 = 1e-12;
+
+/// Energy of the tether and tip body, J, in the towing-aircraft frame.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Energy {
+    /// Translational and rotational kinetic energy.
+    pub kinetic: f64,
+    /// Gravitational potential, zero at the attachment's height (z down, so it is negative below).
+    pub gravity: f64,
+    /// Strain energy of the axial element, k s^2 / 2.
+    pub axial: f64,
+    /// Strain energy of the bending springs.
+    pub bending: f64,
+}
+
+impl Energy {
+    /// Sum of all parts.
+    pub fn total(&self) -> f64 {
+        self.kinetic + self.gravity + self.axial + self.bending
+    }
+}
+
+/// The tether's equations of motion, with the constants derived from a [`TetherConfig`] and
+/// preallocated work buffers: evaluating the right-hand side allocates nothing.
+#[derive(Debug, Clone)]
+pub struct TetherModel {
+    config: TetherConfig,
+    n: usize,
+    l: f64,
+    m: f64,
+    rod_inertia: f64,
+    tip_mass: f64,
+    k: f64,
+    c_s: f64,
+    c_b: f64,
+    ei: f64,
+    gravity: f64,
+    /// 1/2 d l C_n, m^2: times rho |v_n| v_n gives the cross-flow drag.
+    normal_drag: f64,
+    /// 1/2 pi d l C_t, m^2: times rho |v_t| v_t gives the skin friction.
+    tangential_drag: f64,
+    ws: Workspace,
+}
+
+#[derive(Debug, Clone)]
+struct Workspace {
+    jets: Vec<DirectionJet>,
+    e_dot: Vec<V3>,
+    e_conv: Vec<V3>,
+    com: Vec<V3>,
+    com_vel: Vec<V3>,
+    com_acc0: Vec<V3>,
+    /// External force on each segment centre (gravity, apparent, aero), N.
+    force: Vec<V3>,
+    /// Per-segment vector X_k whose projections E_kb . X_k are the generalized forces of bending,
+    /// damping and rotational convective inertia.
+    extra: Vec<V3>,
+    omega: Vec<V3>,
+    tip: V3,
+    tip_vel: V3,
+    tip_acc0: V3,
+    tip_force: V3,
+    /// Lower triangle of the mass matrix, row-major, dim x dim; overwritten by its Cholesky factor.
+    mass: Vec<f64>,
+}
+
+impl TetherModel {
+    /// Builds the model, validating the config.
+    pub fn new(config: &TetherConfig) -> Result<Self> {
+        config.validate()?;
+        let n = config.segments;
+        let l = config.segment_length();
+        let m = config.segment_mass();
+        let dim = config.dofs();
+        Ok(TetherModel {
+            n,
+            l,
+            m,
+            rod_inertia: m * l * l / 12.0,
+            tip_mass: config.tip_mass,
+            k: config.axial_stiffness,
+            c_s: config.axial_damping(),
+            c_b: config.joint_damping(),
+            ei: config.flexural_rigidity,
+            gravity: config.gravity,
+            normal_drag: 0.5 * config.diameter * l * config.normal_drag_coefficient,
+            tangential_drag: 0.5 * std::f64::consts::PI * config.diameter * l * config.tangential_drag_coefficient,
+            ws: Workspace {
+                jets: vec![DirectionJet::default(); n],
+                e_dot: vec![V3::zeros(); n],
+                e_conv: vec![V3::zeros(); n],
+                com: vec![V3::zeros(); n],
+                com_vel: vec![V3::zeros(); n],
+                com_acc0: vec![V3::zeros(); n],
+                force: vec![V3::zeros(); n],
+                extra: vec![V3::zeros(); n],
+                omega: vec![V3::zeros(); n],
+                tip: V3::zeros(),
+                tip_vel: V3::zeros(),
+                tip_acc0: V3::zeros(),
+                tip_force: V3::zeros(),
+                mass: vec![0.0; dim * dim],
+            },
+            config: config.clone(),
+        })
+    }
+
+    /// The configuration this model was built from.
+    pub fn config(&self) -> &TetherConfig {
+        &self.config
+    }
+
+    /// Number of segments n.
+    pub fn segments(&self) -> usize {
+        self.n
+    }
+
+    /// Number of generalized coordinates 2n + 1.
+    pub fn dofs(&self) -> usize {
+        2 * self.n + 1
+    }
+
+    fn check_len(&self, what: &'static str, v: &[f64]) -> Result<()> {
+        if v.len() == self.dofs() {
+            Ok(())
+        } else {
+            Err(TetherError::WrongSize { what, expected: self.dofs(), found: v.len() })
+        }
+    }
+
+    /// Positions, velocities and convective (q'' = 0) accelerations of every point.
+    fn kinematics(&mut self, q: &[f64], qd: &[f64]) {
+        let (s, sd) = (q[0], qd[0]);
+        let ws = &mut self.ws;
+        for k in 0..self.n {
+            let (phi, psi) = (q[1 + 2 * k], q[2 + 2 * k]);
+            let (phi_d, psi_d) = (qd[1 + 2 * k], qd[2 + 2 * k]);
+            let jet = DirectionJet::new(phi, psi);
+            ws.e_dot[k] = jet.rate(phi_d, psi_d);
+            ws.e_conv[k] = jet.convective(phi_d, psi_d);
+            ws.jets[k] = jet;
+        }
+        let e1 = ws.jets[0].e;
+        let mut p = e1 * s;
+        let mut pv = e1 * sd + ws.e_dot[0] * s;
+        let mut pa = ws.e_dot[0] * (2.0 * sd) + ws.e_conv[0] * s;
+        let half = 0.5 * self.l;
+        for k in 0..self.n {
+            let e = ws.jets[k].e;
+            ws.com[k] = p + e * half;
+            ws.com_vel[k] = pv + ws.e_dot[k] * half;
+            ws.com_acc0[k] = pa + ws.e_conv[k] * half;
+            p += e * self.l;
+            pv += ws.e_dot[k] * self.l;
+            pa += ws.e_conv[k] * self.l;
+        }
+        ws.tip = p;
+        ws.tip_vel = pv;
+        ws.tip_acc0 = pa;
+    }
+
+    fn check_chart(&self, time: f64) -> Result<()> {
+        for (k, jet) in self.ws.jets.iter().enumerate() {
+            if jet.cos_psi.abs() < SINGULAR_COS_PSI || !jet.cos_psi.is_finite() {
+                return Err(TetherError::Diverged {
+                    time,
+                    reason: format!(
+                        "segment {} points along the lateral axis (cos psi = {:.3e}), the coordinate singularity",
+                        k + 1,
+                        jet.cos_psi
+                    ),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// External forces on the segment centres and the tip, and the generalized forces of
+    /// bending, damping and rotational inertia (as the per-segment vectors `extra`).
+    fn loads<S: Surroundings + ?Sized>(&mut self, time: f64, surroundings: &S) -> Result<()> {
+        let ws = &mut self.ws;
+        let g_eff = V3::new(0.0, 0.0, self.gravity) - surroundings.frame_acceleration(time);
+        let weight = g_eff * self.m;
+        for k in 0..self.n {
+            let e = ws.jets[k].e;
+            let c = ws.com[k];
+            let rho = surroundings.air_density(time, &c);
+            let rel = surroundings.air_velocity(time, &c) - ws.com_vel[k];
+            let vt = rel.dot(&e);
+            let vn = rel - e * vt;
+            let aero = vn * (rho * self.normal_drag * vn.norm()) + e * (rho * self.tangential_drag * vt * vt.abs());
+            ws.force[k] = weight + aero;
+            ws.extra[k] = ws.e_conv[k] * (-self.rod_inertia);
+            ws.omega[k] = e.cross(&ws.e_dot[k]);
+        }
+        ws.tip_force = g_eff * self.tip_mass + surroundings.tip_force(time, &ws.tip, &ws.tip_vel);
+
+        // Bending springs and joint dampers between segments j and j+1.
+        let bend_gain = 2.0 * self.ei / self.l;
+        for j in 0..self.n.saturating_sub(1) {
+            let (ej, ek) = (ws.jets[j].e, ws.jets[j + 1].e);
+            let one_plus_cos = 1.0 + ej.dot(&ek);
+            if one_plus_cos < FOLDED_JOINT || !one_plus_cos.is_finite() {
+                return Err(TetherError::Diverged {
+                    time,
+                    reason: format!("joint {} between segments {} and {} folded back on itself", j + 1, j + 1, j + 2),
+                });
+            }
+            let coef = bend_gain / one_plus_cos;
+            ws.extra[j] += ek * coef;
+            ws.extra[j + 1] += ej * coef;
+            // Damping torque of this joint: on segment j+1 it is -c_b (w_{j+1} - w_j), on segment j
+            // the opposite; Q_(k,b) = E_kb . (tau_k x e_k).
+            let tau = (ws.omega[j + 1] - ws.omega[j]) * self.c_b;
+            ws.extra[j] += tau.cross(&ej);
+            ws.extra[j + 1] -= tau.cross(&ek);
+        }
+        Ok(())
+    }
+
+    /// Generalized forces Q (right-hand side) into `rhs`, from the loads already computed.
+    fn generalized_forces(&self, q: &[f64], qd: &[f64], rhs: &mut [f64]) {
+        let ws = &self.ws;
+        let s = q[0];
+        let half = 0.5 * self.l;
+        let mut suffix = ws.tip_force - ws.tip_acc0 * self.tip_mass;
+        let mut total = suffix;
+        for k in (0..self.n).rev() {
+            let h = ws.force[k] - ws.com_acc0[k] * self.m;
+            let (a_kk, l_k) = if k == 0 { (half + s, self.l + s) } else { (half, self.l) };
+            let g = h * a_kk + suffix * l_k + ws.extra[k];
+            rhs[1 + 2 * k] = ws.jets[k].e_phi.dot(&g);
+            rhs[2 + 2 * k] = ws.jets[k].e_psi.dot(&g);
+            suffix += h;
+            total += h;
+        }
+        rhs[0] = ws.jets[0].e.dot(&total) - self.k * s - self.c_s * qd[0];
+    }
+
+    /// Assembles the lower triangle of the mass matrix M(q) into the workspace.
+    fn assemble_mass(&mut self, s: f64) {
+        let n = self.n;
+        let dim = 2 * n + 1;
+        let ws = &mut self.ws;
+        let (m, l, tip) = (self.m, self.l, self.tip_mass);
+        let half = 0.5 * l;
+        ws.mass[0] = n as f64 * m + tip;
+        let e1 = ws.jets[0].e;
+        for k in 0..n {
+            let (a_kk, l_k) = if k == 0 { (half + s, l + s) } else { (half, l) };
+            let beyond = m * (n - 1 - k) as f64 + tip;
+            let v_k = m * a_kk + beyond * l_k;
+            let w_kk = m * a_kk * a_kk + beyond * l_k * l_k + self.rod_inertia;
+            let jk = ws.jets[k];
+            let (rp, rs) = (1 + 2 * k, 2 + 2 * k);
+            ws.mass[rp * dim] = v_k * e1.dot(&jk.e_phi);
+            ws.mass[rs * dim] = v_k * e1.dot(&jk.e_psi);
+            // Rows of segment k against segments j < k: W_jk = l_j V_k.
+            for j in 0..k {
+                let l_j = if j == 0 { l + s } else { l };
+                let w = l_j * v_k;
+                let jj = ws.jets[j];
+                let (cp, cs) = (1 + 2 * j, 2 + 2 * j);
+                ws.mass[rp * dim + cp] = w * jk.e_phi.dot(&jj.e_phi);
+                ws.mass[rp * dim + cs] = w * jk.e_phi.dot(&jj.e_psi);
+                ws.mass[rs * dim + cp] = w * jk.e_psi.dot(&jj.e_phi);
+                ws.mass[rs * dim + cs] = w * jk.e_psi.dot(&jj.e_psi);
+            }
+            ws.mass[rp * dim + rp] = w_kk * jk.cos_psi * jk.cos_psi;
+            ws.mass[rs * dim + rp] = 0.0;
+            ws.mass[rs * dim + rs] = w_kk;
+        }
+    }
+
+    /// Generalized accelerations q'' = M(q)^-1 Q(t, q, q') (paper Eq. 12) into `qdd`.
+    ///
+    /// Errors if the state reaches the coordinate singularity, folds a joint completely, or makes
+    /// the mass matrix numerically singular.
+    pub fn accelerations<S: Surroundings + ?Sized>(
+        &mut self,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        surroundings: &S,
+        qdd: &mut [f64],
+    ) -> Result<()> {
+        self.check_len("q", q)?;
+        self.check_len("qd", qd)?;
+        self.check_len("qdd", qdd)?;
+        self.kinematics(q, qd);
+        self.check_chart(time)?;
+        self.loads(time, surroundings)?;
+        self.generalized_forces(q, qd, qdd);
+        self.assemble_mass(q[0]);
+        let dim = self.dofs();
+        cholesky_in_place(&mut self.ws.mass, dim).map_err(|col| TetherError::Diverged {
+            time,
+            reason: format!("mass matrix lost positive definiteness at column {col}"),
+        })?;
+        cholesky_solve(&self.ws.mass, dim, qdd);
+        Ok(())
+    }
+
+    /// The mass matrix M(q) (symmetric, dim x dim). Allocates; for analysis and tests.
+    pub fn mass_matrix(&mut self, q: &[f64]) -> Result<DMatrix<f64>> {
+        self.check_len("q", q)?;
+        let zeros = vec![0.0; q.len()];
+        self.kinematics(q, &zeros);
+        self.assemble_mass(q[0]);
+        let dim = self.dofs();
+        Ok(DMatrix::from_fn(dim, dim, |r, c| {
+            let (r, c) = if r >= c { (r, c) } else { (c, r) };
+            self.ws.mass[r * dim + c]
+        }))
+    }
+
+    /// Energy of the state (no allocation).
+    pub fn energy(&mut self, q: &[f64], qd: &[f64]) -> Result<Energy> {
+        self.check_len("q", q)?;
+        self.check_len("qd", qd)?;
+        self.kinematics(q, qd);
+        let ws = &self.ws;
+        let mut kinetic = 0.5 * self.tip_mass * ws.tip_vel.norm_squared();
+        let mut height = self.tip_mass * ws.tip.z;
+        for k in 0..self.n {
+            kinetic += 0.5 * (self.m * ws.com_vel[k].norm_squared() + self.rod_inertia * ws.e_dot[k].norm_squared());
+            height += self.m * ws.com[k].z;
+        }
+        let mut bending = 0.0;
+        for j in 0..self.n.saturating_sub(1) {
+            let c = ws.jets[j].e.dot(&ws.jets[j + 1].e);
+            bending -= (2.0 * self.ei / self.l) * (0.5 * (1.0 + c)).ln();
+        }
+        Ok(Energy { kinetic, gravity: -self.gravity * height, axial: 0.5 * self.k * q[0] * q[0], bending })
+    }
+
+    /// Tension along the chain (N, positive when pulling) into `tensions` (n + 1 values): entry k < n
+    /// is the axial force at the inboard end of segment k + 1, entry n the force the tip body pulls
+    /// with on the last segment. Entry 0 equals the axial element's k s + c_s s'. Computed from
+    /// Newton's law for everything outboard of each joint with the accelerations of this state.
+    pub fn tensions<S: Surroundings + ?Sized>(
+        &mut self,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        surroundings: &S,
+        qdd: &mut [f64],
+        tensions: &mut [f64],
+    ) -> Result<()> {
+        if tensions.len() != self.n + 1 {
+            return Err(TetherError::WrongSize { what: "tensions", expected: self.n + 1, found: tensions.len() });
+        }
+        self.accelerations(time, q, qd, surroundings, qdd)?;
+        let ws = &self.ws;
+        let (s, sd, sdd) = (q[0], qd[0], qdd[0]);
+        let acc_dir = |k: usize| ws.e_conv[k] + ws.jets[k].e_phi * qdd[1 + 2 * k] + ws.jets[k].e_psi * qdd[2 + 2 * k];
+        let e1dd = acc_dir(0);
+        let mut pa = ws.jets[0].e * sdd + ws.e_dot[0] * (2.0 * sd) + e1dd * s;
+        // Accelerations of centres, stored in place of nothing: accumulate forward, then sum backward.
+        // Two passes keep it allocation-free: first the tip acceleration, then walk inward.
+        for k in 0..self.n {
+            pa += acc_dir(k) * self.l;
+        }
+        let mut pull = ws.tip_force - pa * self.tip_mass;
+        tensions[self.n] = pull.dot(&ws.jets[self.n - 1].e);
+        // Walk inward: the base of segment k is the tip position minus l e_j for j >= k.
+        let mut base_acc = pa;
+        for k in (0..self.n).rev() {
+            let ek_dd = acc_dir(k);
+            base_acc -= ek_dd * self.l;
+            let com_acc = base_acc + ek_dd * (0.5 * self.l);
+            pull += ws.force[k] - com_acc * self.m;
+            tensions[k] = pull.dot(&ws.jets[k].e);
+        }
+        Ok(())
+    }
+
+    /// Joint positions into `out` (n + 1 points, m): the inboard end of each segment (the first at
+    /// `s e_1`, the outboard end of the axial element) and then the tip. The attachment point itself
+    /// is the origin.
+    pub fn joint_positions(&self, q: &[f64], out: &mut [V3]) -> Result<()> {
+        self.check_len("q", q)?;
+        if out.len() != self.n + 1 {
+            return Err(TetherError::WrongSize { what: "joint positions", expected: self.n + 1, found: out.len() });
+        }
+        let mut p = crate::direction::direction(q[1], q[2]) * q[0];
+        out[0] = p;
+        for k in 0..self.n {
+            p += crate::direction::direction(q[1 + 2 * k], q[2 + 2 * k]) * self.l;
+            out[k + 1] = p;
+        }
+        Ok(())
+    }
+
+    /// Tip position (m) and velocity (m/s) in the TA frame.
+    pub fn tip_state(&mut self, q: &[f64], qd: &[f64]) -> Result<(V3, V3)> {
+        self.check_len("q", q)?;
+        self.check_len("qd", qd)?;
+        self.kinematics(q, qd);
+        Ok((self.ws.tip, self.ws.tip_vel))
+    }
+}
+
+/// In-place Cholesky factorisation of the lower triangle of a row-major `dim x dim` matrix.
+/// Returns the failing column if the matrix is not (numerically) positive definite.
+fn cholesky_in_place(a: &mut [f64], dim: usize) -> std::result::Result<(), usize> {
+    for j in 0..dim {
+        let row_j = j * dim;
+        let mut d = a[row_j + j];
+        for k in 0..j {
+            d -= a[row_j + k] * a[row_j + k];
+        }
+        if !(d > 0.0) || !d.is_finite() {
+            return Err(j);
+        }
+        let d = d.sqrt();
+        a[row_j + j] = d;
+        let inv = 1.0 / d;
+        for i in (j + 1)..dim {
+            let row_i = i * dim;
+            let mut v = a[row_i + j];
+            for k in 0..j {
+                v -= a[row_i + k] * a[row_j + k];
+            }
+            a[row_i + j] = v * inv;
+        }
+    }
+    Ok(())
+}
+
+/// Solves L L^T x = b in place, with L from [`cholesky_in_place`].
+fn cholesky_solve(l: &[f64], dim: usize, b: &mut [f64]) {
+    for i in 0..dim {
+        let row = i * dim;
+        let mut v = b[i];
+        for k in 0..i {
+            v -= l[row + k] * b[k];
+        }
+        b[i] = v / l[row + i];
+    }
+    for i in (0..dim).rev() {
+        let mut v = b[i];
+        for k in (i + 1)..dim {
+            v -= l[k * dim + i] * b[k];
+        }
+        b[i] = v / l[i * dim + i];
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cholesky_solves_spd_system() {
+        let a = [4.0, 1.0, 0.5, 1.0, 3.0, 0.2, 0.5, 0.2, 2.0];
+        let mut l = a;
+        cholesky_in_place(&mut l, 3).unwrap();
+        let mut x = [1.0, 2.0, 3.0];
+        cholesky_solve(&l, 3, &mut x);
+        for r in 0..3 {
+            let ax: f64 = (0..3).map(|c| a[r * 3 + c] * x[c]).sum();
+            assert!((ax - [1.0, 2.0, 3.0][r]).abs() < 1e-12);
+        }
+        let mut bad = [1.0, 2.0, 2.0, 1.0];
+        assert_eq!(cholesky_in_place(&mut bad, 2), Err(1));
+    }
+}

@@ -1,0 +1,109 @@
+//! [`Tether`]: a model, its state and its integrator together, for users who just want to step.
+
+use nalgebra::Vector3;
+
+use crate::config::TetherConfig;
+use crate::dynamics::{Energy, TetherModel};
+use crate::error::{Result, TetherError};
+use crate::integrator::Rk4;
+use crate::state::TetherState;
+use crate::surroundings::Surroundings;
+
+/// A tether ready to step: config (validated), model, state and RK4 buffers.
+///
+/// A new tether trails straight back from the aircraft (all segments along -x), at rest and
+/// unstretched, at t = 0: the paper's initial condition of section 4.
+#[derive(Debug, Clone)]
+pub struct Tether {
+    model: TetherModel,
+    state: TetherState,
+    rk4: Rk4,
+    qdd: Vec<f64>,
+}
+
+impl Tether {
+    /// Builds a tether from a config (validated).
+    pub fn new(config: &TetherConfig) -> Result<Self> {
+        let model = TetherModel::new(config)?;
+        let state = TetherState::straight(config.segments, Vector3::new(-1.0, 0.0, 0.0), 0.0)?;
+        Ok(Tether { rk4: Rk4::new(model.dofs()), qdd: vec![0.0; model.dofs()], model, state })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &TetherConfig {
+        self.model.config()
+    }
+
+    /// The model (equations of motion), e.g. for the mass matrix or accelerations at any state.
+    pub fn model_mut(&mut self) -> &mut TetherModel {
+        &mut self.model
+    }
+
+    /// The current state.
+    pub fn state(&self) -> &TetherState {
+        &self.state
+    }
+
+    /// Replaces the state after checking its size and values.
+    pub fn set_state(&mut self, state: TetherState) -> Result<()> {
+        if state.q.len() != self.model.dofs() {
+            return Err(TetherError::WrongSize { what: "state.q", expected: self.model.dofs(), found: state.q.len() });
+        }
+        state.validate()?;
+        self.state = state;
+        Ok(())
+    }
+
+    /// The fixed step, s.
+    pub fn time_step(&self) -> f64 {
+        self.config().time_step
+    }
+
+    /// One RK4 step of the configured length. On error the state is unchanged.
+    pub fn step<S: Surroundings + ?Sized>(&mut self, surroundings: &S) -> Result<()> {
+        let dt = self.model.config().time_step;
+        self.rk4.step(&mut self.model, &mut self.state, surroundings, dt)
+    }
+
+    /// Steps `steps` times, stopping at the first error.
+    pub fn step_many<S: Surroundings + ?Sized>(&mut self, steps: usize, surroundings: &S) -> Result<()> {
+        for _ in 0..steps {
+            self.step(surroundings)?;
+        }
+        Ok(())
+    }
+
+    /// Generalized accelerations at the current state.
+    pub fn accelerations<S: Surroundings + ?Sized>(&mut self, surroundings: &S) -> Result<&[f64]> {
+        let s = &self.state;
+        self.model.accelerations(s.time, &s.q, &s.qd, surroundings, &mut self.qdd)?;
+        Ok(&self.qdd)
+    }
+
+    /// Energy of the current state.
+    pub fn energy(&mut self) -> Energy {
+        self.model.energy(&self.state.q, &self.state.qd).expect("state size is checked on set")
+    }
+
+    /// Tip position (m) and velocity (m/s) in the TA frame.
+    pub fn tip_state(&mut self) -> (Vector3<f64>, Vector3<f64>) {
+        self.model.tip_state(&self.state.q, &self.state.qd).expect("state size is checked on set")
+    }
+
+    /// Joint positions (n + 1 points, see [`TetherModel::joint_positions`]).
+    pub fn joint_positions(&self, out: &mut [Vector3<f64>]) -> Result<()> {
+        self.model.joint_positions(&self.state.q, out)
+    }
+
+    /// Tensions along the chain at the current state (n + 1 values, see [`TetherModel::tensions`]).
+    pub fn tensions<S: Surroundings + ?Sized>(&mut self, surroundings: &S, out: &mut [f64]) -> Result<()> {
+        let s = &self.state;
+        self.model.tensions(s.time, &s.q, &s.qd, surroundings, &mut self.qdd, out)
+    }
+
+    /// Tension of the axial element at the attachment, k s + c_s s', N.
+    pub fn attachment_tension(&self) -> f64 {
+        let c = self.config();
+        c.axial_stiffness * self.state.q[0] + c.axial_damping() * self.state.qd[0]
+    }
+}
