@@ -16,13 +16,15 @@ pub const HEAT_CAPACITY_RATIO: f64 = 1.4;
 pub const LAPSE_RATE: f64 = 0.0065;
 /// Geopotential altitude of the tropopause, m.
 pub const TROPOPAUSE: f64 = 11_000.0;
-/// Highest altitude modelled, m.
+/// Highest altitude modelled (geometric), m.
 pub const CEILING: f64 = 20_000.0;
+/// Earth radius used to convert geometric to geopotential altitude, m.
+pub const EARTH_RADIUS: f64 = 6_356_766.0;
 
 /// Air properties at one altitude.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Atmosphere {
-    /// Geopotential altitude, m.
+    /// Geometric altitude above mean sea level, m.
     pub altitude: f64,
     /// Temperature, K.
     pub temperature: f64,
@@ -35,23 +37,36 @@ pub struct Atmosphere {
 }
 
 impl Atmosphere {
-    /// ISA at `altitude` (geopotential, m) in [-500, 20000].
+    /// ISA at geometric `altitude` (m above mean sea level) in [-500, 20000]. At 6000 m this gives
+    /// the paper's flight condition: density 0.6601 kg/m^3, speed of sound 316.5 m/s.
     pub fn isa(altitude: f64) -> Result<Atmosphere> {
         if !(altitude.is_finite() && (-500.0..=CEILING).contains(&altitude)) {
-            return Err(TetherError::invalid_config("altitude", altitude, "[-500, 20000] m"));
+            return Err(TetherError::invalid_config(
+                "altitude",
+                altitude,
+                "[-500, 20000] m",
+            ));
         }
+        let geometric = altitude;
+        let altitude = EARTH_RADIUS * geometric / (EARTH_RADIUS + geometric);
         let exponent = STANDARD_GRAVITY / (GAS_CONSTANT * LAPSE_RATE);
         let tropopause_temperature = SEA_LEVEL_TEMPERATURE - LAPSE_RATE * TROPOPAUSE;
         let (temperature, pressure) = if altitude <= TROPOPAUSE {
             let t = SEA_LEVEL_TEMPERATURE - LAPSE_RATE * altitude;
-            (t, SEA_LEVEL_PRESSURE * (t / SEA_LEVEL_TEMPERATURE).powf(exponent))
+            (
+                t,
+                SEA_LEVEL_PRESSURE * (t / SEA_LEVEL_TEMPERATURE).powf(exponent),
+            )
         } else {
-            let p11 = SEA_LEVEL_PRESSURE * (tropopause_temperature / SEA_LEVEL_TEMPERATURE).powf(exponent);
-            let decay = (-STANDARD_GRAVITY * (altitude - TROPOPAUSE) / (GAS_CONSTANT * tropopause_temperature)).exp();
+            let p11 = SEA_LEVEL_PRESSURE
+                * (tropopause_temperature / SEA_LEVEL_TEMPERATURE).powf(exponent);
+            let decay = (-STANDARD_GRAVITY * (altitude - TROPOPAUSE)
+                / (GAS_CONSTANT * tropopause_temperature))
+                .exp();
             (tropopause_temperature, p11 * decay)
         };
         Ok(Atmosphere {
-            altitude,
+            altitude: geometric,
             temperature,
             pressure,
             density: pressure / (GAS_CONSTANT * temperature),
@@ -64,20 +79,31 @@ impl Atmosphere {
 mod tests {
     use super::*;
 
-    /// Reference values from the ISA tables (ICAO Doc 7488).
+    /// Reference values from the ISA tables by geometric altitude (ICAO Doc 7488).
     #[test]
     fn matches_isa_tables() {
         let cases = [
             (0.0, 1.2250, 340.29),
             (6000.0, 0.66011, 316.45),
-            (11_000.0, 0.36392, 295.07),
-            (15_000.0, 0.19476, 295.07),
+            (11_000.0, 0.36480, 295.15),
+            (15_000.0, 0.19475, 295.07),
         ];
         for (h, rho, a) in cases {
             let atm = Atmosphere::isa(h).unwrap();
-            assert!((atm.density / rho - 1.0).abs() < 2e-4, "rho at {h}: {}", atm.density);
-            assert!((atm.speed_of_sound / a - 1.0).abs() < 1e-4, "a at {h}: {}", atm.speed_of_sound);
+            assert!(
+                (atm.density / rho - 1.0).abs() < 2e-4,
+                "rho at {h}: {}",
+                atm.density
+            );
+            assert!(
+                (atm.speed_of_sound / a - 1.0).abs() < 1e-4,
+                "a at {h}: {}",
+                atm.speed_of_sound
+            );
         }
-        assert!(Atmosphere::isa(30_000.0).unwrap_err().to_string().contains("altitude"));
+        assert!(Atmosphere::isa(30_000.0)
+            .unwrap_err()
+            .to_string()
+            .contains("altitude"));
     }
 }

@@ -142,7 +142,11 @@ impl TetherModel {
             ei: config.flexural_rigidity,
             gravity: config.gravity,
             normal_drag: 0.5 * config.diameter * l * config.normal_drag_coefficient,
-            tangential_drag: 0.5 * std::f64::consts::PI * config.diameter * l * config.tangential_drag_coefficient,
+            tangential_drag: 0.5
+                * std::f64::consts::PI
+                * config.diameter
+                * l
+                * config.tangential_drag_coefficient,
             ws: Workspace {
                 jets: vec![DirectionJet::default(); n],
                 e_dot: vec![V3::zeros(); n],
@@ -182,7 +186,11 @@ impl TetherModel {
         if v.len() == self.dofs() {
             Ok(())
         } else {
-            Err(TetherError::WrongSize { what, expected: self.dofs(), found: v.len() })
+            Err(TetherError::WrongSize {
+                what,
+                expected: self.dofs(),
+                found: v.len(),
+            })
         }
     }
 
@@ -246,7 +254,8 @@ impl TetherModel {
             let rel = surroundings.air_velocity(time, &c) - ws.com_vel[k];
             let vt = rel.dot(&e);
             let vn = rel - e * vt;
-            let aero = vn * (rho * self.normal_drag * vn.norm()) + e * (rho * self.tangential_drag * vt * vt.abs());
+            let aero = vn * (rho * self.normal_drag * vn.norm())
+                + e * (rho * self.tangential_drag * vt * vt.abs());
             ws.force[k] = weight + aero;
             ws.extra[k] = ws.e_conv[k] * (-self.rod_inertia);
             ws.omega[k] = e.cross(&ws.e_dot[k]);
@@ -261,7 +270,12 @@ impl TetherModel {
             if one_plus_cos < FOLDED_JOINT || !one_plus_cos.is_finite() {
                 return Err(TetherError::Diverged {
                     time,
-                    reason: format!("joint {} between segments {} and {} folded back on itself", j + 1, j + 1, j + 2),
+                    reason: format!(
+                        "joint {} between segments {} and {} folded back on itself",
+                        j + 1,
+                        j + 1,
+                        j + 2
+                    ),
                 });
             }
             let coef = bend_gain / one_plus_cos;
@@ -285,7 +299,11 @@ impl TetherModel {
         let mut total = suffix;
         for k in (0..self.n).rev() {
             let h = ws.force[k] - ws.com_acc0[k] * self.m;
-            let (a_kk, l_k) = if k == 0 { (half + s, self.l + s) } else { (half, self.l) };
+            let (a_kk, l_k) = if k == 0 {
+                (half + s, self.l + s)
+            } else {
+                (half, self.l)
+            };
             let g = h * a_kk + suffix * l_k + ws.extra[k];
             rhs[1 + 2 * k] = ws.jets[k].e_phi.dot(&g);
             rhs[2 + 2 * k] = ws.jets[k].e_psi.dot(&g);
@@ -381,7 +399,9 @@ impl TetherModel {
         let mut kinetic = 0.5 * self.tip_mass * ws.tip_vel.norm_squared();
         let mut height = self.tip_mass * ws.tip.z;
         for k in 0..self.n {
-            kinetic += 0.5 * (self.m * ws.com_vel[k].norm_squared() + self.rod_inertia * ws.e_dot[k].norm_squared());
+            kinetic += 0.5
+                * (self.m * ws.com_vel[k].norm_squared()
+                    + self.rod_inertia * ws.e_dot[k].norm_squared());
             height += self.m * ws.com[k].z;
         }
         let mut bending = 0.0;
@@ -389,7 +409,12 @@ impl TetherModel {
             let c = ws.jets[j].e.dot(&ws.jets[j + 1].e);
             bending -= (2.0 * self.ei / self.l) * (0.5 * (1.0 + c)).ln();
         }
-        Ok(Energy { kinetic, gravity: -self.gravity * height, axial: 0.5 * self.k * q[0] * q[0], bending })
+        Ok(Energy {
+            kinetic,
+            gravity: -self.gravity * height,
+            axial: 0.5 * self.k * q[0] * q[0],
+            bending,
+        })
     }
 
     /// Tension along the chain (N, positive when pulling) into `tensions` (n + 1 values): entry k < n
@@ -406,12 +431,18 @@ impl TetherModel {
         tensions: &mut [f64],
     ) -> Result<()> {
         if tensions.len() != self.n + 1 {
-            return Err(TetherError::WrongSize { what: "tensions", expected: self.n + 1, found: tensions.len() });
+            return Err(TetherError::WrongSize {
+                what: "tensions",
+                expected: self.n + 1,
+                found: tensions.len(),
+            });
         }
         self.accelerations(time, q, qd, surroundings, qdd)?;
         let ws = &self.ws;
         let (s, sd, sdd) = (q[0], qd[0], qdd[0]);
-        let acc_dir = |k: usize| ws.e_conv[k] + ws.jets[k].e_phi * qdd[1 + 2 * k] + ws.jets[k].e_psi * qdd[2 + 2 * k];
+        let acc_dir = |k: usize| {
+            ws.e_conv[k] + ws.jets[k].e_phi * qdd[1 + 2 * k] + ws.jets[k].e_psi * qdd[2 + 2 * k]
+        };
         let e1dd = acc_dir(0);
         let mut pa = ws.jets[0].e * sdd + ws.e_dot[0] * (2.0 * sd) + e1dd * s;
         // Accelerations of centres, stored in place of nothing: accumulate forward, then sum backward.
@@ -439,7 +470,11 @@ impl TetherModel {
     pub fn joint_positions(&self, q: &[f64], out: &mut [V3]) -> Result<()> {
         self.check_len("q", q)?;
         if out.len() != self.n + 1 {
-            return Err(TetherError::WrongSize { what: "joint positions", expected: self.n + 1, found: out.len() });
+            return Err(TetherError::WrongSize {
+                what: "joint positions",
+                expected: self.n + 1,
+                found: out.len(),
+            });
         }
         let mut p = crate::direction::direction(q[1], q[2]) * q[0];
         out[0] = p;

@@ -47,7 +47,11 @@ impl Rk4 {
     ) -> Result<()> {
         let dim = model.dofs();
         if state.q.len() != dim || state.qd.len() != dim {
-            return Err(TetherError::WrongSize { what: "state", expected: dim, found: state.q.len() });
+            return Err(TetherError::WrongSize {
+                what: "state",
+                expected: dim,
+                found: state.q.len(),
+            });
         }
         let t = state.time;
         let h = 0.5 * dt;
@@ -76,10 +80,16 @@ impl Rk4 {
         let w = dt / 6.0;
         for i in 0..dim {
             self.q_stage[i] = q[i] + w * (qd[i] + 2.0 * (self.qd2[i] + self.qd3[i]) + self.qd4[i]);
-            self.qd_stage[i] = qd[i] + w * (self.a1[i] + 2.0 * (self.a2[i] + self.a3[i]) + self.a4[i]);
+            self.qd_stage[i] =
+                qd[i] + w * (self.a1[i] + 2.0 * (self.a2[i] + self.a3[i]) + self.a4[i]);
         }
         let new_time = t + dt;
-        if let Some(i) = self.q_stage.iter().chain(self.qd_stage.iter()).position(|v| !v.is_finite()) {
+        if let Some(i) = self
+            .q_stage
+            .iter()
+            .chain(self.qd_stage.iter())
+            .position(|v| !v.is_finite())
+        {
             return Err(TetherError::Diverged {
                 time: new_time,
                 reason: format!("state entry {i} became non-finite"),

@@ -26,12 +26,14 @@ pub mod dynamics;
 pub mod error;
 pub mod integrator;
 pub mod material;
+pub mod reference;
 pub mod state;
 pub mod surroundings;
 pub mod tether;
 
 pub use atmosphere::Atmosphere;
 pub use config::{TetherConfig, STANDARD_GRAVITY};
+pub use direction::DirectionJet;
 pub use dynamics::{Energy, TetherModel};
 pub use error::{Result, TetherError};
 pub use integrator::Rk4;

@@ -82,7 +82,9 @@ impl Material {
         Material::ALL
             .into_iter()
             .find(|m| m.name().eq_ignore_ascii_case(name))
-            .ok_or_else(|| TetherError::invalid_config("material", name, "one of uhmwpe, kevlar, steel"))
+            .ok_or_else(|| {
+                TetherError::invalid_config("material", name, "one of uhmwpe, kevlar, steel")
+            })
     }
 
     fn rows(self) -> &'static [Row] {
@@ -116,7 +118,10 @@ impl Material {
         } else if diameter >= last.diameter {
             per_area(last)
         } else {
-            let i = rows.windows(2).position(|w| diameter <= w[1].diameter).unwrap_or(0);
+            let i = rows
+                .windows(2)
+                .position(|w| diameter <= w[1].diameter)
+                .unwrap_or(0);
             let (a, b) = (&rows[i], &rows[i + 1]);
             let f = (diameter - a.diameter) / (b.diameter - a.diameter);
             per_area(a) + f * (per_area(b) - per_area(a))

@@ -40,10 +40,18 @@ impl TetherState {
     ) -> Result<Self> {
         let n = directions.len();
         if n == 0 {
-            return Err(TetherError::WrongSize { what: "directions", expected: 1, found: 0 });
+            return Err(TetherError::WrongSize {
+                what: "directions",
+                expected: 1,
+                found: 0,
+            });
         }
         if direction_rates.len() != n {
-            return Err(TetherError::WrongSize { what: "direction_rates", expected: n, found: direction_rates.len() });
+            return Err(TetherError::WrongSize {
+                what: "direction_rates",
+                expected: n,
+                found: direction_rates.len(),
+            });
         }
         let mut q = vec![0.0; 2 * n + 1];
         let mut qd = vec![0.0; 2 * n + 1];
@@ -72,9 +80,10 @@ impl TetherState {
                 return Err(TetherError::InvalidState {
                     field: format!("directions[{k}]"),
                     value: format!("{:?}", d.as_slice()),
-                    reason: "points along the lateral (y) axis, where the angle chart is singular; \
+                    reason:
+                        "points along the lateral (y) axis, where the angle chart is singular; \
                              |y| / |direction| must be below 0.9999995"
-                        .into(),
+                            .into(),
                 });
             }
             let (phi_d, psi_d) = angle_rates(phi, psi, r);
@@ -98,7 +107,11 @@ impl TetherState {
         let n = phi.len();
         for (what, v) in [("psi", psi), ("phi_rate", phi_rate), ("psi_rate", psi_rate)] {
             if v.len() != n {
-                return Err(TetherError::WrongSize { what, expected: n, found: v.len() });
+                return Err(TetherError::WrongSize {
+                    what,
+                    expected: n,
+                    found: v.len(),
+                });
             }
         }
         let mut q = Vec::with_capacity(2 * n + 1);
@@ -131,13 +144,18 @@ impl TetherState {
 
     /// Rate of the unit direction of segment `k` (0-based), 1/s.
     pub fn direction_rate(&self, k: usize) -> Vector3<f64> {
-        DirectionJet::new(self.q[1 + 2 * k], self.q[2 + 2 * k]).rate(self.qd[1 + 2 * k], self.qd[2 + 2 * k])
+        DirectionJet::new(self.q[1 + 2 * k], self.q[2 + 2 * k])
+            .rate(self.qd[1 + 2 * k], self.qd[2 + 2 * k])
     }
 
     /// Checks that every value is finite and no segment sits at the coordinate singularity.
     pub fn validate(&self) -> Result<()> {
         if self.q.len() != self.qd.len() || self.q.len() % 2 != 1 {
-            return Err(TetherError::WrongSize { what: "qd", expected: self.q.len(), found: self.qd.len() });
+            return Err(TetherError::WrongSize {
+                what: "qd",
+                expected: self.q.len(),
+                found: self.qd.len(),
+            });
         }
         check_finite("time", self.time)?;
         for (name, v) in [("q", &self.q), ("qd", &self.qd)] {
@@ -167,6 +185,10 @@ fn check_finite(field: &str, value: f64) -> Result<()> {
     if value.is_finite() {
         Ok(())
     } else {
-        Err(TetherError::InvalidState { field: field.into(), value: value.to_string(), reason: "must be finite".into() })
+        Err(TetherError::InvalidState {
+            field: field.into(),
+            value: value.to_string(),
+            reason: "must be finite".into(),
+        })
     }
 }

@@ -27,7 +27,12 @@ pub trait Surroundings {
     /// External force on the tip body (N) given its position (m) and velocity (m/s) in the TA
     /// frame: the capturing device's aerodynamics, a towed load, ... Gravity and the apparent force
     /// of [`Surroundings::frame_acceleration`] on the tip mass are added by the model. Default: none.
-    fn tip_force(&self, _time: f64, _position: &Vector3<f64>, _velocity: &Vector3<f64>) -> Vector3<f64> {
+    fn tip_force(
+        &self,
+        _time: f64,
+        _position: &Vector3<f64>,
+        _velocity: &Vector3<f64>,
+    ) -> Vector3<f64> {
         Vector3::zeros()
     }
 }
@@ -89,7 +94,12 @@ impl Surroundings for UniformFlow {
     fn frame_acceleration(&self, _time: f64) -> Vector3<f64> {
         self.frame_acceleration
     }
-    fn tip_force(&self, _time: f64, _position: &Vector3<f64>, velocity: &Vector3<f64>) -> Vector3<f64> {
+    fn tip_force(
+        &self,
+        _time: f64,
+        _position: &Vector3<f64>,
+        velocity: &Vector3<f64>,
+    ) -> Vector3<f64> {
         let relative = self.velocity - velocity;
         self.tip_force + relative * (0.5 * self.density * self.tip_drag_area * relative.norm())
     }

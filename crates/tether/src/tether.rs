@@ -26,7 +26,12 @@ impl Tether {
     pub fn new(config: &TetherConfig) -> Result<Self> {
         let model = TetherModel::new(config)?;
         let state = TetherState::straight(config.segments, Vector3::new(-1.0, 0.0, 0.0), 0.0)?;
-        Ok(Tether { rk4: Rk4::new(model.dofs()), qdd: vec![0.0; model.dofs()], model, state })
+        Ok(Tether {
+            rk4: Rk4::new(model.dofs()),
+            qdd: vec![0.0; model.dofs()],
+            model,
+            state,
+        })
     }
 
     /// The configuration.
@@ -47,7 +52,11 @@ impl Tether {
     /// Replaces the state after checking its size and values.
     pub fn set_state(&mut self, state: TetherState) -> Result<()> {
         if state.q.len() != self.model.dofs() {
-            return Err(TetherError::WrongSize { what: "state.q", expected: self.model.dofs(), found: state.q.len() });
+            return Err(TetherError::WrongSize {
+                what: "state.q",
+                expected: self.model.dofs(),
+                found: state.q.len(),
+            });
         }
         state.validate()?;
         self.state = state;
@@ -62,11 +71,16 @@ impl Tether {
     /// One RK4 step of the configured length. On error the state is unchanged.
     pub fn step<S: Surroundings + ?Sized>(&mut self, surroundings: &S) -> Result<()> {
         let dt = self.model.config().time_step;
-        self.rk4.step(&mut self.model, &mut self.state, surroundings, dt)
+        self.rk4
+            .step(&mut self.model, &mut self.state, surroundings, dt)
     }
 
     /// Steps `steps` times, stopping at the first error.
-    pub fn step_many<S: Surroundings + ?Sized>(&mut self, steps: usize, surroundings: &S) -> Result<()> {
+    pub fn step_many<S: Surroundings + ?Sized>(
+        &mut self,
+        steps: usize,
+        surroundings: &S,
+    ) -> Result<()> {
         for _ in 0..steps {
             self.step(surroundings)?;
         }
@@ -76,18 +90,23 @@ impl Tether {
     /// Generalized accelerations at the current state.
     pub fn accelerations<S: Surroundings + ?Sized>(&mut self, surroundings: &S) -> Result<&[f64]> {
         let s = &self.state;
-        self.model.accelerations(s.time, &s.q, &s.qd, surroundings, &mut self.qdd)?;
+        self.model
+            .accelerations(s.time, &s.q, &s.qd, surroundings, &mut self.qdd)?;
         Ok(&self.qdd)
     }
 
     /// Energy of the current state.
     pub fn energy(&mut self) -> Energy {
-        self.model.energy(&self.state.q, &self.state.qd).expect("state size is checked on set")
+        self.model
+            .energy(&self.state.q, &self.state.qd)
+            .expect("state size is checked on set")
     }
 
     /// Tip position (m) and velocity (m/s) in the TA frame.
     pub fn tip_state(&mut self) -> (Vector3<f64>, Vector3<f64>) {
-        self.model.tip_state(&self.state.q, &self.state.qd).expect("state size is checked on set")
+        self.model
+            .tip_state(&self.state.q, &self.state.qd)
+            .expect("state size is checked on set")
     }
 
     /// Joint positions (n + 1 points, see [`TetherModel::joint_positions`]).
@@ -96,9 +115,14 @@ impl Tether {
     }
 
     /// Tensions along the chain at the current state (n + 1 values, see [`TetherModel::tensions`]).
-    pub fn tensions<S: Surroundings + ?Sized>(&mut self, surroundings: &S, out: &mut [f64]) -> Result<()> {
+    pub fn tensions<S: Surroundings + ?Sized>(
+        &mut self,
+        surroundings: &S,
+        out: &mut [f64],
+    ) -> Result<()> {
         let s = &self.state;
-        self.model.tensions(s.time, &s.q, &s.qd, surroundings, &mut self.qdd, out)
+        self.model
+            .tensions(s.time, &s.q, &s.qd, surroundings, &mut self.qdd, out)
     }
 
     /// Tension of the axial element at the attachment, k s + c_s s', N.
