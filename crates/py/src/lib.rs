@@ -1,1 +1,27 @@
+//! `accd_gym._core`: the Python bindings of accd-gym. Glue only; the physics lives in the
+//! pure-Rust crates.
+//!
+//! # Threading model
+//! Every object is `Send + Sync` and guarded by PyO3's borrow checking: a method that steps
+//! (`Tether.step`, `Tether.advance`) takes the object mutably and releases the GIL while the Rust
+//! code runs, so other Python threads proceed, but a second call on the *same* object from another
+//! thread during that time raises `RuntimeError: Already borrowed`. Different objects step in
+//! parallel freely. Nothing here starts threads of its own.
 
+mod arrays;
+mod errors;
+mod tether;
+
+use pyo3::prelude::*;
+
+/// Native core of accd-gym (Rust). Use the `accd_gym` package rather than this module directly.
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add_class::<tether::PyTether>()?;
+    m.add_function(wrap_pyfunction!(tether::tether_config, m)?)?;
+    m.add_function(wrap_pyfunction!(tether::isa, m)?)?;
+    m.add_function(wrap_pyfunction!(tether::stand_in_body, m)?)?;
+    m.add_function(wrap_pyfunction!(tether::towed_tether, m)?)?;
+    Ok(())
+}
