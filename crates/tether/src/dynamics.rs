@@ -22,11 +22,15 @@
 //!   of `e_k` in `c_i`, the angle block is `M_(j,a)(k,b) = W_jk (de_j/da . de_k/db)` with the scalar
 //!   `W_jk = sum_i m a_ij a_ik + M_t a_tj a_tk + I delta_jk`, which has the closed forms used below
 //!   (the Appendix's `b_i`, `c_i` factors are the special cases s = 0).
-//! * `Q = sum_i J_ci^T (F_i - m c_i''|_{q''=0}) - I J_ei^T e_i''|_{q''=0} + J_t^T (F_t - M_t p_t''|_{q''=0})
-//!   + Q_M + Q_D - [k s + c_s s', 0, ...]`: external forces `F_i` on the segment centres
-//!   (gravity, the apparent force -m a_TA of Eq. 10, aerodynamics of section 2.3.4), the tip force
-//!   `F_t` (Eq. 8), the convective inertia terms (the paper's `f`), bending (Eq. 5) and damping
-//!   (Eq. 7) in the coordinate-free forms below, and the axial element.
+//! * the generalized forces are
+//!   ```text
+//!   Q = sum_i J_ci^T (F_i - m c_i''|q''=0) - I J_ei^T e_i''|q''=0 + J_t^T (F_t - M_t p_t''|q''=0)
+//!       + Q_M + Q_D - (k s + c_s s') d/ds
+//!   ```
+//!   with the external forces `F_i` on the segment centres (gravity, the apparent force -m a_TA of
+//!   Eq. 10, aerodynamics of section 2.3.4), the tip force `F_t` (Eq. 8), the convective inertia
+//!   terms (the paper's `f`), bending (Eq. 5) and damping (Eq. 7) in the coordinate-free forms
+//!   below, and the axial element.
 //!
 //! **Bending.** A joint between segments j and j+1 at angle theta stores
 //! `U = -(4 EI / l) ln cos(theta/2) = -(2 EI / l) ln((1 + e_j . e_{j+1}) / 2)`, whose moment
@@ -503,7 +507,7 @@ fn cholesky_in_place(a: &mut [f64], dim: usize) -> std::result::Result<(), usize
         for k in 0..j {
             d -= a[row_j + k] * a[row_j + k];
         }
-        if !(d > 0.0) || !d.is_finite() {
+        if d.is_nan() || d <= 0.0 || d.is_infinite() {
             return Err(j);
         }
         let d = d.sqrt();

@@ -51,13 +51,13 @@ fn bent_and_lateral_shapes_stay_well_conditioned() {
     // Catenary-like sag from trailing to hanging, with lateral excursions up to 45 degrees: the
     // whole operating envelope and beyond (a towed tether sags 10-25 degrees, swings laterally
     // far less than 45).
-    for sag_deg in [0.0, 15.0, 30.0, 60.0, 90.0] {
+    for sag_deg in [0.0f64, 15.0, 30.0, 60.0, 90.0] {
         for lateral_deg in [-45.0, -20.0, 0.0, 20.0, 45.0] {
             let dirs: Vec<_> = (0..n)
                 .map(|k| {
                     let f = k as f64 / (n - 1) as f64;
-                    let phi = (sag_deg as f64 * f).to_radians();
-                    let psi = (lateral_deg as f64 * f).to_radians();
+                    let phi = (sag_deg * f).to_radians();
+                    let psi = (lateral_deg * f).to_radians();
                     direction::direction(phi, psi)
                 })
                 .collect();
