@@ -1,0 +1,59 @@
+//! Errors of the capture simulation. Every variant names what is wrong and the values involved.
+
+use thiserror::Error;
+
+/// Everything that can go wrong when configuring, loading data for, or stepping an episode.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum SimError {
+    /// A configuration value is outside its allowed range.
+    #[error("invalid config: `{field}` = {value} is outside the allowed range {allowed}")]
+    InvalidConfig {
+        /// Dotted name of the field.
+        field: String,
+        /// The offending value, printed.
+        value: String,
+        /// The allowed range or set, in words.
+        allowed: String,
+    },
+    /// A data table (aerodynamic coefficients, wake) is malformed.
+    #[error("invalid table `{table}`: {reason}")]
+    InvalidTable {
+        /// Name of the table or file.
+        table: String,
+        /// What is wrong: wrong shape, non-finite value, non-monotonic axis (with indices).
+        reason: String,
+    },
+    /// A file could not be read or parsed.
+    #[error("cannot read `{path}`: {reason}")]
+    Io {
+        /// The path.
+        path: String,
+        /// The reason.
+        reason: String,
+    },
+    /// The tether model reported an error.
+    #[error(transparent)]
+    Tether(#[from] accd_tether::TetherError),
+}
+
+impl SimError {
+    /// Shorthand for [`SimError::InvalidConfig`].
+    pub fn invalid_config(field: &str, value: impl std::fmt::Display, allowed: &str) -> Self {
+        SimError::InvalidConfig {
+            field: field.to_owned(),
+            value: value.to_string(),
+            allowed: allowed.to_owned(),
+        }
+    }
+
+    /// Shorthand for [`SimError::InvalidTable`].
+    pub fn invalid_table(table: &str, reason: impl Into<String>) -> Self {
+        SimError::InvalidTable {
+            table: table.to_owned(),
+            reason: reason.into(),
+        }
+    }
+}
+
+/// Result alias of this crate.
+pub type Result<T, E = SimError> = std::result::Result<T, E>;

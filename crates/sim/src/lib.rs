@@ -1,0 +1,13 @@
+//! # accd-sim
+//!
+//! One capture episode of DLR's In-Air Capturing, in pure Rust: the Aerodynamically Controlled
+//! Capturing Device (ACCD) as a 6-DoF body at the tip of the [`accd_tether`] tether, the towing
+//! aircraft's (TA) wake and its turbulence, the TA's flight, and the RLV's capture boom. Nothing
+//! here knows about reinforcement learning or batching.
+//!
+//! Frames and units as in `accd_tether`: SI, TA frame with x forward, y starboard, z down, origin
+//! at the tether attachment.
+
+pub mod error;
+
+pub use error::SimError;
