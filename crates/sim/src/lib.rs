@@ -8,6 +8,9 @@
 //! Frames and units as in `accd_tether`: SI, TA frame with x forward, y starboard, z down, origin
 //! at the tether attachment.
 
+pub mod accd;
+pub mod aero;
 pub mod error;
+mod interp;
 
 pub use error::SimError;
