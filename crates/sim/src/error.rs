@@ -31,6 +31,14 @@ pub enum SimError {
         /// The reason.
         reason: String,
     },
+    /// The simulation left the region where it can be trusted.
+    #[error("capture simulation diverged at t = {time:.4} s: {reason}")]
+    Diverged {
+        /// Simulation time of detection, s.
+        time: f64,
+        /// What was detected.
+        reason: String,
+    },
     /// The tether model reported an error.
     #[error(transparent)]
     Tether(#[from] accd_tether::TetherError),

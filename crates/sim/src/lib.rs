@@ -10,7 +10,16 @@
 
 pub mod accd;
 pub mod aero;
+pub mod aircraft;
+pub mod boom;
+pub mod capture;
 pub mod error;
 mod interp;
+pub mod rng;
 
+pub use accd::{AccdConfig, AccdState};
+pub use aero::AeroModel;
+pub use aircraft::AircraftConfig;
+pub use boom::{BoomConfig, CaptureStatus};
+pub use capture::{AirDisturbance, CalmAir, CaptureConfig, CaptureSim, Seeds, Snapshot};
 pub use error::SimError;

@@ -1,0 +1,567 @@
+//! One capture episode: the tether (with the ACCD's mass at its tip), the ACCD's attitude
+//! dynamics and flaps, the towing aircraft's flight, the air (free stream plus any disturbance:
+//! wake, turbulence) and the RLV's boom, stepped together.
+//!
+//! # Integration
+//! The tether coordinates and the ACCD's attitude quaternion and body rates form one state,
+//! advanced by classical RK4 at the tether's fixed step (0.01 s by default). At every stage the
+//! ACCD's aerodynamic force (from its attitude, rates, flaps and the air at its position) enters
+//! the tether as the tip force, and its moment drives Euler's equations. Once per step, before
+//! the RK4 stages: the flap actuators, the boom and the air disturbance advance, and the air
+//! density is taken from ISA at the aircraft's altitude (varying linearly with depth below it).
+//! The quaternion is renormalised after each step.
+
+use std::cell::Cell;
+use std::sync::Arc;
+
+use accd_tether::{Atmosphere, Surroundings, TetherConfig, TetherModel, TetherState};
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::accd::{aero_loads, angular_acceleration, AccdConfig, AccdState, Actuators, AeroLoads};
+use crate::aero::AeroModel;
+use crate::aircraft::AircraftConfig;
+use crate::boom::{Boom, BoomConfig, CaptureStatus};
+use crate::error::{Result, SimError};
+
+type V3 = Vector3<f64>;
+
+/// Disturbances of the air relative to the free stream (wake, turbulence), anywhere in the TA
+/// frame. `velocity` must be a pure function during a step; `advance` moves time-dependent
+/// parts (turbulence) forward once per step.
+pub trait AirDisturbance: Send + Sync {
+    /// Velocity added to the free stream at `position` (TA frame, m), m/s.
+    fn velocity(&self, time: f64, position: &V3) -> V3;
+
+    /// Advances internal state from `time` to `time + dt`.
+    fn advance(&mut self, _time: f64, _dt: f64) {}
+}
+
+/// No disturbance: the free stream alone.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct CalmAir;
+
+impl AirDisturbance for CalmAir {
+    fn velocity(&self, _time: f64, _position: &V3) -> V3 {
+        V3::zeros()
+    }
+}
+
+/// Everything that defines an episode's physics. Missing keys take their defaults.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CaptureConfig {
+    /// The tether (Table 3 by default). Its `tip_mass` must stay 0: the ACCD's mass is at the tip.
+    pub tether: TetherConfig,
+    /// The capturing device.
+    pub accd: AccdConfig,
+    /// The towing aircraft.
+    pub aircraft: AircraftConfig,
+    /// The RLV's boom.
+    pub boom: BoomConfig,
+}
+
+impl Default for CaptureConfig {
+    fn default() -> Self {
+        CaptureConfig {
+            tether: TetherConfig::table3(),
+            accd: AccdConfig::default(),
+            aircraft: AircraftConfig::default(),
+            boom: BoomConfig::default(),
+        }
+    }
+}
+
+impl CaptureConfig {
+    /// Checks every part.
+    pub fn validate(&self) -> Result<()> {
+        self.tether.validate()?;
+        if self.tether.tip_mass != 0.0 {
+            return Err(SimError::invalid_config(
+                "tether.tip_mass",
+                self.tether.tip_mass,
+                "0 kg (the ACCD's mass, accd.mass, is the tip mass)",
+            ));
+        }
+        self.accd.validate()?;
+        self.aircraft.validate()?;
+        self.boom.validate()
+    }
+
+    /// Parses JSON (unknown keys are errors) and validates.
+    pub fn from_json(text: &str) -> Result<Self> {
+        let config: CaptureConfig =
+            serde_json::from_str(text).map_err(|e| SimError::InvalidConfig {
+                field: "(document)".into(),
+                value: String::new(),
+                allowed: e.to_string(),
+            })?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// The tether with the ACCD's mass at its tip.
+    pub fn tether_with_tip(&self) -> TetherConfig {
+        TetherConfig {
+            tip_mass: self.accd.mass,
+            ..self.tether.clone()
+        }
+    }
+}
+
+/// The seeds of an episode's independent random streams.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct Seeds {
+    /// Initial conditions.
+    pub initial: u64,
+    /// Wake turbulence (the "wake seed").
+    pub wake: u64,
+    /// RLV motion (the boom).
+    pub rlv: u64,
+}
+
+/// The air as seen during one step.
+#[derive(Debug, Clone, Copy)]
+struct AirAtStep {
+    /// ISA density at the aircraft's altitude, kg/m^3.
+    density: f64,
+    /// d(density)/d(depth below the aircraft), kg/m^4.
+    density_per_depth: f64,
+}
+
+/// The surroundings of the tether during one RK4 stage: free stream and disturbance at every
+/// point, the aircraft's acceleration, and the ACCD's aerodynamic force as the tip force (its
+/// loads are kept for the attitude equations).
+struct Stage<'a> {
+    aircraft: &'a AircraftConfig,
+    air: AirAtStep,
+    disturbance: &'a dyn AirDisturbance,
+    aero: &'a AeroModel,
+    accd: AccdState,
+    deflection: [f64; 4],
+    loads: Cell<AeroLoads>,
+}
+
+impl Surroundings for Stage<'_> {
+    fn air_velocity(&self, time: f64, position: &V3) -> V3 {
+        -self.aircraft.velocity(time) + self.disturbance.velocity(time, position)
+    }
+    fn air_density(&self, _time: f64, position: &V3) -> f64 {
+        self.air.density + self.air.density_per_depth * position.z
+    }
+    fn frame_acceleration(&self, time: f64) -> V3 {
+        self.aircraft.acceleration(time)
+    }
+    fn tip_force(&self, time: f64, position: &V3, velocity: &V3) -> V3 {
+        let wind = self.air_velocity(time, position);
+        let rho = self.air_density(time, position);
+        let loads = aero_loads(
+            self.aero,
+            &self.accd,
+            velocity,
+            &wind,
+            rho,
+            &self.deflection,
+        );
+        self.loads.set(loads);
+        loads.force
+    }
+}
+
+/// RK4 stage buffers.
+#[derive(Debug, Clone)]
+struct Buffers {
+    q: Vec<f64>,
+    qd: Vec<f64>,
+    qd_k: [Vec<f64>; 3],
+    a_k: [Vec<f64>; 4],
+}
+
+/// A snapshot of everything a user may want to see, in the TA frame, SI units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Snapshot {
+    /// Time, s.
+    pub time: f64,
+    /// ACCD centre of gravity (the tether tip), m.
+    pub position: V3,
+    /// Its velocity, m/s.
+    pub velocity: V3,
+    /// ACCD attitude (body to TA frame).
+    pub attitude: UnitQuaternion<f64>,
+    /// Body rates (p, q, r), rad/s.
+    pub omega: V3,
+    /// Flap deflections (right, left, top, bottom), rad.
+    pub deflection: [f64; 4],
+    /// Flap commands, rad.
+    pub command: [f64; 4],
+    /// Capture point (the ACCD's tail), m.
+    pub capture_point: V3,
+    /// Its velocity, m/s.
+    pub capture_point_velocity: V3,
+    /// Boom tip, m.
+    pub boom_tip: V3,
+    /// Boom-tip velocity, m/s.
+    pub boom_velocity: V3,
+    /// Capture criteria.
+    pub capture: CaptureStatus,
+    /// Aerodynamic loads on the ACCD at this state.
+    pub loads: AeroLoads,
+    /// Tension at the attachment, N.
+    pub attachment_tension: f64,
+    /// Velocity of the TA relative to the air, m/s.
+    pub aircraft_velocity: V3,
+}
+
+/// One capture episode's physics.
+pub struct CaptureSim {
+    config: CaptureConfig,
+    model: TetherModel,
+    aero: Arc<AeroModel>,
+    inertia: V3,
+    capture_offset: V3,
+    tether: TetherState,
+    accd: AccdState,
+    actuators: Actuators,
+    boom: Boom,
+    disturbance: Box<dyn AirDisturbance>,
+    buffers: Buffers,
+}
+
+impl CaptureSim {
+    /// A new episode with the default aerodynamic model of the config and calm air: the tether
+    /// trails straight back (the paper's initial condition), the ACCD flies level with the
+    /// aircraft, flaps neutral, t = 0.
+    pub fn new(config: &CaptureConfig, seeds: Seeds) -> Result<Self> {
+        let aero = Arc::new(config.accd.aero_model()?);
+        CaptureSim::with_parts(config, seeds, aero, Box::new(CalmAir))
+    }
+
+    /// A new episode with a given (shared) aerodynamic model and air disturbance.
+    pub fn with_parts(
+        config: &CaptureConfig,
+        seeds: Seeds,
+        aero: Arc<AeroModel>,
+        disturbance: Box<dyn AirDisturbance>,
+    ) -> Result<Self> {
+        config.validate()?;
+        let tether_config = config.tether_with_tip();
+        let model = TetherModel::new(&tether_config)?;
+        let tether = TetherState::straight(tether_config.segments, V3::new(-1.0, 0.0, 0.0), 0.0)?;
+        let dofs = model.dofs();
+        let z = || vec![0.0; dofs];
+        Ok(CaptureSim {
+            inertia: config.accd.principal_inertia(),
+            capture_offset: config.accd.capture_point(),
+            boom: Boom::new(&config.boom, seeds.rlv),
+            config: config.clone(),
+            model,
+            aero,
+            tether,
+            accd: AccdState::default(),
+            actuators: Actuators::default(),
+            disturbance,
+            buffers: Buffers {
+                q: z(),
+                qd: z(),
+                qd_k: [z(), z(), z()],
+                a_k: [z(), z(), z(), z()],
+            },
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &CaptureConfig {
+        &self.config
+    }
+
+    /// Simulation time, s.
+    pub fn time(&self) -> f64 {
+        self.tether.time
+    }
+
+    /// The tether's state.
+    pub fn tether_state(&self) -> &TetherState {
+        &self.tether
+    }
+
+    /// The ACCD's attitude and rates.
+    pub fn accd_state(&self) -> &AccdState {
+        &self.accd
+    }
+
+    /// Replaces the ACCD's attitude and rates (e.g. to test its stability).
+    pub fn set_accd_state(&mut self, state: AccdState) -> Result<()> {
+        if !(state.attitude.coords.iter().all(|v| v.is_finite())
+            && state.omega.iter().all(|v| v.is_finite()))
+        {
+            return Err(SimError::invalid_config(
+                "accd_state",
+                format!("{state:?}"),
+                "finite values",
+            ));
+        }
+        self.accd = state;
+        Ok(())
+    }
+
+    /// Replaces the tether's state (its time becomes the episode's time).
+    pub fn set_tether_state(&mut self, state: TetherState) -> Result<()> {
+        if state.q.len() != self.model.dofs() {
+            return Err(accd_tether::TetherError::WrongSize {
+                what: "tether state",
+                expected: self.model.dofs(),
+                found: state.q.len(),
+            }
+            .into());
+        }
+        state.validate()?;
+        self.tether = state;
+        Ok(())
+    }
+
+    /// The flap actuators.
+    pub fn actuators(&self) -> &Actuators {
+        &self.actuators
+    }
+
+    /// Fixed physics step, s.
+    pub fn time_step(&self) -> f64 {
+        self.config.tether.time_step
+    }
+
+    fn air_at_step(&self) -> Result<AirAtStep> {
+        let altitude = self.config.aircraft.altitude_at(self.tether.time);
+        let here = Atmosphere::isa(altitude.clamp(-500.0, 20_000.0))?;
+        let below = Atmosphere::isa((altitude - 100.0).clamp(-500.0, 20_000.0))?;
+        Ok(AirAtStep {
+            density: here.density,
+            density_per_depth: (below.density - here.density) / 100.0,
+        })
+    }
+
+    /// Derivatives at one stage: tether accelerations into `qdd`, and the quaternion and body-rate
+    /// rates returned.
+    #[allow(clippy::too_many_arguments)]
+    fn stage(
+        model: &mut TetherModel,
+        stage: &mut Stage<'_>,
+        inertia: &V3,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        quat: &Quaternion<f64>,
+        omega: &V3,
+        qdd: &mut [f64],
+    ) -> Result<(Quaternion<f64>, V3)> {
+        stage.accd = AccdState {
+            attitude: UnitQuaternion::new_normalize(*quat),
+            omega: *omega,
+        };
+        model.accelerations(time, q, qd, &*stage, qdd)?;
+        let loads = stage.loads.get();
+        let omega_dot = angular_acceleration(inertia, omega, &loads.moment);
+        let quat_dot = quat * Quaternion::from_parts(0.0, *omega) * 0.5;
+        Ok((quat_dot, omega_dot))
+    }
+
+    /// Advances one physics step with the flap commands `command` (rad; clipped to the limit).
+    /// On error the episode keeps its last good state.
+    pub fn step(&mut self, command: [f64; 4]) -> Result<()> {
+        let dt = self.time_step();
+        let t = self.tether.time;
+        self.actuators.set_command(&self.config.accd, command)?;
+        self.actuators.advance(&self.config.accd, dt);
+        self.boom.advance(t, dt);
+        self.disturbance.advance(t, dt);
+        let air = self.air_at_step()?;
+
+        let mut stage = Stage {
+            aircraft: &self.config.aircraft,
+            air,
+            disturbance: self.disturbance.as_ref(),
+            aero: &self.aero,
+            accd: self.accd,
+            deflection: self.actuators.deflection,
+            loads: Cell::new(AeroLoads::default()),
+        };
+        let b = &mut self.buffers;
+        let (q0, qd0) = (&self.tether.q, &self.tether.qd);
+        let (att0, w0) = (*self.accd.attitude.quaternion(), self.accd.omega);
+        let dim = q0.len();
+        let h = 0.5 * dt;
+        let inertia = self.inertia;
+
+        let (dq1, dw1) = Self::stage(
+            &mut self.model,
+            &mut stage,
+            &inertia,
+            t,
+            q0,
+            qd0,
+            &att0,
+            &w0,
+            &mut b.a_k[0],
+        )?;
+        for i in 0..dim {
+            b.q[i] = q0[i] + h * qd0[i];
+            b.qd_k[0][i] = qd0[i] + h * b.a_k[0][i];
+        }
+        let (att, w) = (att0 + dq1 * h, w0 + dw1 * h);
+        let (dq2, dw2) = Self::stage(
+            &mut self.model,
+            &mut stage,
+            &inertia,
+            t + h,
+            &b.q,
+            &b.qd_k[0],
+            &att,
+            &w,
+            &mut b.a_k[1],
+        )?;
+        for i in 0..dim {
+            b.q[i] = q0[i] + h * b.qd_k[0][i];
+            b.qd_k[1][i] = qd0[i] + h * b.a_k[1][i];
+        }
+        let (att, w) = (att0 + dq2 * h, w0 + dw2 * h);
+        let (dq3, dw3) = Self::stage(
+            &mut self.model,
+            &mut stage,
+            &inertia,
+            t + h,
+            &b.q,
+            &b.qd_k[1],
+            &att,
+            &w,
+            &mut b.a_k[2],
+        )?;
+        for i in 0..dim {
+            b.q[i] = q0[i] + dt * b.qd_k[1][i];
+            b.qd_k[2][i] = qd0[i] + dt * b.a_k[2][i];
+        }
+        let (att, w) = (att0 + dq3 * dt, w0 + dw3 * dt);
+        let (dq4, dw4) = Self::stage(
+            &mut self.model,
+            &mut stage,
+            &inertia,
+            t + dt,
+            &b.q,
+            &b.qd_k[2],
+            &att,
+            &w,
+            &mut b.a_k[3],
+        )?;
+
+        let sixth = dt / 6.0;
+        for i in 0..dim {
+            b.q[i] = q0[i] + sixth * (qd0[i] + 2.0 * (b.qd_k[0][i] + b.qd_k[1][i]) + b.qd_k[2][i]);
+            b.qd[i] =
+                qd0[i] + sixth * (b.a_k[0][i] + 2.0 * (b.a_k[1][i] + b.a_k[2][i]) + b.a_k[3][i]);
+        }
+        let att = att0 + (dq1 + (dq2 + dq3) * 2.0 + dq4) * sixth;
+        let w = w0 + (dw1 + (dw2 + dw3) * 2.0 + dw4) * sixth;
+        let finite = b.q.iter().chain(b.qd.iter()).all(|v| v.is_finite())
+            && att.coords.iter().all(|v| v.is_finite())
+            && w.iter().all(|v| v.is_finite())
+            && att.norm() > 0.0;
+        if !finite {
+            return Err(SimError::Diverged {
+                time: t + dt,
+                reason: "state became non-finite".into(),
+            });
+        }
+        std::mem::swap(&mut self.tether.q, &mut b.q);
+        std::mem::swap(&mut self.tether.qd, &mut b.qd);
+        self.tether.time = t + dt;
+        self.accd = AccdState {
+            attitude: UnitQuaternion::new_normalize(att),
+            omega: w,
+        };
+        Ok(())
+    }
+
+    /// Steps `steps` times with the same commands.
+    pub fn step_many(&mut self, steps: usize, command: [f64; 4]) -> Result<()> {
+        for _ in 0..steps {
+            self.step(command)?;
+        }
+        Ok(())
+    }
+
+    /// Everything observable about the current state.
+    pub fn snapshot(&mut self) -> Result<Snapshot> {
+        let t = self.tether.time;
+        let (position, velocity) = self.model.tip_state(&self.tether.q, &self.tether.qd)?;
+        let air = self.air_at_step()?;
+        let stage = Stage {
+            aircraft: &self.config.aircraft,
+            air,
+            disturbance: self.disturbance.as_ref(),
+            aero: &self.aero,
+            accd: self.accd,
+            deflection: self.actuators.deflection,
+            loads: Cell::new(AeroLoads::default()),
+        };
+        stage.tip_force(t, &position, &velocity);
+        let loads = stage.loads.get();
+        let attitude = self.accd.attitude;
+        let arm = attitude.transform_vector(&self.capture_offset);
+        let capture_point = position + arm;
+        let capture_point_velocity =
+            velocity + attitude.transform_vector(&self.accd.omega.cross(&self.capture_offset));
+        let boom_tip = self.boom.tip(t);
+        let boom_velocity = self.boom.velocity();
+        let c = &self.config.tether;
+        Ok(Snapshot {
+            time: t,
+            position,
+            velocity,
+            attitude,
+            omega: self.accd.omega,
+            deflection: self.actuators.deflection,
+            command: self.actuators.command,
+            capture_point,
+            capture_point_velocity,
+            boom_tip,
+            boom_velocity,
+            capture: CaptureStatus::evaluate(
+                &self.config.boom,
+                &capture_point,
+                &capture_point_velocity,
+                &boom_tip,
+                &boom_velocity,
+            ),
+            loads,
+            attachment_tension: c.axial_stiffness * self.tether.q[0]
+                + c.axial_damping() * self.tether.qd[0],
+            aircraft_velocity: self.config.aircraft.velocity(t),
+        })
+    }
+
+    /// Tension along the chain at the current state (n + 1 values, N; see
+    /// [`accd_tether::TetherModel::tensions`]).
+    pub fn tensions(&mut self, out: &mut [f64]) -> Result<()> {
+        let t = self.tether.time;
+        let air = self.air_at_step()?;
+        let stage = Stage {
+            aircraft: &self.config.aircraft,
+            air,
+            disturbance: self.disturbance.as_ref(),
+            aero: &self.aero,
+            accd: self.accd,
+            deflection: self.actuators.deflection,
+            loads: Cell::new(AeroLoads::default()),
+        };
+        let mut qdd = std::mem::take(&mut self.buffers.a_k[0]);
+        let result = self
+            .model
+            .tensions(t, &self.tether.q, &self.tether.qd, &stage, &mut qdd, out);
+        self.buffers.a_k[0] = qdd;
+        Ok(result?)
+    }
+
+    /// Joint positions of the tether (n + 1 points, m; see
+    /// [`accd_tether::TetherModel::joint_positions`]).
+    pub fn joint_positions(&self, out: &mut [V3]) -> Result<()> {
+        Ok(self.model.joint_positions(&self.tether.q, out)?)
+    }
+}
