@@ -10,6 +10,8 @@ x forward, y to starboard, z down.
 
 Public API:
 
+* :class:`CaptureSim` -- one capture episode's physics (tether, 6-DoF capturing device, towing
+  aircraft, RLV boom) for scripted runs; :func:`mix_flaps` turns pitch/yaw/roll into flaps.
 * :class:`Tether` -- the tether model alone, for design studies and validation.
 * :func:`tether_config` -- validated tether configurations from the paper's presets.
 * :func:`towed_tether`, :func:`stand_in_body` -- the towed reference case (a stand-in capturing
@@ -19,17 +21,28 @@ Public API:
   :class:`SimulationError`.
 """
 
-from accd_gym._core import Tether, __version__, isa, stand_in_body, tether_config, towed_tether
+from accd_gym._core import (
+    CaptureSim,
+    Tether,
+    __version__,
+    isa,
+    mix_flaps,
+    stand_in_body,
+    tether_config,
+    towed_tether,
+)
 from accd_gym.errors import AccdError, ConfigError, SimulationError, StateError
 
 __all__ = [
     "AccdError",
+    "CaptureSim",
     "ConfigError",
     "SimulationError",
     "StateError",
     "Tether",
     "__version__",
     "isa",
+    "mix_flaps",
     "stand_in_body",
     "tether_config",
     "towed_tether",

@@ -9,6 +9,7 @@
 //! parallel freely. Nothing here starts threads of its own.
 
 mod arrays;
+mod capture;
 mod errors;
 mod tether;
 
@@ -19,6 +20,8 @@ use pyo3::prelude::*;
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<tether::PyTether>()?;
+    m.add_class::<capture::PyCaptureSim>()?;
+    m.add_function(wrap_pyfunction!(capture::mix_flaps, m)?)?;
     m.add_function(wrap_pyfunction!(tether::tether_config, m)?)?;
     m.add_function(wrap_pyfunction!(tether::isa, m)?)?;
     m.add_function(wrap_pyfunction!(tether::stand_in_body, m)?)?;
