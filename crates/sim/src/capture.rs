@@ -225,6 +225,11 @@ pub struct CaptureSim {
     boom: Boom,
     disturbance: Box<dyn AirDisturbance>,
     buffers: Buffers,
+    /// Time of the last state set from outside, s; the episode time is
+    /// `time_origin + steps * dt`, free of the drift of summing dt.
+    time_origin: f64,
+    /// Steps taken since `time_origin`.
+    steps: u64,
 }
 
 impl CaptureSim {
@@ -266,6 +271,8 @@ impl CaptureSim {
                 qd_k: [z(), z(), z()],
                 a_k: [z(), z(), z(), z()],
             },
+            time_origin: 0.0,
+            steps: 0,
         })
     }
 
@@ -315,6 +322,8 @@ impl CaptureSim {
             .into());
         }
         state.validate()?;
+        self.time_origin = state.time;
+        self.steps = 0;
         self.tether = state;
         Ok(())
     }
@@ -471,7 +480,8 @@ impl CaptureSim {
         }
         std::mem::swap(&mut self.tether.q, &mut b.q);
         std::mem::swap(&mut self.tether.qd, &mut b.qd);
-        self.tether.time = t + dt;
+        self.steps += 1;
+        self.tether.time = self.time_origin + self.steps as f64 * dt;
         self.accd = AccdState {
             attitude: UnitQuaternion::new_normalize(att),
             omega: w,
