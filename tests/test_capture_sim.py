@@ -77,3 +77,23 @@ def test_mix_flaps_follows_fig5():
     assert accd_gym.mix_flaps(1.0, 0.0, 0.0) == [1.0, 1.0, 0.0, 0.0]
     assert accd_gym.mix_flaps(0.0, 1.0, 0.0) == [0.0, 0.0, 1.0, 1.0]
     assert accd_gym.mix_flaps(0.0, 0.0, 1.0) == [1.0, -1.0, -1.0, 1.0]
+
+
+def test_exported_aero_tables_load_back(tmp_path):
+    from accd_gym.cli import main
+
+    path = tmp_path / "aero.json"
+    assert main(["export-aero", "--out", str(path)]) == 0
+    a = accd_gym.CaptureSim().step([5.0, 5.0, -3.0, 2.0], steps=50)
+    b = accd_gym.CaptureSim({"accd": {"aero_table": str(path)}}).step([5.0, 5.0, -3.0, 2.0], steps=50)
+    np.testing.assert_allclose(a["position"], b["position"], rtol=0, atol=1e-9)
+    bad = tmp_path / "bad.json"
+    import json
+
+    data = json.loads(path.read_text())
+    data["alpha_deg"][0], data["alpha_deg"][1] = data["alpha_deg"][1], data["alpha_deg"][0]
+    bad.write_text(json.dumps(data))
+    with pytest.raises(ConfigError, match="alpha_deg"):
+        accd_gym.CaptureSim({"accd": {"aero_table": str(bad)}})
+    with pytest.raises(ConfigError, match="cannot read"):
+        accd_gym.CaptureSim({"accd": {"aero_table": str(tmp_path / "missing.json")}})

@@ -19,6 +19,16 @@ def _settle(args: argparse.Namespace) -> int:
     return 0
 
 
+def _export_aero(args: argparse.Namespace) -> int:
+    from accd_gym import default_aero_table_json
+
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(default_aero_table_json())
+    print(f"wrote the default ACCD aerodynamic tables to {out}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``accd-gym`` and its subcommands."""
     parser = argparse.ArgumentParser(prog="accd-gym", description="accd-gym: In-Air Capturing simulation tools.")
@@ -29,6 +39,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, default=120.0, help="simulated time in seconds (default 120)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_settle)
+    p = sub.add_parser("export-aero", help="write the default ACCD aerodynamic tables (JSON) to start your own")
+    p.add_argument("--out", default="accd-aero.json", help="output file (default: accd-aero.json)")
+    p.set_defaults(func=_export_aero)
     return parser
 
 

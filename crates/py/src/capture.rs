@@ -105,6 +105,14 @@ pub fn mix_flaps(pitch: f64, yaw: f64, roll: f64) -> [f64; 4] {
     mix(pitch, yaw, roll)
 }
 
+/// The default aerodynamic tables of the ACCD as JSON in the documented file format (see
+/// README, "ACCD aerodynamic tables"): a starting point for tables from your own CFD, which
+/// ``CaptureSim({"accd": {"aero_table": path}})`` loads.
+#[pyfunction]
+pub fn default_aero_table_json() -> String {
+    accd_sim::AeroModel::accd().to_json()
+}
+
 /// One In-Air Capturing episode's physics, for scripted (non-RL) runs: Table 3's tether (or a
 /// preset) with the 6-DoF capturing device (ACCD) at its tip, towed at 185 m/s, 6000 m, with the
 /// RLV's boom in formation behind and below. Calm air (the wake arrives with its model).

@@ -384,7 +384,12 @@ impl AeroModel {
 
     /// The model in the file format.
     pub fn to_file_data(&self) -> AeroTableFile {
-        let deg = |v: &Vec<f64>| v.iter().map(|x| x.to_degrees()).collect();
+        // Degrees rounded to 1e-9 so that the file shows the grid as written (-30, not -29.999...).
+        let deg = |v: &Vec<f64>| {
+            v.iter()
+                .map(|x| (x.to_degrees() * 1e9).round() / 1e9)
+                .collect()
+        };
         let per_flap = self.flaps.len() / 4;
         let flap = |f: usize| {
             CoefficientArrays::from_interleaved(&self.flaps[f * per_flap..(f + 1) * per_flap])
