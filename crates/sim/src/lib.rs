@@ -9,5 +9,14 @@
 //! at the tether attachment.
 
 pub mod error;
+pub mod turbulence;
+pub mod wake;
+pub mod wake_field;
 
 pub use error::SimError;
+pub use turbulence::{AmbientTurbulence, Gaussian, Turbulence, TurbulenceConfig};
+pub use wake::{
+    AnalyticWake, Wake, WakeConfig, WakeSample, WakeTable, WakeTableData, WakeTableFiles,
+    WakeTables,
+};
+pub use wake_field::{WakeField, WakeFieldConfig};
