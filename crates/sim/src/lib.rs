@@ -8,6 +8,8 @@
 //! Frames and units as in `accd_tether`: SI, TA frame with x forward, y starboard, z down, origin
 //! at the tether attachment.
 
+#![warn(missing_docs)]
+
 pub mod error;
 pub mod turbulence;
 pub mod wake;

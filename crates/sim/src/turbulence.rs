@@ -62,6 +62,10 @@
 //!   `r = sqrt(-2 ln u1)`, `z0 = r cos(2 pi u2)`, `z1 = r sin(2 pi u2)`; both are used, in that
 //!   order. |z| <= 8.57.
 //!
+//! The `u64` streams are identical on every platform. The Gaussians go through the platform's
+//! `ln`, `sqrt`, `sin` and `cos`: histories are bitwise identical on one platform (same seed, same
+//! history) and may differ in the last bits across platforms' math libraries.
+//!
 //! Per grid step the lanes' Gaussians are drawn lane by lane (lane index `iy * nz + iz`),
 //! components x, y, z; then the ambient's x, y, z from its own stream.
 //!
@@ -532,8 +536,8 @@ impl Turbulence {
         &self.config
     }
 
-    /// Number of wake lanes (y lanes, z lanes); (0, 0)-equivalent count 0 when wake turbulence
-    /// is off is reported by [`Turbulence::wake_lanes`].
+    /// Size of the lane grid: (lanes along y, lanes along z). Whether they are generated at all
+    /// is [`Turbulence::wake_lanes`] (0 when wake turbulence is off).
     pub fn lane_grid(&self) -> (usize, usize) {
         (self.lanes_y.count, self.lanes_z.count)
     }

@@ -77,7 +77,8 @@
 //!   with `W = 0.08` at 8 deg (the paper: about 8 % of `U_inf` at 315 m) and `W = 0.015` at 0 deg
 //!   (our choice: the paper shows a much weaker downwash at 0 deg; a cruise lift coefficient about
 //!   a fifth of the 8 deg one). At `|zeta| = 0.5` the downwash is still 64 % of its axis value,
-//!   at `|zeta| = 1` 17 %; at 560 m it has decayed only to 7.0 % (8 deg);
+//!   at `|zeta| = 1` 17 %; at 560 m it has decayed only to 7.0 % (8 deg); at the settled ACCD
+//!   (about 300 m behind the nose, 50 m below the axis) it is 3.3 % (6 m/s);
 //! * **turbulent kinetic energy**, peaked in the wake and decaying downstream:
 //!   `k = 1.5 I(xi)^2 * exp(-(zeta / h(xi))^2 - (eta / b(xi))^2)` with the turbulence intensity
 //!   `I(xi) = I_0 r(xi) / sqrt(1 + max(xi - 1, 0) / 1.5)`, `h = 0.35 + 0.05 xi`,

@@ -124,8 +124,10 @@ fn table3_tether_flies_in_the_wake_and_settles_lower_with_more_downwash() {
 
 #[test]
 fn config_errors_name_the_field() {
-    let mut c = WakeFieldConfig::default();
-    c.altitude_m = 30_000.0;
+    let c = WakeFieldConfig {
+        altitude_m: 30_000.0,
+        ..WakeFieldConfig::default()
+    };
     let err = WakeField::new(&c, 0).unwrap_err();
     assert!(
         matches!(&err, SimError::InvalidConfig { field, .. } if field == "altitude_m"),
