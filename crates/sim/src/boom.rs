@@ -15,7 +15,7 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, SimError};
-use crate::rng::Stream;
+use crate::rng::{Stream, RLV_STREAM};
 
 type V3 = Vector3<f64>;
 
@@ -135,7 +135,7 @@ pub struct Boom {
 impl Boom {
     /// The boom of an episode whose RLV stream is drawn from `seed`, at t = 0.
     pub fn new(config: &BoomConfig, seed: u64) -> Self {
-        let mut stream = Stream::new(seed, "rlv");
+        let mut stream = Stream::new(seed, RLV_STREAM);
         let base = V3::from_fn(|i, _| {
             config.offset[i] + stream.range(-1.0, 1.0) * config.initial_spread[i]
         });

@@ -8,6 +8,8 @@
 //! Frames and units as in `accd_tether`: SI, TA frame with x forward, y starboard, z down, origin
 //! at the tether attachment.
 
+#![warn(missing_docs)]
+
 pub mod accd;
 pub mod aero;
 pub mod aircraft;
@@ -16,6 +18,9 @@ pub mod capture;
 pub mod error;
 mod interp;
 pub mod rng;
+pub mod turbulence;
+pub mod wake;
+pub mod wake_field;
 
 pub use accd::{AccdConfig, AccdState};
 pub use aero::AeroModel;
@@ -23,3 +28,9 @@ pub use aircraft::AircraftConfig;
 pub use boom::{BoomConfig, CaptureStatus};
 pub use capture::{AirDisturbance, CalmAir, CaptureConfig, CaptureSim, Seeds, Snapshot};
 pub use error::SimError;
+pub use turbulence::{AmbientTurbulence, Turbulence, TurbulenceConfig};
+pub use wake::{
+    AnalyticWake, Wake, WakeConfig, WakeSample, WakeTable, WakeTableData, WakeTableFiles,
+    WakeTables,
+};
+pub use wake_field::{WakeField, WakeFieldConfig};

@@ -1,0 +1,612 @@
+//! Turbulent velocity fluctuations: the wake's (RMS from its turbulent kinetic energy, paper
+//! Eq. 1) and, optionally, the ambient atmosphere's (MIL-F-8785C), time-correlated, drawn from
+//! the episode's **wake seed**, deterministic and cheap per step.
+//!
+//! # Model
+//!
+//! **Gust histories.** Each gust component is a unit-variance first-order Gauss-Markov process
+//! (the Dryden longitudinal form, exponential autocorrelation `exp(-U_inf tau / L_t)`), advanced
+//! on a fixed time grid of step `dt` ([`TurbulenceConfig::time_step_s`]) with the exact
+//! discretisation
+//!
+//! ```text
+//! g[j+1] = a g[j] + sqrt(1 - a^2) n[j],   a = exp(-U_inf dt / L_t),   n[j] ~ N(0, 1) iid,
+//! ```
+//!
+//! started from the stationary distribution (`g ~ N(0, 1)`), so the variance is 1 at every step
+//! and the autocorrelation at lag `m dt` is `a^m` exactly. All three components (x, y, z) use the
+//! same first-order form and length scale (a simplification of Dryden's second-order lateral and
+//! vertical filters; documented choice).
+//!
+//! **Frozen turbulence (Taylor).** The air moves through the TA frame at `-U_inf` along x, so a
+//! point at `x < 0` sees at time `t` the air that crossed the plane `x = 0` (the attachment) at
+//! time `t - tau`, `tau = -x / U_inf`. The histories are generated at that plane and kept in a
+//! ring buffer (allocated once) covering `tau` up to
+//! [`TurbulenceConfig::history_distance_m`]` / U_inf` (default 400 m, 2.2 s at 185 m/s);
+//! points farther behind use the oldest sample, points ahead of the plane (`x > 0`) the newest.
+//! Between grid times the history is interpolated linearly, `(1 - f) g[j] + f g[j+1]`, and divided
+//! by `sqrt((1 - f)^2 + f^2 + 2 f (1 - f) a)` so that the variance stays exactly 1.
+//!
+//! **Lanes across the wake.** Wake turbulence has a small length scale
+//! ([`TurbulenceConfig::wake_length_scale_m`] `L_t`, default 10 m: of the order of the fuselage
+//! diameter and the wing chord of a 70 m aircraft; our choice). Independent histories ("lanes")
+//! are generated on a grid in (y, z) spaced by `L_t` (default y in [-30, 30] m, z in [-10, 90] m:
+//! 7 x 11 lanes around the trailing tether and the capturing device). A point is sampled from the
+//! four lanes around it with bilinear weights `w_i`, renormalised to keep unit variance:
+//! `sum w_i g_i / sqrt(sum w_i^2)`. Two points one spacing apart or more apart laterally are
+//! uncorrelated; points outside the lane grid use its edge lanes.
+//!
+//! **Wake amplitude.** The wake fluctuation at `p` is `sqrt(2 k(p) / 3) g(p)` per component,
+//! `k` from the wake tables (paper Eq. 1); zero where `k = 0`.
+//!
+//! **Ambient turbulence** (optional, [`AmbientTurbulence`]) follows MIL-F-8785C above 2000 ft:
+//! length scale 1750 ft (533.4 m) for all components and, at 6000 m, sigma 1.7 (light),
+//! 2.8 (moderate) or 7.0 m/s (severe) per component, or a custom sigma and length scale. It is one
+//! lane (its length scale dwarfs the wake region, so it is coherent across it) from an independent
+//! random stream, added to the wake fluctuation.
+//!
+//! # Random numbers and seeds
+//!
+//! Every random number comes from ChaCha8 ([`rand_chacha::ChaCha8Rng`], a fixed algorithm) via
+//! our own derivation and Gaussian transform, so histories are bitwise reproducible across
+//! platforms and library versions:
+//!
+//! * **Streams** ([`crate::rng::stream_rng`]): the 256-bit ChaCha key is four successive outputs of
+//!   SplitMix64 started at the wake seed (little-endian), and the ChaCha stream (nonce) is a
+//!   fixed label per use: [`crate::rng::WAKE_LANES_STREAM`] for the wake lanes, [`crate::rng::AMBIENT_STREAM`] for the
+//!   ambient process. SplitMix64's output function is a bijective avalanche mix, so neighbouring
+//!   seeds give unrelated keys, and distinct labels give independent ChaCha streams under one key.
+//!   Adding ambient turbulence does not change the wake lanes' history.
+//! * **Gaussians** ([`crate::rng::Stream`]): Box-Muller on two uniforms built from the top 53 bits of one
+//!   `u64` each, `u1 = 1 - m1 2^-53` in (0, 1], `u2 = m2 2^-53` in [0, 1):
+//!   `r = sqrt(-2 ln u1)`, `z0 = r cos(2 pi u2)`, `z1 = r sin(2 pi u2)`; both are used, in that
+//!   order. |z| <= 8.57.
+//!
+//! The `u64` streams are identical on every platform. The Gaussians go through the platform's
+//! `ln`, `sqrt`, `sin` and `cos`: histories are bitwise identical on one platform (same seed, same
+//! history) and may differ in the last bits across platforms' math libraries.
+//!
+//! Per grid step the lanes' Gaussians are drawn lane by lane (lane index `iy * nz + iz`),
+//! components x, y, z; then the ambient's x, y, z from its own stream.
+//!
+//! # Cost
+//!
+//! `advance` draws `3 * lanes (+ 3)` Gaussians per grid step (234 with the defaults);
+//! [`Turbulence::sample`] reads 24 (+ 6) ring entries. Neither allocates.
+
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Result, SimError};
+use crate::rng::{Stream, AMBIENT_STREAM, WAKE_LANES_STREAM};
+
+/// MIL-F-8785C turbulence length scale above 2000 ft (1750 ft), m.
+pub const MIL_LENGTH_SCALE_M: f64 = 533.4;
+
+/// Most ring-buffer entries a turbulence may hold (lanes x components x history), 16 Mi.
+const MAX_RING_ENTRIES: usize = 16 << 20;
+/// Most wake lanes.
+const MAX_LANES: usize = 4096;
+
+/// Ambient (atmospheric) turbulence, MIL-F-8785C at 6000 m. Serialized in lowercase:
+/// `"none"`, `"light"`, `"moderate"`, `"severe"`, or
+/// `{"custom": {"sigma_mps": 2.0, "length_scale_m": 533.4}}`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase", deny_unknown_fields)]
+pub enum AmbientTurbulence {
+    /// No ambient turbulence.
+    #[default]
+    None,
+    /// Light: sigma 1.7 m/s per component, length scale 533.4 m.
+    Light,
+    /// Moderate: sigma 2.8 m/s per component, length scale 533.4 m.
+    Moderate,
+    /// Severe: sigma 7.0 m/s per component, length scale 533.4 m.
+    Severe,
+    /// Any level.
+    Custom {
+        /// RMS per component, m/s, [0, 50].
+        sigma_mps: f64,
+        /// Length scale, m, [1, 10000].
+        length_scale_m: f64,
+    },
+}
+
+impl AmbientTurbulence {
+    /// RMS velocity per component, m/s.
+    pub fn sigma_mps(&self) -> f64 {
+        match *self {
+            AmbientTurbulence::None => 0.0,
+            AmbientTurbulence::Light => 1.7,
+            AmbientTurbulence::Moderate => 2.8,
+            AmbientTurbulence::Severe => 7.0,
+            AmbientTurbulence::Custom { sigma_mps, .. } => sigma_mps,
+        }
+    }
+
+    /// Length scale, m.
+    pub fn length_scale_m(&self) -> f64 {
+        match *self {
+            AmbientTurbulence::Custom { length_scale_m, .. } => length_scale_m,
+            _ => MIL_LENGTH_SCALE_M,
+        }
+    }
+
+    fn is_on(&self) -> bool {
+        !matches!(self, AmbientTurbulence::None)
+    }
+}
+
+/// Configuration of the turbulence (model in the [module docs](self)).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TurbulenceConfig {
+    /// Generate the wake-turbulence lanes. Default true. (Off saves their cost when there is no
+    /// wake; the wake fluctuation is then zero.)
+    pub wake_turbulence: bool,
+    /// Length scale L_t of the wake turbulence and spacing of its lanes, m, [1, 1000].
+    /// Default 10.
+    pub wake_length_scale_m: f64,
+    /// Lateral extent [min, max] of the lane grid (TA frame y), m, within [-1000, 1000].
+    /// Default [-30, 30].
+    pub lanes_y_m: [f64; 2],
+    /// Vertical extent [min, max] of the lane grid (TA frame z, down), m, within [-1000, 1000].
+    /// Default [-10, 90].
+    pub lanes_z_m: [f64; 2],
+    /// Distance behind the attachment over which the frozen history is kept, m, [0, 5000].
+    /// Default 400 (the 250 m tether with margin).
+    pub history_distance_m: f64,
+    /// Step of the gust time grid, s, [1e-4, 0.1]. Default 0.01 (the physics step).
+    pub time_step_s: f64,
+    /// Ambient turbulence. Default none.
+    pub ambient: AmbientTurbulence,
+}
+
+impl Default for TurbulenceConfig {
+    fn default() -> Self {
+        TurbulenceConfig {
+            wake_turbulence: true,
+            wake_length_scale_m: 10.0,
+            lanes_y_m: [-30.0, 30.0],
+            lanes_z_m: [-10.0, 90.0],
+            history_distance_m: 400.0,
+            time_step_s: 0.01,
+            ambient: AmbientTurbulence::None,
+        }
+    }
+}
+
+fn lane_count(range: [f64; 2], spacing: f64) -> usize {
+    ((range[1] - range[0]) / spacing - 1e-9).ceil().max(0.0) as usize + 1
+}
+
+impl TurbulenceConfig {
+    /// Checks every value; errors name the field as `turbulence.<field>`.
+    pub fn validate(&self) -> Result<()> {
+        let l = self.wake_length_scale_m;
+        if !(l.is_finite() && (1.0..=1000.0).contains(&l)) {
+            return Err(SimError::invalid_config(
+                "turbulence.wake_length_scale_m",
+                l,
+                "[1, 1000] m",
+            ));
+        }
+        for (name, r) in [("lanes_y_m", self.lanes_y_m), ("lanes_z_m", self.lanes_z_m)] {
+            for (i, &v) in r.iter().enumerate() {
+                if !(v.is_finite() && v.abs() <= 1000.0) {
+                    return Err(SimError::invalid_config(
+                        &format!("turbulence.{name}[{i}]"),
+                        v,
+                        "[-1000, 1000] m",
+                    ));
+                }
+            }
+            if r[1] < r[0] {
+                return Err(SimError::invalid_config(
+                    &format!("turbulence.{name}[1]"),
+                    r[1],
+                    &format!("[{}, 1000] m (not below {name}[0])", r[0]),
+                ));
+            }
+        }
+        let lanes = lane_count(self.lanes_y_m, l) * lane_count(self.lanes_z_m, l);
+        if lanes > MAX_LANES {
+            return Err(SimError::invalid_config(
+                "turbulence.wake_length_scale_m",
+                l,
+                &format!(
+                    "a spacing giving at most {MAX_LANES} lanes over the lane extents (gives {lanes})"
+                ),
+            ));
+        }
+        let d = self.history_distance_m;
+        if !(d.is_finite() && (0.0..=5000.0).contains(&d)) {
+            return Err(SimError::invalid_config(
+                "turbulence.history_distance_m",
+                d,
+                "[0, 5000] m",
+            ));
+        }
+        let dt = self.time_step_s;
+        if !(dt.is_finite() && (1e-4..=0.1).contains(&dt)) {
+            return Err(SimError::invalid_config(
+                "turbulence.time_step_s",
+                dt,
+                "[1e-4, 0.1] s",
+            ));
+        }
+        if let AmbientTurbulence::Custom {
+            sigma_mps,
+            length_scale_m,
+        } = self.ambient
+        {
+            if !(sigma_mps.is_finite() && (0.0..=50.0).contains(&sigma_mps)) {
+                return Err(SimError::invalid_config(
+                    "turbulence.ambient.custom.sigma_mps",
+                    sigma_mps,
+                    "[0, 50] m/s",
+                ));
+            }
+            if !(length_scale_m.is_finite() && (1.0..=10_000.0).contains(&length_scale_m)) {
+                return Err(SimError::invalid_config(
+                    "turbulence.ambient.custom.length_scale_m",
+                    length_scale_m,
+                    "[1, 10000] m",
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Position of a point on a 1D lane axis: the first lane, the fraction towards the second, and
+/// whether there is a second.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct LaneAxis {
+    first: f64,
+    inv_spacing: f64,
+    count: usize,
+}
+
+impl LaneAxis {
+    /// `(i, f)` with lanes i and i + 1 (i + 1 only when count > 1; f = 0 otherwise).
+    #[inline]
+    fn locate(&self, x: f64) -> (usize, usize, f64) {
+        if self.count == 1 {
+            return (0, 0, 0.0);
+        }
+        let r = ((x - self.first) * self.inv_spacing).clamp(0.0, (self.count - 1) as f64);
+        let r = if r.is_nan() { 0.0 } else { r };
+        let i = (r as usize).min(self.count - 2);
+        (i, i + 1, r - i as f64)
+    }
+}
+
+/// Interpolation in time: two ring slots, the fraction, and the variance-restoring factor.
+#[derive(Debug, Clone, Copy)]
+struct TimeStencil {
+    slot0: usize,
+    slot1: usize,
+    f: f64,
+}
+
+/// Time-correlated wake and ambient turbulence of one episode. Build once, [`Turbulence::reset`]
+/// per episode, [`Turbulence::advance`] once per physics step, [`Turbulence::sample`] anywhere.
+#[derive(Debug, Clone)]
+pub struct Turbulence {
+    config: TurbulenceConfig,
+    seed: u64,
+    inv_airspeed: f64,
+    dt: f64,
+    inv_dt: f64,
+    max_delay: f64,
+    lanes_y: LaneAxis,
+    lanes_z: LaneAxis,
+    /// Number of wake lanes (0 when wake turbulence is off).
+    lanes: usize,
+    a_wake: f64,
+    b_wake: f64,
+    a_ambient: f64,
+    b_ambient: f64,
+    sigma_ambient: f64,
+    ambient: bool,
+    /// Channels per grid time: 3 per lane, then 3 ambient when on.
+    channels: usize,
+    /// Grid times kept.
+    slots: usize,
+    /// `slots * channels` values, slot-major; slot of grid index j is j mod slots.
+    ring: Vec<f32>,
+    /// Current value of every channel (full precision).
+    state: Vec<f64>,
+    /// Grid index of the newest generated time.
+    newest: i64,
+    time: f64,
+    wake_rng: Stream,
+    ambient_rng: Stream,
+}
+
+impl Turbulence {
+    /// Turbulence advected at `airspeed_mps` (U_inf, m/s, (0, 400]) from the wake seed `seed`,
+    /// at time 0 with its history filled (stationary from the start).
+    pub fn new(config: &TurbulenceConfig, airspeed_mps: f64, seed: u64) -> Result<Turbulence> {
+        config.validate()?;
+        if !(airspeed_mps.is_finite() && airspeed_mps > 0.0 && airspeed_mps <= 400.0) {
+            return Err(SimError::invalid_config(
+                "airspeed_mps",
+                airspeed_mps,
+                "(0, 400] m/s",
+            ));
+        }
+        let dt = config.time_step_s;
+        let spacing = config.wake_length_scale_m;
+        let lanes_y = LaneAxis {
+            first: config.lanes_y_m[0],
+            inv_spacing: 1.0 / spacing,
+            count: lane_count(config.lanes_y_m, spacing),
+        };
+        let lanes_z = LaneAxis {
+            first: config.lanes_z_m[0],
+            inv_spacing: 1.0 / spacing,
+            count: lane_count(config.lanes_z_m, spacing),
+        };
+        let lanes = if config.wake_turbulence {
+            lanes_y.count * lanes_z.count
+        } else {
+            0
+        };
+        let ambient = config.ambient.is_on();
+        let channels = 3 * lanes + if ambient { 3 } else { 0 };
+        let max_delay = config.history_distance_m / airspeed_mps;
+        let slots = (max_delay / dt).ceil() as usize + 3;
+        if slots * channels > MAX_RING_ENTRIES {
+            return Err(SimError::invalid_config(
+                "turbulence.history_distance_m",
+                config.history_distance_m,
+                &format!(
+                    "a distance giving at most {MAX_RING_ENTRIES} history entries (gives {})",
+                    slots * channels
+                ),
+            ));
+        }
+        let a_wake = (-airspeed_mps * dt / spacing).exp();
+        let a_ambient = (-airspeed_mps * dt / config.ambient.length_scale_m()).exp();
+        let mut t = Turbulence {
+            config: config.clone(),
+            seed,
+            inv_airspeed: 1.0 / airspeed_mps,
+            dt,
+            inv_dt: 1.0 / dt,
+            max_delay,
+            lanes_y,
+            lanes_z,
+            lanes,
+            a_wake,
+            b_wake: (1.0 - a_wake * a_wake).sqrt(),
+            a_ambient,
+            b_ambient: (1.0 - a_ambient * a_ambient).sqrt(),
+            sigma_ambient: config.ambient.sigma_mps(),
+            ambient,
+            channels,
+            slots,
+            ring: vec![0.0; slots * channels],
+            state: vec![0.0; channels],
+            newest: 0,
+            time: 0.0,
+            wake_rng: Stream::new(seed, WAKE_LANES_STREAM),
+            ambient_rng: Stream::new(seed, AMBIENT_STREAM),
+        };
+        t.reset(seed);
+        Ok(t)
+    }
+
+    /// Restarts at time 0 from wake seed `seed`: new streams, a fresh stationary history.
+    /// Allocates nothing.
+    pub fn reset(&mut self, seed: u64) {
+        self.seed = seed;
+        self.wake_rng = Stream::new(seed, WAKE_LANES_STREAM);
+        self.ambient_rng = Stream::new(seed, AMBIENT_STREAM);
+        self.time = 0.0;
+        // Grid indices -(slots - 1) ..= 0; the first from the stationary distribution.
+        self.newest = -(self.slots as i64 - 1);
+        let wake_channels = 3 * self.lanes;
+        for c in 0..wake_channels {
+            self.state[c] = self.wake_rng.gaussian();
+        }
+        if self.ambient {
+            for c in wake_channels..self.channels {
+                self.state[c] = self.ambient_rng.gaussian();
+            }
+        }
+        self.store_newest();
+        while self.newest < 0 {
+            self.generate();
+        }
+    }
+
+    fn store_newest(&mut self) {
+        let slot = self.newest.rem_euclid(self.slots as i64) as usize;
+        let row = &mut self.ring[slot * self.channels..(slot + 1) * self.channels];
+        for (r, s) in row.iter_mut().zip(&self.state) {
+            *r = *s as f32;
+        }
+    }
+
+    /// Generates the next grid time.
+    fn generate(&mut self) {
+        let wake_channels = 3 * self.lanes;
+        let (a, b) = (self.a_wake, self.b_wake);
+        for g in &mut self.state[..wake_channels] {
+            *g = a * *g + b * self.wake_rng.gaussian();
+        }
+        if self.ambient {
+            let (a, b) = (self.a_ambient, self.b_ambient);
+            for g in &mut self.state[wake_channels..] {
+                *g = a * *g + b * self.ambient_rng.gaussian();
+            }
+        }
+        self.newest += 1;
+        self.store_newest();
+    }
+
+    /// Advances the clock by `dt` (s, finite, >= 0), generating the grid times it passes.
+    /// Call once per physics step; samples are held between calls. Allocates nothing.
+    pub fn advance(&mut self, dt: f64) -> Result<()> {
+        if !(dt.is_finite() && dt >= 0.0) {
+            return Err(SimError::invalid_config("dt", dt, "a finite step >= 0 s"));
+        }
+        self.time += dt;
+        while (self.newest as f64) * self.dt < self.time {
+            self.generate();
+        }
+        Ok(())
+    }
+
+    /// Time since the last reset, s.
+    pub fn time(&self) -> f64 {
+        self.time
+    }
+
+    /// The wake seed of the current history.
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &TurbulenceConfig {
+        &self.config
+    }
+
+    /// Size of the lane grid: (lanes along y, lanes along z). Whether they are generated at all
+    /// is [`Turbulence::wake_lanes`] (0 when wake turbulence is off).
+    pub fn lane_grid(&self) -> (usize, usize) {
+        (self.lanes_y.count, self.lanes_z.count)
+    }
+
+    /// Number of wake lanes generated (0 when wake turbulence is off).
+    pub fn wake_lanes(&self) -> usize {
+        self.lanes
+    }
+
+    /// Time step of the gust grid, s.
+    pub fn time_step(&self) -> f64 {
+        self.dt
+    }
+
+    /// Stencil in time for a point at TA-frame x coordinate `x` (m).
+    #[inline]
+    fn time_stencil(&self, x: f64) -> TimeStencil {
+        let delay = (-x * self.inv_airspeed).clamp(0.0, self.max_delay);
+        let delay = if delay.is_nan() { 0.0 } else { delay };
+        let r = (self.time - delay) * self.inv_dt;
+        let mut j0 = r.floor() as i64;
+        let mut f = r - j0 as f64;
+        if j0 >= self.newest {
+            j0 = self.newest - 1;
+            f = 1.0;
+        }
+        let oldest = self.newest - self.slots as i64 + 1;
+        if j0 < oldest {
+            j0 = oldest;
+            f = 0.0;
+        }
+        let n = self.slots as i64;
+        TimeStencil {
+            slot0: j0.rem_euclid(n) as usize,
+            slot1: (j0 + 1).rem_euclid(n) as usize,
+            f,
+        }
+    }
+
+    #[inline]
+    fn read(&self, ts: &TimeStencil, channel: usize) -> f64 {
+        let g0 = self.ring[ts.slot0 * self.channels + channel] as f64;
+        let g1 = self.ring[ts.slot1 * self.channels + channel] as f64;
+        g0 + ts.f * (g1 - g0)
+    }
+
+    /// Variance of the time interpolation of a process with lag-one correlation `a`.
+    #[inline]
+    fn time_variance(f: f64, a: f64) -> f64 {
+        let g = 1.0 - f;
+        g * g + f * f + 2.0 * f * g * a
+    }
+
+    /// The unit-variance wake gust (per component, dimensionless) at `p` (TA frame, m) now.
+    /// Zero when wake turbulence is off. Allocates nothing.
+    #[inline]
+    pub fn wake_unit(&self, p: &Vector3<f64>) -> Vector3<f64> {
+        if self.lanes == 0 {
+            return Vector3::zeros();
+        }
+        let ts = self.time_stencil(p.x);
+        let (iy0, iy1, fy) = self.lanes_y.locate(p.y);
+        let (iz0, iz1, fz) = self.lanes_z.locate(p.z);
+        let nz = self.lanes_z.count;
+        let corners = [
+            (iy0 * nz + iz0, (1.0 - fy) * (1.0 - fz)),
+            (iy0 * nz + iz1, (1.0 - fy) * fz),
+            (iy1 * nz + iz0, fy * (1.0 - fz)),
+            (iy1 * nz + iz1, fy * fz),
+        ];
+        let mut sum = Vector3::zeros();
+        let mut weights2 = 0.0;
+        for (lane, w) in corners {
+            if w == 0.0 {
+                continue;
+            }
+            weights2 += w * w;
+            for c in 0..3 {
+                sum[c] += w * self.read(&ts, 3 * lane + c);
+            }
+        }
+        sum / (weights2 * Self::time_variance(ts.f, self.a_wake)).sqrt()
+    }
+
+    /// The unit-variance ambient gust (per component, dimensionless) at `p` (TA frame, m) now.
+    /// Zero when ambient turbulence is off. Allocates nothing.
+    #[inline]
+    pub fn ambient_unit(&self, p: &Vector3<f64>) -> Vector3<f64> {
+        if !self.ambient {
+            return Vector3::zeros();
+        }
+        let ts = self.time_stencil(p.x);
+        let base = 3 * self.lanes;
+        let scale = 1.0 / Self::time_variance(ts.f, self.a_ambient).sqrt();
+        Vector3::new(
+            self.read(&ts, base),
+            self.read(&ts, base + 1),
+            self.read(&ts, base + 2),
+        ) * scale
+    }
+
+    /// RMS wake fluctuation per component for turbulent kinetic energy `tke` (m^2/s^2):
+    /// `u' = sqrt(2 k / 3)`, m/s (paper Eq. 1).
+    #[inline]
+    pub fn wake_rms(tke: f64) -> f64 {
+        (2.0 * tke.max(0.0) / 3.0).sqrt()
+    }
+
+    /// RMS ambient fluctuation per component, m/s.
+    pub fn ambient_sigma(&self) -> f64 {
+        if self.ambient {
+            self.sigma_ambient
+        } else {
+            0.0
+        }
+    }
+
+    /// The turbulent velocity fluctuation at `p` (TA frame, m) now, m/s:
+    /// `sqrt(2 tke / 3) * wake_unit(p) + sigma_ambient * ambient_unit(p)`, with `tke` (m^2/s^2)
+    /// the wake's turbulent kinetic energy at `p`. Allocates nothing.
+    #[inline]
+    pub fn sample(&self, p: &Vector3<f64>, tke: f64) -> Vector3<f64> {
+        let mut v = Vector3::zeros();
+        if tke > 0.0 {
+            v += self.wake_unit(p) * Self::wake_rms(tke);
+        }
+        if self.ambient {
+            v += self.ambient_unit(p) * self.sigma_ambient;
+        }
+        v
+    }
+}

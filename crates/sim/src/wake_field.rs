@@ -1,0 +1,174 @@
+//! [`WakeField`]: the air around the tether and the capturing device: free stream, the TA's mean
+//! wake ([`crate::wake`]) and turbulence ([`crate::turbulence`]), as an
+//! [`accd_tether::Surroundings`], so that wake and turbulence act on every tether segment.
+//!
+//! `air_velocity(t, p) = (-U_inf, 0, 0) + wake(p).velocity + turbulence(p, wake(p).tke)`, in the
+//! TA frame; `air_density` is uniform: ISA at the configured altitude (0.6601 kg/m^3 at 6000 m).
+//!
+//! **Time.** The turbulence is advanced once per physics step by [`WakeField::advance`] and held
+//! over the RK4 stages of the step: `air_velocity` ignores its `time` argument (the
+//! [`accd_tether::Surroundings`] contract requires a pure function during a step). The wake and
+//! the frozen turbulence are still sampled at each stage's positions.
+//!
+//! A typical loop: `tether.step(&field)?; field.advance(dt)?;`.
+
+use accd_tether::{Atmosphere, Surroundings};
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Result, SimError};
+use crate::turbulence::{Turbulence, TurbulenceConfig};
+use crate::wake::{Wake, WakeConfig, WakeTables};
+
+/// Configuration of the air: flight condition, wake, turbulence.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct WakeFieldConfig {
+    /// Airspeed of the TA, U_inf, m/s, (0, 400]. Default 185 (paper).
+    pub airspeed_mps: f64,
+    /// Altitude for the ISA density, m, [-500, 20000]. Default 6000 (paper).
+    pub altitude_m: f64,
+    /// The mean wake.
+    pub wake: WakeConfig,
+    /// The turbulence.
+    pub turbulence: TurbulenceConfig,
+}
+
+impl Default for WakeFieldConfig {
+    fn default() -> Self {
+        WakeFieldConfig {
+            airspeed_mps: accd_tether::reference::TOWING_AIRSPEED,
+            altitude_m: accd_tether::reference::TOWING_ALTITUDE,
+            wake: WakeConfig::default(),
+            turbulence: TurbulenceConfig::default(),
+        }
+    }
+}
+
+/// Free stream + mean wake + turbulence, as the tether's [`Surroundings`].
+#[derive(Debug, Clone)]
+pub struct WakeField {
+    wake: Wake,
+    turbulence: Turbulence,
+    density: f64,
+    free_stream: Vector3<f64>,
+    tip_drag_area: f64,
+}
+
+impl WakeField {
+    /// The field a config asks for (tables from files or the shared analytic default), with its
+    /// turbulence drawn from `wake_seed`.
+    pub fn new(config: &WakeFieldConfig, wake_seed: u64) -> Result<WakeField> {
+        let tables = if config.wake.enabled {
+            config.wake.load_tables()?
+        } else {
+            WakeTables::analytic()
+        };
+        WakeField::with_tables(config, tables, wake_seed)
+    }
+
+    /// As [`WakeField::new`] with a given (shared) table pair; `config.wake.tables` is ignored.
+    pub fn with_tables(
+        config: &WakeFieldConfig,
+        tables: WakeTables,
+        wake_seed: u64,
+    ) -> Result<WakeField> {
+        let air = Atmosphere::isa(config.altitude_m).map_err(|_| {
+            SimError::invalid_config("altitude_m", config.altitude_m, "[-500, 20000] m")
+        })?;
+        let wake = Wake::new(&config.wake, config.airspeed_mps, tables)?;
+        let mut turbulence_config = config.turbulence.clone();
+        if !config.wake.enabled {
+            turbulence_config.wake_turbulence = false;
+        }
+        let turbulence = Turbulence::new(&turbulence_config, config.airspeed_mps, wake_seed)?;
+        Ok(WakeField::from_parts(wake, turbulence, air.density))
+    }
+
+    /// Assembles a field; the free stream is `(-wake.airspeed(), 0, 0)`, `density` in kg/m^3.
+    pub fn from_parts(wake: Wake, turbulence: Turbulence, density: f64) -> WakeField {
+        WakeField {
+            free_stream: Vector3::new(-wake.airspeed(), 0.0, 0.0),
+            wake,
+            turbulence,
+            density,
+            tip_drag_area: 0.0,
+        }
+    }
+
+    /// Gives the tip a stand-in body with quadratic drag `0.5 rho C_D A |v_rel| v_rel` on its
+    /// velocity relative to the local air (wake and turbulence included); `drag_area` C_D A in m^2.
+    /// Default 0 (no tip force): the capturing device's own model supplies its forces.
+    pub fn with_tip_drag_area(mut self, drag_area: f64) -> WakeField {
+        self.tip_drag_area = drag_area;
+        self
+    }
+
+    /// Advances the turbulence by `dt` (s); call once per physics step.
+    pub fn advance(&mut self, dt: f64) -> Result<()> {
+        self.turbulence.advance(dt)
+    }
+
+    /// Restarts the turbulence at time 0 from `wake_seed`. Allocates nothing.
+    pub fn reset(&mut self, wake_seed: u64) {
+        self.turbulence.reset(wake_seed);
+    }
+
+    /// The mean wake.
+    pub fn wake(&self) -> &Wake {
+        &self.wake
+    }
+
+    /// The turbulence.
+    pub fn turbulence(&self) -> &Turbulence {
+        &self.turbulence
+    }
+
+    /// Air density, kg/m^3.
+    pub fn density(&self) -> f64 {
+        self.density
+    }
+
+    /// Free-stream air velocity in the TA frame, (-U_inf, 0, 0), m/s.
+    pub fn free_stream(&self) -> Vector3<f64> {
+        self.free_stream
+    }
+
+    /// Mean air velocity at `p` (TA frame, m): free stream + wake, m/s.
+    #[inline]
+    pub fn mean_air_velocity_at(&self, p: &Vector3<f64>) -> Vector3<f64> {
+        self.free_stream + self.wake.sample(p).velocity
+    }
+
+    /// Air velocity at `p` (TA frame, m) now: free stream + wake + turbulence, m/s.
+    /// Allocates nothing.
+    #[inline]
+    pub fn air_velocity_at(&self, p: &Vector3<f64>) -> Vector3<f64> {
+        let w = self.wake.sample(p);
+        self.free_stream + w.velocity + self.turbulence.sample(p, w.tke)
+    }
+}
+
+impl Surroundings for WakeField {
+    /// [`WakeField::air_velocity_at`]; `time` is ignored (turbulence held over the step).
+    fn air_velocity(&self, _time: f64, position: &Vector3<f64>) -> Vector3<f64> {
+        self.air_velocity_at(position)
+    }
+
+    fn air_density(&self, _time: f64, _position: &Vector3<f64>) -> f64 {
+        self.density
+    }
+
+    fn tip_force(
+        &self,
+        _time: f64,
+        position: &Vector3<f64>,
+        velocity: &Vector3<f64>,
+    ) -> Vector3<f64> {
+        if self.tip_drag_area == 0.0 {
+            return Vector3::zeros();
+        }
+        let relative = self.air_velocity_at(position) - velocity;
+        relative * (0.5 * self.density * self.tip_drag_area * relative.norm())
+    }
+}
