@@ -9,7 +9,7 @@ from accd_gym import ConfigError, StateError
 
 @pytest.fixture(scope="module")
 def settled_state():
-    sim = accd_gym.CaptureSim(seed=3)
+    sim = accd_gym.CaptureSim(calm=True, seed=3)
     state = sim.settle(40.0)
     return sim, state
 
@@ -25,7 +25,7 @@ def test_open_loop_settles_about_50_m_below(settled_state):
 
 
 def test_pitch_up_lifts_and_flaps_follow_commands():
-    sim = accd_gym.CaptureSim()
+    sim = accd_gym.CaptureSim(calm=True)
     sim.settle(30.0)
     z0 = sim.state()["position"][2]
     s = sim.step(accd_gym.mix_flaps(10.0, 0.0, 0.0), steps=300)
@@ -84,8 +84,8 @@ def test_exported_aero_tables_load_back(tmp_path):
 
     path = tmp_path / "aero.json"
     assert main(["export-aero", "--out", str(path)]) == 0
-    a = accd_gym.CaptureSim().step([5.0, 5.0, -3.0, 2.0], steps=50)
-    b = accd_gym.CaptureSim({"accd": {"aero_table": str(path)}}).step([5.0, 5.0, -3.0, 2.0], steps=50)
+    a = accd_gym.CaptureSim(calm=True).step([5.0, 5.0, -3.0, 2.0], steps=50)
+    b = accd_gym.CaptureSim({"accd": {"aero_table": str(path)}}, calm=True).step([5.0, 5.0, -3.0, 2.0], steps=50)
     np.testing.assert_allclose(a["position"], b["position"], rtol=0, atol=1e-9)
     bad = tmp_path / "bad.json"
     import json
@@ -97,3 +97,18 @@ def test_exported_aero_tables_load_back(tmp_path):
         accd_gym.CaptureSim({"accd": {"aero_table": str(bad)}})
     with pytest.raises(ConfigError, match="cannot read"):
         accd_gym.CaptureSim({"accd": {"aero_table": str(tmp_path / "missing.json")}})
+
+
+def test_wake_pushes_down_and_wake_seed_changes_only_the_gusts():
+    calm = accd_gym.CaptureSim(calm=True).settle(40.0)
+    wake = accd_gym.CaptureSim(seed=1, wake_seed=5).settle(40.0)
+    assert wake["position"][2] > calm["position"][2] + 3.0
+    same = accd_gym.CaptureSim(seed=1, wake_seed=5).settle(40.0)
+    other = accd_gym.CaptureSim(seed=1, wake_seed=6).settle(40.0)
+    np.testing.assert_array_equal(wake["position"], same["position"])
+    assert not np.array_equal(wake["position"], other["position"])
+    np.testing.assert_array_equal(wake["boom_tip"], other["boom_tip"])  # RLV stream unchanged
+    with pytest.raises(ConfigError, match="alpha_deg"):
+        accd_gym.CaptureSim({"wake": {"alpha_deg": 12.0}})
+    moderate = accd_gym.CaptureSim({"turbulence": {"ambient": "moderate"}}).settle(5.0)
+    assert np.isfinite(moderate["position"]).all()

@@ -23,6 +23,7 @@ class CaptureSim:
         config: Optional[dict[str, Any]] = None,
         *,
         tether_preset: str = "table3",
+        calm: bool = False,
         seed: int = 0,
         wake_seed: Optional[int] = None,
     ) -> "CaptureSim": ...

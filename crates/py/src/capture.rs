@@ -64,11 +64,17 @@ fn check_finite_floats(prefix: &str, dict: &Bound<'_, PyDict>) -> PyResult<()> {
 fn build(
     py: Python<'_>,
     tether_preset: &str,
+    calm: bool,
     overrides: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<CaptureConfig> {
+    let defaults = if calm {
+        CaptureConfig::calm()
+    } else {
+        CaptureConfig::default()
+    };
     let base = CaptureConfig {
         tether: TetherConfig::preset(tether_preset).py_err()?,
-        ..CaptureConfig::default()
+        ..defaults
     };
     let Some(overrides) = overrides else {
         base.validate().map_err(sim_to_py)?;
@@ -114,15 +120,19 @@ pub fn default_aero_table_json() -> String {
 }
 
 /// One In-Air Capturing episode's physics, for scripted (non-RL) runs: Table 3's tether (or a
-/// preset) with the 6-DoF capturing device (ACCD) at its tip, towed at 185 m/s, 6000 m, with the
-/// RLV's boom in formation behind and below. Calm air (the wake arrives with its model).
+/// preset) with the 6-DoF capturing device (ACCD) at its tip, towed at 185 m/s, 6000 m through
+/// the aircraft's wake (8 degrees angle of attack) and its turbulence, with the RLV's boom in
+/// formation behind and below. ``calm=True`` switches wake and turbulence off, as in the paper's
+/// open-loop studies.
 ///
 /// All outputs are SI in the towing-aircraft (TA) frame (origin at the attachment, x forward,
 /// y starboard, z down); angles named ``*_deg`` are degrees.
 ///
 /// Args:
 ///     config: nested overrides of the defaults: ``{"tether": {...}, "accd": {...},
-///         "aircraft": {...}, "boom": {...}}`` (see README for every key).
+///         "aircraft": {...}, "boom": {...}, "wake": {...}, "turbulence": {...}}`` (see README
+///         for every key).
+///     calm: start from the no-wake, no-turbulence defaults.
 ///     tether_preset: preset of the tether before overrides (``"table3"``, ``"steel-250m-24mm"``, ...).
 ///     seed: the episode's seed (RLV motion, initial conditions).
 ///     wake_seed: the turbulence seed; defaults to ``seed``.
@@ -138,15 +148,16 @@ pub struct PyCaptureSim {
 #[pymethods]
 impl PyCaptureSim {
     #[new]
-    #[pyo3(signature = (config = None, *, tether_preset = "table3", seed = 0, wake_seed = None))]
+    #[pyo3(signature = (config = None, *, tether_preset = "table3", calm = false, seed = 0, wake_seed = None))]
     fn new(
         py: Python<'_>,
         config: Option<&Bound<'_, PyDict>>,
         tether_preset: &str,
+        calm: bool,
         seed: u64,
         wake_seed: Option<u64>,
     ) -> PyResult<Self> {
-        let config = build(py, tether_preset, config)?;
+        let config = build(py, tether_preset, calm, config)?;
         let seeds = Seeds {
             initial: seed,
             wake: wake_seed.unwrap_or(seed),

@@ -33,9 +33,6 @@ pub struct AircraftConfig {
     pub airspeed: f64,
     /// Altitude at t = 0, m (ISA), [0, 15000]. Default 6000 (paper section 2).
     pub altitude: f64,
-    /// Angle of attack of the TA, degrees [0, 8]: selects the wake between the 0 and 8 degree
-    /// tables. Default 8 (descending flight at high angle of attack, paper section 2.2).
-    pub angle_of_attack_deg: f64,
     /// Scripted accelerations; empty (default) for constant speed. Segments must not overlap.
     pub acceleration_profile: Vec<AccelerationSegment>,
 }
@@ -45,7 +42,6 @@ impl Default for AircraftConfig {
         AircraftConfig {
             airspeed: 185.0,
             altitude: 6000.0,
-            angle_of_attack_deg: 8.0,
             acceleration_profile: vec![],
         }
     }
@@ -62,15 +58,6 @@ impl AircraftConfig {
         }
         if !(self.altitude.is_finite() && (0.0..=15_000.0).contains(&self.altitude)) {
             return bad("aircraft.altitude", self.altitude, "[0, 15000] m");
-        }
-        if !(self.angle_of_attack_deg.is_finite()
-            && (0.0..=8.0).contains(&self.angle_of_attack_deg))
-        {
-            return bad(
-                "aircraft.angle_of_attack_deg",
-                self.angle_of_attack_deg,
-                "[0, 8] deg",
-            );
         }
         let mut last_end = f64::NEG_INFINITY;
         for (i, seg) in self.acceleration_profile.iter().enumerate() {

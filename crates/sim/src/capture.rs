@@ -23,6 +23,9 @@ use crate::aero::AeroModel;
 use crate::aircraft::AircraftConfig;
 use crate::boom::{Boom, BoomConfig, CaptureStatus};
 use crate::error::{Result, SimError};
+use crate::turbulence::{Turbulence, TurbulenceConfig};
+use crate::wake::{Wake, WakeConfig};
+use crate::wake_field::WakeField;
 
 type V3 = Vector3<f64>;
 
@@ -34,7 +37,9 @@ pub trait AirDisturbance: Send + Sync {
     fn velocity(&self, time: f64, position: &V3) -> V3;
 
     /// Advances internal state from `time` to `time + dt`.
-    fn advance(&mut self, _time: f64, _dt: f64) {}
+    fn advance(&mut self, _time: f64, _dt: f64) -> Result<()> {
+        Ok(())
+    }
 }
 
 /// No disturbance: the free stream alone.
@@ -59,15 +64,23 @@ pub struct CaptureConfig {
     pub aircraft: AircraftConfig,
     /// The RLV's boom.
     pub boom: BoomConfig,
+    /// The towing aircraft's mean wake (on by default, at 8 degrees angle of attack).
+    pub wake: WakeConfig,
+    /// Wake and ambient turbulence (wake turbulence on by default, ambient off).
+    pub turbulence: TurbulenceConfig,
 }
 
 impl Default for CaptureConfig {
+    /// The capture mission: Table 3's tether, the default ACCD and boom, the aircraft at 185 m/s
+    /// and 6000 m, its wake at 8 degrees angle of attack with wake turbulence.
     fn default() -> Self {
         CaptureConfig {
             tether: TetherConfig::table3(),
             accd: AccdConfig::default(),
             aircraft: AircraftConfig::default(),
             boom: BoomConfig::default(),
+            wake: WakeConfig::default(),
+            turbulence: TurbulenceConfig::default(),
         }
     }
 }
@@ -85,7 +98,17 @@ impl CaptureConfig {
         }
         self.accd.validate()?;
         self.aircraft.validate()?;
-        self.boom.validate()
+        self.boom.validate()?;
+        self.wake.validate()?;
+        self.turbulence.validate()
+    }
+
+    /// The paper's open-loop setting (section 4): no wake, no turbulence ("no wake unless stated").
+    pub fn calm() -> Self {
+        let mut config = CaptureConfig::default();
+        config.wake.enabled = false;
+        config.turbulence.wake_turbulence = false;
+        config
     }
 
     /// Parses JSON (unknown keys are errors) and validates.
@@ -233,12 +256,18 @@ pub struct CaptureSim {
 }
 
 impl CaptureSim {
-    /// A new episode with the default aerodynamic model of the config and calm air: the tether
-    /// trails straight back (the paper's initial condition), the ACCD flies level with the
-    /// aircraft, flaps neutral, t = 0.
+    /// A new episode with the aerodynamic model, wake and turbulence of the config (turbulence
+    /// from the wake seed): the tether trails straight back (the paper's initial condition), the
+    /// ACCD flies level with the aircraft, flaps neutral, t = 0.
     pub fn new(config: &CaptureConfig, seeds: Seeds) -> Result<Self> {
+        config.validate()?;
         let aero = Arc::new(config.accd.aero_model()?);
-        CaptureSim::with_parts(config, seeds, aero, Box::new(CalmAir))
+        let airspeed = config.aircraft.airspeed;
+        let wake = Wake::from_config(&config.wake, airspeed)?;
+        let turbulence = Turbulence::new(&config.turbulence, airspeed, seeds.wake)?;
+        let density = Atmosphere::isa(config.aircraft.altitude)?.density;
+        let field = WakeField::from_parts(wake, turbulence, density);
+        CaptureSim::with_parts(config, seeds, aero, Box::new(field))
     }
 
     /// A new episode with a given (shared) aerodynamic model and air disturbance.
@@ -381,7 +410,7 @@ impl CaptureSim {
         self.actuators.set_command(&self.config.accd, command)?;
         self.actuators.advance(&self.config.accd, dt);
         self.boom.advance(t, dt);
-        self.disturbance.advance(t, dt);
+        self.disturbance.advance(t, dt)?;
         let air = self.air_at_step()?;
 
         let mut stage = Stage {

@@ -90,4 +90,3 @@ impl Stream {
         r * c
     }
 }
-

@@ -172,3 +172,16 @@ impl Surroundings for WakeField {
         relative * (0.5 * self.density * self.tip_drag_area * relative.norm())
     }
 }
+
+/// The wake and its turbulence as the disturbance of a capture episode, whose free stream and
+/// density come from the towing aircraft instead (the field's own are not used there).
+impl crate::capture::AirDisturbance for WakeField {
+    fn velocity(&self, _time: f64, position: &Vector3<f64>) -> Vector3<f64> {
+        let w = self.wake.sample(position);
+        w.velocity + self.turbulence.sample(position, w.tke)
+    }
+
+    fn advance(&mut self, _time: f64, dt: f64) -> Result<()> {
+        self.turbulence.advance(dt)
+    }
+}

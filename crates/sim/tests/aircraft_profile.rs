@@ -8,7 +8,7 @@ use accd_sim::{CaptureConfig, CaptureSim, Seeds};
 #[test]
 fn forward_acceleration_loads_the_tether_and_changes_the_free_stream() {
     let a = 2.0;
-    let mut config = CaptureConfig::default();
+    let mut config = CaptureConfig::calm();
     config.aircraft.acceleration_profile = vec![AccelerationSegment {
         start: 40.0,
         end: 45.0,

@@ -1,6 +1,7 @@
 //! The ACCD responds to its flaps with the documented signs, is statically stable, conserves
 //! rotational energy and angular momentum when no moment acts, and with zero flaps the whole
-//! system settles where the paper's open-loop runs settle.
+//! system settles where the paper's open-loop runs settle (no wake, as in the paper's section 4);
+//! with the wake on, its mean downwash pushes the ACCD down.
 
 use accd_sim::accd::{mix, rotational_invariants};
 use accd_sim::{AccdState, CaptureConfig, CaptureSim, Seeds};
@@ -19,7 +20,7 @@ fn settled(config: &CaptureConfig, seconds: f64) -> CaptureSim {
 
 /// Position change of the ACCD after holding `command` for `seconds` from the settled state.
 fn response(command: [f64; 4], seconds: f64) -> (Vector3<f64>, CaptureSim) {
-    let mut sim = settled(&CaptureConfig::default(), 40.0);
+    let mut sim = settled(&CaptureConfig::calm(), 40.0);
     let before = sim.snapshot().unwrap().position;
     let steps = (seconds / sim.time_step()).round() as usize;
     sim.step_many(steps, command).unwrap();
@@ -29,7 +30,7 @@ fn response(command: [f64; 4], seconds: f64) -> (Vector3<f64>, CaptureSim) {
 
 #[test]
 fn neutral_flaps_settle_about_50_m_below_the_aircraft() {
-    let mut sim = settled(&CaptureConfig::default(), 60.0);
+    let mut sim = settled(&CaptureConfig::calm(), 60.0);
     let s = sim.snapshot().unwrap();
     eprintln!(
         "open loop: ACCD at ({:.2}, {:.2}, {:.2}) m, alpha {:.3} deg, speed {:.2e} m/s, tension {:.0} N",
@@ -110,7 +111,7 @@ fn roll_command_rolls_the_accd() {
 
 #[test]
 fn disturbed_attitude_returns() {
-    let mut sim = settled(&CaptureConfig::default(), 40.0);
+    let mut sim = settled(&CaptureConfig::calm(), 40.0);
     let tilted = UnitQuaternion::from_euler_angles(0.0, 12.0 * DEG, -8.0 * DEG);
     sim.set_accd_state(AccdState {
         attitude: tilted,
@@ -134,7 +135,7 @@ fn torque_free_accd_conserves_rotational_energy_and_angular_momentum() {
     // Below 1 m/s of airspeed the ACCD feels no aerodynamic moment; the tether joins it at its
     // centre of gravity, so nothing else exerts a moment. A hanging tether at rest in a 0.5 m/s
     // breeze keeps the ACCD there while it tumbles.
-    let mut config = CaptureConfig::default();
+    let mut config = CaptureConfig::calm();
     config.aircraft.airspeed = 0.5;
     config.accd.inertia = Some([2.0, 9.0, 8.0]);
     config.tether = TetherConfig {
@@ -174,7 +175,7 @@ fn calibrated_depths_match_the_paper() {
     let depth = |preset: &str| {
         let config = CaptureConfig {
             tether: TetherConfig::preset(preset).unwrap(),
-            ..CaptureConfig::default()
+            ..CaptureConfig::calm()
         };
         let mut sim = settled(&config, 90.0);
         sim.snapshot().unwrap().position.z
@@ -188,4 +189,44 @@ fn calibrated_depths_match_the_paper() {
     assert!((uhmwpe / 50.0 - 1.0).abs() < 0.15);
     assert!(steel > 100.0);
     assert!((long / 70.0 - 1.0).abs() < 0.15);
+}
+
+#[test]
+fn wake_downwash_at_8_degrees_pushes_the_accd_down() {
+    let depth = |alpha: f64, turbulence: bool| {
+        let mut config = CaptureConfig::default();
+        config.wake.alpha_deg = alpha;
+        config.turbulence.wake_turbulence = turbulence;
+        let mut sim = CaptureSim::new(
+            &config,
+            Seeds {
+                initial: 0,
+                wake: 7,
+                rlv: 0,
+            },
+        )
+        .unwrap();
+        sim.step_many(4000, [0.0; 4]).unwrap();
+        // Average the last 20 s so that turbulence does not decide the comparison.
+        let mut mean = 0.0;
+        for _ in 0..200 {
+            sim.step_many(10, [0.0; 4]).unwrap();
+            mean += sim.snapshot().unwrap().position.z / 200.0;
+        }
+        mean
+    };
+    let calm = settled(&CaptureConfig::calm(), 60.0)
+        .snapshot()
+        .unwrap()
+        .position
+        .z;
+    let (d0, d8) = (depth(0.0, false), depth(8.0, false));
+    let d8_turbulent = depth(8.0, true);
+    eprintln!("mean ACCD depth: no wake {calm:.1} m, 0 deg wake {d0:.1} m, 8 deg wake {d8:.1} m, with turbulence {d8_turbulent:.1} m");
+    assert!(d8 > d0 + 2.0, "the 8 degree downwash pushes the ACCD down");
+    assert!(d0 > calm, "even the 0 degree wake has some downwash");
+    assert!(
+        (d8_turbulent - d8).abs() < 2.0,
+        "turbulence averages out around the mean wake"
+    );
 }

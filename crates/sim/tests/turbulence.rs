@@ -431,10 +431,7 @@ fn gaussian_has_zero_mean_and_unit_variance() {
     assert!(max < 8.6 && max > 4.5, "max |z| {max}");
     // The fraction within one sigma: 68.27 %.
     let mut g = Stream::new(99, AMBIENT_STREAM);
-    let inside = (0..1_000_000)
-        .filter(|_| g.gaussian().abs() < 1.0)
-        .count() as f64
-        / 1e6;
+    let inside = (0..1_000_000).filter(|_| g.gaussian().abs() < 1.0).count() as f64 / 1e6;
     assert!((inside - 0.682_689).abs() < 0.002, "{inside}");
 }
 
