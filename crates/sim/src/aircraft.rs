@@ -47,15 +47,22 @@ impl Default for AircraftConfig {
     }
 }
 
+/// Checks an airspeed (m/s) against the range every part of the simulation accepts, (0, 400].
+pub fn check_airspeed(field: &str, value: f64) -> Result<()> {
+    if value.is_finite() && value > 0.0 && value <= 400.0 {
+        Ok(())
+    } else {
+        Err(SimError::invalid_config(field, value, "(0, 400] m/s"))
+    }
+}
+
 impl AircraftConfig {
     /// Checks every field against its allowed range.
     pub fn validate(&self) -> Result<()> {
         let bad = |field: &str, value: f64, allowed: &str| {
             Err(SimError::invalid_config(field, value, allowed))
         };
-        if !(self.airspeed.is_finite() && self.airspeed > 0.0 && self.airspeed <= 400.0) {
-            return bad("aircraft.airspeed", self.airspeed, "(0, 400] m/s");
-        }
+        check_airspeed("aircraft.airspeed", self.airspeed)?;
         if !(self.altitude.is_finite() && (0.0..=15_000.0).contains(&self.altitude)) {
             return bad("aircraft.altitude", self.altitude, "[0, 15000] m");
         }

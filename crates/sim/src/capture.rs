@@ -377,6 +377,22 @@ impl CaptureSim {
         })
     }
 
+    /// The surroundings of the current step (with the ACCD's current state), the tether model and
+    /// the stage buffers, borrowed apart so that the model can run while the stage is alive.
+    fn parts(&mut self) -> Result<(Stage<'_>, &mut TetherModel, &mut Buffers)> {
+        let air = self.air_at_step()?;
+        let stage = Stage {
+            aircraft: &self.config.aircraft,
+            air,
+            disturbance: self.disturbance.as_ref(),
+            aero: &self.aero,
+            accd: self.accd,
+            deflection: self.actuators.deflection,
+            loads: Cell::new(AeroLoads::default()),
+        };
+        Ok((stage, &mut self.model, &mut self.buffers))
+    }
+
     /// Derivatives at one stage: tether accelerations into `qdd`, and the quaternion and body-rate
     /// rates returned.
     #[allow(clippy::too_many_arguments)]
@@ -411,26 +427,48 @@ impl CaptureSim {
         self.actuators.advance(&self.config.accd, dt);
         self.boom.advance(t, dt);
         self.disturbance.advance(t, dt)?;
-        let air = self.air_at_step()?;
+        // The state is read while the stage buffers are written: lend it out for the step.
+        let q0 = std::mem::take(&mut self.tether.q);
+        let qd0 = std::mem::take(&mut self.tether.qd);
+        let result = self.integrate(t, dt, &q0, &qd0);
+        match result {
+            Ok((attitude, omega)) => {
+                // The new state is in the buffers; the old vectors become the next buffers.
+                self.tether.q = std::mem::replace(&mut self.buffers.q, q0);
+                self.tether.qd = std::mem::replace(&mut self.buffers.qd, qd0);
+                self.steps += 1;
+                self.tether.time = self.time_origin + self.steps as f64 * dt;
+                self.accd = AccdState {
+                    attitude: UnitQuaternion::new_normalize(attitude),
+                    omega,
+                };
+                Ok(())
+            }
+            Err(e) => {
+                self.tether.q = q0;
+                self.tether.qd = qd0;
+                Err(e)
+            }
+        }
+    }
 
-        let mut stage = Stage {
-            aircraft: &self.config.aircraft,
-            air,
-            disturbance: self.disturbance.as_ref(),
-            aero: &self.aero,
-            accd: self.accd,
-            deflection: self.actuators.deflection,
-            loads: Cell::new(AeroLoads::default()),
-        };
-        let b = &mut self.buffers;
-        let (q0, qd0) = (&self.tether.q, &self.tether.qd);
+    /// One RK4 step of the coupled state from (q0, qd0) and the current ACCD state; writes the new
+    /// tether state into the buffers and returns the new (unnormalised) quaternion and body rates.
+    fn integrate(
+        &mut self,
+        t: f64,
+        dt: f64,
+        q0: &[f64],
+        qd0: &[f64],
+    ) -> Result<(Quaternion<f64>, V3)> {
+        let inertia = self.inertia;
         let (att0, w0) = (*self.accd.attitude.quaternion(), self.accd.omega);
+        let (mut stage, model, b) = self.parts()?;
         let dim = q0.len();
         let h = 0.5 * dt;
-        let inertia = self.inertia;
 
         let (dq1, dw1) = Self::stage(
-            &mut self.model,
+            model,
             &mut stage,
             &inertia,
             t,
@@ -446,7 +484,7 @@ impl CaptureSim {
         }
         let (att, w) = (att0 + dq1 * h, w0 + dw1 * h);
         let (dq2, dw2) = Self::stage(
-            &mut self.model,
+            model,
             &mut stage,
             &inertia,
             t + h,
@@ -462,7 +500,7 @@ impl CaptureSim {
         }
         let (att, w) = (att0 + dq2 * h, w0 + dw2 * h);
         let (dq3, dw3) = Self::stage(
-            &mut self.model,
+            model,
             &mut stage,
             &inertia,
             t + h,
@@ -478,7 +516,7 @@ impl CaptureSim {
         }
         let (att, w) = (att0 + dq3 * dt, w0 + dw3 * dt);
         let (dq4, dw4) = Self::stage(
-            &mut self.model,
+            model,
             &mut stage,
             &inertia,
             t + dt,
@@ -507,15 +545,7 @@ impl CaptureSim {
                 reason: "state became non-finite".into(),
             });
         }
-        std::mem::swap(&mut self.tether.q, &mut b.q);
-        std::mem::swap(&mut self.tether.qd, &mut b.qd);
-        self.steps += 1;
-        self.tether.time = self.time_origin + self.steps as f64 * dt;
-        self.accd = AccdState {
-            attitude: UnitQuaternion::new_normalize(att),
-            omega: w,
-        };
-        Ok(())
+        Ok((att, w))
     }
 
     /// Steps `steps` times with the same commands.
@@ -530,16 +560,7 @@ impl CaptureSim {
     pub fn snapshot(&mut self) -> Result<Snapshot> {
         let t = self.tether.time;
         let (position, velocity) = self.model.tip_state(&self.tether.q, &self.tether.qd)?;
-        let air = self.air_at_step()?;
-        let stage = Stage {
-            aircraft: &self.config.aircraft,
-            air,
-            disturbance: self.disturbance.as_ref(),
-            aero: &self.aero,
-            accd: self.accd,
-            deflection: self.actuators.deflection,
-            loads: Cell::new(AeroLoads::default()),
-        };
+        let (stage, _, _) = self.parts()?;
         stage.tip_force(t, &position, &velocity);
         let loads = stage.loads.get();
         let attitude = self.accd.attitude;
@@ -580,22 +601,14 @@ impl CaptureSim {
     /// [`accd_tether::TetherModel::tensions`]).
     pub fn tensions(&mut self, out: &mut [f64]) -> Result<()> {
         let t = self.tether.time;
-        let air = self.air_at_step()?;
-        let stage = Stage {
-            aircraft: &self.config.aircraft,
-            air,
-            disturbance: self.disturbance.as_ref(),
-            aero: &self.aero,
-            accd: self.accd,
-            deflection: self.actuators.deflection,
-            loads: Cell::new(AeroLoads::default()),
-        };
-        let mut qdd = std::mem::take(&mut self.buffers.a_k[0]);
-        let result = self
-            .model
-            .tensions(t, &self.tether.q, &self.tether.qd, &stage, &mut qdd, out);
-        self.buffers.a_k[0] = qdd;
-        Ok(result?)
+        let q = std::mem::take(&mut self.tether.q);
+        let qd = std::mem::take(&mut self.tether.qd);
+        let result = self.parts().and_then(|(stage, model, buffers)| {
+            Ok(model.tensions(t, &q, &qd, &stage, &mut buffers.a_k[0], out)?)
+        });
+        self.tether.q = q;
+        self.tether.qd = qd;
+        result
     }
 
     /// Joint positions of the tether (n + 1 points, m; see

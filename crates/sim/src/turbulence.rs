@@ -330,13 +330,7 @@ impl Turbulence {
     /// at time 0 with its history filled (stationary from the start).
     pub fn new(config: &TurbulenceConfig, airspeed_mps: f64, seed: u64) -> Result<Turbulence> {
         config.validate()?;
-        if !(airspeed_mps.is_finite() && airspeed_mps > 0.0 && airspeed_mps <= 400.0) {
-            return Err(SimError::invalid_config(
-                "airspeed_mps",
-                airspeed_mps,
-                "(0, 400] m/s",
-            ));
-        }
+        crate::aircraft::check_airspeed("airspeed_mps", airspeed_mps)?;
         let dt = config.time_step_s;
         let spacing = config.wake_length_scale_m;
         let lanes_y = LaneAxis {

@@ -791,13 +791,7 @@ impl Wake {
     /// an attachment offset outside [-1000, 1000] m, `airspeed_mps` outside (0, 400].
     pub fn new(config: &WakeConfig, airspeed_mps: f64, tables: WakeTables) -> Result<Wake> {
         config.validate()?;
-        if !(airspeed_mps.is_finite() && airspeed_mps > 0.0 && airspeed_mps <= 400.0) {
-            return Err(SimError::invalid_config(
-                "airspeed_mps",
-                airspeed_mps,
-                "(0, 400] m/s",
-            ));
-        }
+        crate::aircraft::check_airspeed("airspeed_mps", airspeed_mps)?;
         let (lo, hi) = (tables.low().alpha_deg(), tables.high().alpha_deg());
         if !(config.alpha_deg >= lo && config.alpha_deg <= hi) {
             return Err(SimError::invalid_config(

@@ -2,7 +2,7 @@
 //! tether in the wake field allocate nothing on the heap.
 
 use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::cell::Cell;
 
 use accd_sim::turbulence::AmbientTurbulence;
 use accd_sim::{WakeField, WakeFieldConfig};
@@ -11,18 +11,30 @@ use nalgebra::Vector3;
 
 struct Counting;
 
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+thread_local! {
+    /// Allocations made by this thread: the tests run in parallel threads and must not count
+    /// each other's.
+    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
+}
+
+fn count() {
+    let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
+}
+
+fn allocations() -> usize {
+    ALLOCATIONS.with(Cell::get)
+}
 
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        count();
         unsafe { System.alloc(layout) }
     }
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
         unsafe { System.dealloc(ptr, layout) }
     }
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        count();
         unsafe { System.realloc(ptr, layout, new_size) }
     }
 }
@@ -46,7 +58,7 @@ fn sampling_advancing_and_stepping_do_not_allocate() {
         Vector3::new(-240.0, 0.0, 50.0),
         Vector3::new(-2000.0, 0.0, 0.0),
     ];
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let before = allocations();
     let mut acc = Vector3::zeros();
     for i in 0..300 {
         tether.step(&field).unwrap();
@@ -61,7 +73,39 @@ fn sampling_advancing_and_stepping_do_not_allocate() {
             field.reset(4);
         }
     }
-    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    let after = allocations();
     assert!(acc.iter().all(|v| v.is_finite()));
     assert_eq!(after - before, 0, "{} allocations", after - before);
+}
+
+#[test]
+fn capture_episode_steps_without_allocating() {
+    let mut config = accd_sim::CaptureConfig::default();
+    config.turbulence.ambient = AmbientTurbulence::Light;
+    let mut sim = accd_sim::CaptureSim::new(
+        &config,
+        accd_sim::Seeds {
+            initial: 1,
+            wake: 2,
+            rlv: 3,
+        },
+    )
+    .unwrap();
+    let mut tensions = vec![0.0; config.tether.segments + 1];
+    sim.step([0.1, -0.1, 0.05, 0.0]).unwrap();
+    let before = allocations();
+    for i in 0..300 {
+        let k = i as f64 * 0.01;
+        sim.step([0.1 * k.sin(), -0.1, 0.05 * k.cos(), 0.0])
+            .unwrap();
+        let _ = sim.snapshot().unwrap();
+        sim.tensions(&mut tensions).unwrap();
+    }
+    let after = allocations();
+    assert_eq!(
+        after - before,
+        0,
+        "{} allocations in 300 capture steps",
+        after - before
+    );
 }
