@@ -42,13 +42,15 @@
 //! `F = 1/2 rho d l (C_n |v_n| v_n + pi C_t |v_t| v_t)`.
 //!
 //! All of `Q` costs O(n) through suffix sums; the dense solve of `M` costs O(n^3) and is the
-//! reference formulation.
+//! reference formulation ([`Solver::Dense`]). The hot path ([`Solver::Recursive`], the default)
+//! solves the same equations in O(n) by the articulated-body recursion of [`crate::recursive`].
 
 use nalgebra::{DMatrix, Vector3};
 
 use crate::config::TetherConfig;
 use crate::direction::DirectionJet;
 use crate::error::{Result, TetherError};
+use crate::recursive::{self, Articulated, ChainConstants, ChainLoads};
 use crate::surroundings::Surroundings;
 
 type V3 = Vector3<f64>;
@@ -78,6 +80,16 @@ impl Energy {
     }
 }
 
+/// How [`TetherModel::accelerations`] solves `M(q) q'' = Q`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum Solver {
+    /// O(n) articulated-body recursion ([`crate::recursive`]): the hot path.
+    #[default]
+    Recursive,
+    /// Assemble the dense mass matrix and solve it by Cholesky, O(n^3): the reference.
+    Dense,
+}
+
 /// The tether's equations of motion, with the constants derived from a [`TetherConfig`] and
 /// preallocated work buffers: evaluating the right-hand side allocates nothing.
 #[derive(Debug, Clone)]
@@ -97,6 +109,7 @@ pub struct TetherModel {
     normal_drag: f64,
     /// 1/2 pi d l C_t, m^2: times rho |v_t| v_t gives the skin friction.
     tangential_drag: f64,
+    solver: Solver,
     ws: Workspace,
 }
 
@@ -119,7 +132,10 @@ struct Workspace {
     tip_acc0: V3,
     tip_force: V3,
     /// Lower triangle of the mass matrix, row-major, dim x dim; overwritten by its Cholesky factor.
+    /// Allocated on the first dense solve only.
     mass: Vec<f64>,
+    /// Per-segment results of the recursive solver's backward sweep.
+    articulated: Vec<Articulated>,
 }
 
 impl TetherModel {
@@ -129,7 +145,6 @@ impl TetherModel {
         let n = config.segments;
         let l = config.segment_length();
         let m = config.segment_mass();
-        let dim = config.dofs();
         Ok(TetherModel {
             n,
             l,
@@ -161,8 +176,10 @@ impl TetherModel {
                 tip_vel: V3::zeros(),
                 tip_acc0: V3::zeros(),
                 tip_force: V3::zeros(),
-                mass: vec![0.0; dim * dim],
+                mass: Vec::new(),
+                articulated: vec![Articulated::default(); n],
             },
+            solver: Solver::default(),
             config: config.clone(),
         })
     }
@@ -320,6 +337,9 @@ impl TetherModel {
         let ws = &mut self.ws;
         let (m, l, tip) = (self.m, self.l, self.tip_mass);
         let half = 0.5 * l;
+        if ws.mass.len() != dim * dim {
+            ws.mass.resize(dim * dim, 0.0);
+        }
         ws.mass[0] = n as f64 * m + tip;
         let e1 = ws.jets[0].e;
         for k in 0..n {
@@ -348,11 +368,52 @@ impl TetherModel {
         }
     }
 
-    /// Generalized accelerations q'' = M(q)^-1 Q(t, q, q') (paper Eq. 12) into `qdd`.
+    /// The solver [`TetherModel::accelerations`] and [`TetherModel::tensions`] use.
+    pub fn solver(&self) -> Solver {
+        self.solver
+    }
+
+    /// Chooses the solver of [`TetherModel::accelerations`] and [`TetherModel::tensions`]
+    /// (default [`Solver::Recursive`]; [`Solver::Dense`] is the O(n^3) reference).
+    pub fn set_solver(&mut self, solver: Solver) {
+        self.solver = solver;
+    }
+
+    /// Generalized accelerations q'' = M(q)^-1 Q(t, q, q') (paper Eq. 12) into `qdd`, by the
+    /// configured [`Solver`] (the O(n) recursion unless set otherwise).
     ///
     /// Errors if the state reaches the coordinate singularity, folds a joint completely, or makes
     /// the mass matrix numerically singular.
     pub fn accelerations<S: Surroundings + ?Sized>(
+        &mut self,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        surroundings: &S,
+        qdd: &mut [f64],
+    ) -> Result<()> {
+        match self.solver {
+            Solver::Recursive => self.solve_recursive(time, q, qd, surroundings, qdd, None),
+            Solver::Dense => self.accelerations_dense(time, q, qd, surroundings, qdd),
+        }
+    }
+
+    /// [`TetherModel::accelerations`] by the O(n) articulated-body recursion, whatever the
+    /// configured solver.
+    pub fn accelerations_recursive<S: Surroundings + ?Sized>(
+        &mut self,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        surroundings: &S,
+        qdd: &mut [f64],
+    ) -> Result<()> {
+        self.solve_recursive(time, q, qd, surroundings, qdd, None)
+    }
+
+    /// [`TetherModel::accelerations`] by the dense formulation, whatever the configured solver:
+    /// assembles M(q) (allocated on first use) and solves it by Cholesky, O(n^3). The reference.
+    pub fn accelerations_dense<S: Surroundings + ?Sized>(
         &mut self,
         time: f64,
         q: &[f64],
@@ -375,6 +436,56 @@ impl TetherModel {
         })?;
         cholesky_solve(&self.ws.mass, dim, qdd);
         Ok(())
+    }
+
+    fn solve_recursive<S: Surroundings + ?Sized>(
+        &mut self,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        surroundings: &S,
+        qdd: &mut [f64],
+        tensions: Option<&mut [f64]>,
+    ) -> Result<()> {
+        self.check_len("q", q)?;
+        self.check_len("qd", qd)?;
+        self.check_len("qdd", qdd)?;
+        self.kinematics(q, qd);
+        self.check_chart(time)?;
+        self.loads(time, surroundings)?;
+        let constants = ChainConstants {
+            l: self.l,
+            m: self.m,
+            rod_inertia: self.rod_inertia,
+            tip_mass: self.tip_mass,
+            k: self.k,
+            c_s: self.c_s,
+        };
+        let ws = &mut self.ws;
+        let loads = ChainLoads {
+            jets: &ws.jets,
+            e_dot: &ws.e_dot,
+            e_conv: &ws.e_conv,
+            force: &ws.force,
+            extra: &ws.extra,
+            tip_force: ws.tip_force,
+        };
+        recursive::solve(
+            &constants,
+            &loads,
+            q[0],
+            qd[0],
+            &mut ws.articulated,
+            qdd,
+            tensions,
+        )
+        .map_err(|e| TetherError::Diverged {
+            time,
+            reason: format!(
+                "mass matrix lost positive definiteness at segment {}",
+                e.segment + 1
+            ),
+        })
     }
 
     /// The mass matrix M(q) (symmetric, dim x dim). Allocates; for analysis and tests.
@@ -420,7 +531,8 @@ impl TetherModel {
     /// Tension along the chain (N, positive when pulling) into `tensions` (n + 1 values): entry k < n
     /// is the axial force at the inboard end of segment k + 1, entry n the force the tip body pulls
     /// with on the last segment. Entry 0 equals the axial element's k s + c_s s'. Computed from
-    /// Newton's law for everything outboard of each joint with the accelerations of this state.
+    /// Newton's law for everything outboard of each joint with the accelerations of this state
+    /// (which are written into `qdd`), by the configured [`Solver`].
     pub fn tensions<S: Surroundings + ?Sized>(
         &mut self,
         time: f64,
@@ -437,7 +549,10 @@ impl TetherModel {
                 found: tensions.len(),
             });
         }
-        self.accelerations(time, q, qd, surroundings, qdd)?;
+        if self.solver == Solver::Recursive {
+            return self.solve_recursive(time, q, qd, surroundings, qdd, Some(tensions));
+        }
+        self.accelerations_dense(time, q, qd, surroundings, qdd)?;
         let ws = &self.ws;
         let (s, sd, sdd) = (q[0], qd[0], qdd[0]);
         let acc_dir = |k: usize| {
