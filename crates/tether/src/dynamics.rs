@@ -113,24 +113,36 @@ pub struct TetherModel {
     ws: Workspace,
 }
 
+/// Everything the solvers need of one segment at the current state, from one fused pass over
+/// the chain ([`TetherModel::prepare`]).
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Segment {
+    /// Unit direction e.
+    pub e: V3,
+    /// de/dphi (length cos psi, its y component is zero).
+    pub e_phi: V3,
+    /// de/dpsi (unit).
+    pub e_psi: V3,
+    /// Convective acceleration of e (with zero angle accelerations).
+    pub w: V3,
+    /// External force on the centre (gravity, apparent, aerodynamics), N.
+    pub force: V3,
+    /// Vector X_k whose projections E_kb . X_k are the generalized forces of bending, damping and
+    /// rotational convective inertia (-I w).
+    pub extra: V3,
+    /// cos psi.
+    pub cos_psi: f64,
+}
+
 #[derive(Debug, Clone)]
 struct Workspace {
-    jets: Vec<DirectionJet>,
-    e_dot: Vec<V3>,
-    e_conv: Vec<V3>,
-    com: Vec<V3>,
-    com_vel: Vec<V3>,
-    com_acc0: Vec<V3>,
-    /// External force on each segment centre (gravity, apparent, aero), N.
-    force: Vec<V3>,
-    /// Per-segment vector X_k whose projections E_kb . X_k are the generalized forces of bending,
-    /// damping and rotational convective inertia.
-    extra: Vec<V3>,
-    omega: Vec<V3>,
-    tip: V3,
-    tip_vel: V3,
-    tip_acc0: V3,
+    seg: Vec<Segment>,
+    /// Rate of e_1.
+    e_dot0: V3,
     tip_force: V3,
+    /// Convective accelerations of the segment centres (dense path only; sized on first use).
+    com_acc0: Vec<V3>,
+    tip_acc0: V3,
     /// Lower triangle of the mass matrix, row-major, dim x dim; overwritten by its Cholesky factor.
     /// Allocated on the first dense solve only.
     mass: Vec<f64>,
@@ -163,19 +175,11 @@ impl TetherModel {
                 * l
                 * config.tangential_drag_coefficient,
             ws: Workspace {
-                jets: vec![DirectionJet::default(); n],
-                e_dot: vec![V3::zeros(); n],
-                e_conv: vec![V3::zeros(); n],
-                com: vec![V3::zeros(); n],
-                com_vel: vec![V3::zeros(); n],
-                com_acc0: vec![V3::zeros(); n],
-                force: vec![V3::zeros(); n],
-                extra: vec![V3::zeros(); n],
-                omega: vec![V3::zeros(); n],
-                tip: V3::zeros(),
-                tip_vel: V3::zeros(),
-                tip_acc0: V3::zeros(),
+                seg: vec![Segment::default(); n],
+                e_dot0: V3::zeros(),
                 tip_force: V3::zeros(),
+                com_acc0: Vec::new(),
+                tip_acc0: V3::zeros(),
                 mass: Vec::new(),
                 articulated: vec![Articulated::default(); n],
             },
@@ -211,123 +215,188 @@ impl TetherModel {
         }
     }
 
-    /// Positions, velocities and convective (q'' = 0) accelerations of every point.
-    fn kinematics(&mut self, q: &[f64], qd: &[f64]) {
+    fn singular_chart(time: f64, k: usize, cos_psi: f64) -> TetherError {
+        TetherError::Diverged {
+            time,
+            reason: format!(
+                "segment {} points along the lateral axis (cos psi = {:.3e}), the coordinate singularity",
+                k + 1,
+                cos_psi
+            ),
+        }
+    }
+
+    /// One pass over the chain, root to tip: directions and their partials (one sin/cos pair per
+    /// angle), velocities, convective accelerations, the external forces on the segment centres
+    /// and the tip, and the `extra` vectors of bending, joint damping and rotational inertia.
+    /// Shared by both solvers.
+    ///
+    /// Errors at the coordinate singularity or at a completely folded joint.
+    fn prepare<S: Surroundings + ?Sized>(
+        &mut self,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        surroundings: &S,
+    ) -> Result<()> {
         let (s, sd) = (q[0], qd[0]);
+        let (l, half) = (self.l, 0.5 * self.l);
+        let g_eff = V3::new(0.0, 0.0, self.gravity) - surroundings.frame_acceleration(time);
+        let weight = g_eff * self.m;
+        let bend_gain = 2.0 * self.ei / self.l;
+        let (c_b, rod_inertia) = (self.c_b, self.rod_inertia);
+        let (normal_drag, tangential_drag) = (self.normal_drag, self.tangential_drag);
         let ws = &mut self.ws;
+        let mut p = V3::zeros();
+        let mut pv = V3::zeros();
+        let mut prev_e = V3::zeros();
+        let mut prev_omega = V3::zeros();
         for k in 0..self.n {
             let (phi, psi) = (q[1 + 2 * k], q[2 + 2 * k]);
             let (phi_d, psi_d) = (qd[1 + 2 * k], qd[2 + 2 * k]);
-            let jet = DirectionJet::new(phi, psi);
-            ws.e_dot[k] = jet.rate(phi_d, psi_d);
-            ws.e_conv[k] = jet.convective(phi_d, psi_d);
-            ws.jets[k] = jet;
-        }
-        let e1 = ws.jets[0].e;
-        let mut p = e1 * s;
-        let mut pv = e1 * sd + ws.e_dot[0] * s;
-        let mut pa = ws.e_dot[0] * (2.0 * sd) + ws.e_conv[0] * s;
-        let half = 0.5 * self.l;
-        for k in 0..self.n {
-            let e = ws.jets[k].e;
-            ws.com[k] = p + e * half;
-            ws.com_vel[k] = pv + ws.e_dot[k] * half;
-            ws.com_acc0[k] = pa + ws.e_conv[k] * half;
-            p += e * self.l;
-            pv += ws.e_dot[k] * self.l;
-            pa += ws.e_conv[k] * self.l;
-        }
-        ws.tip = p;
-        ws.tip_vel = pv;
-        ws.tip_acc0 = pa;
-    }
-
-    fn check_chart(&self, time: f64) -> Result<()> {
-        for (k, jet) in self.ws.jets.iter().enumerate() {
-            if jet.cos_psi.abs() < SINGULAR_COS_PSI || !jet.cos_psi.is_finite() {
-                return Err(TetherError::Diverged {
-                    time,
-                    reason: format!(
-                        "segment {} points along the lateral axis (cos psi = {:.3e}), the coordinate singularity",
-                        k + 1,
-                        jet.cos_psi
-                    ),
-                });
+            let (sf, cf) = phi.sin_cos();
+            let (sp, cp) = psi.sin_cos();
+            if !(cp.abs() >= SINGULAR_COS_PSI) {
+                return Err(Self::singular_chart(time, k, cp));
             }
+            // See DirectionJet: e, de/dphi, de/dpsi; d2e/dphi2 = (cp cf, 0, -cp sf),
+            // d2e/dphidpsi = (-sp sf, 0, -sp cf), d2e/dpsi2 = -e.
+            let e = V3::new(-cp * cf, sp, cp * sf);
+            let e_phi = V3::new(cp * sf, 0.0, cp * cf);
+            let e_psi = V3::new(sp * cf, cp, -sp * sf);
+            let e_dot = e_phi * phi_d + e_psi * psi_d;
+            let (pp, ps2, ss) = (phi_d * phi_d, 2.0 * phi_d * psi_d, psi_d * psi_d);
+            let w = V3::new(
+                cp * cf * pp - sp * sf * ps2,
+                0.0,
+                -cp * sf * pp - sp * cf * ps2,
+            ) - e * ss;
+            if k == 0 {
+                p = e * s;
+                pv = e * sd + e_dot * s;
+                ws.e_dot0 = e_dot;
+            }
+            let com = p + e * half;
+            let com_vel = pv + e_dot * half;
+            p += e * l;
+            pv += e_dot * l;
+
+            let rho = surroundings.air_density(time, &com);
+            let mut force = weight;
+            if rho != 0.0 {
+                let rel = surroundings.air_velocity(time, &com) - com_vel;
+                let vt = rel.dot(&e);
+                let vn = rel - e * vt;
+                force += vn * (rho * normal_drag * vn.norm())
+                    + e * (rho * tangential_drag * vt * vt.abs());
+            }
+
+            let omega = e.cross(&e_dot);
+            let mut extra = w * (-rod_inertia);
+            if k > 0 {
+                // Bending spring and joint damper between segments k-1 and k.
+                let one_plus_cos = 1.0 + prev_e.dot(&e);
+                if !(one_plus_cos >= FOLDED_JOINT) || !one_plus_cos.is_finite() {
+                    return Err(TetherError::Diverged {
+                        time,
+                        reason: format!(
+                            "joint {k} between segments {k} and {} folded back on itself",
+                            k + 1
+                        ),
+                    });
+                }
+                let coef = bend_gain / one_plus_cos;
+                // Damping torque of this joint: on segment k it is -c_b (w_k - w_{k-1}), on
+                // segment k-1 the opposite; Q_(k,b) = E_kb . (tau_k x e_k).
+                let tau = (omega - prev_omega) * c_b;
+                ws.seg[k - 1].extra += e * coef + tau.cross(&prev_e);
+                extra += prev_e * coef - tau.cross(&e);
+            }
+            ws.seg[k] = Segment {
+                e,
+                e_phi,
+                e_psi,
+                w,
+                force,
+                extra,
+                cos_psi: cp,
+            };
+            prev_e = e;
+            prev_omega = omega;
         }
+        ws.tip_force = g_eff * self.tip_mass + surroundings.tip_force(time, &p, &pv);
         Ok(())
     }
 
-    /// External forces on the segment centres and the tip, and the generalized forces of
-    /// bending, damping and rotational inertia (as the per-segment vectors `extra`).
-    fn loads<S: Surroundings + ?Sized>(&mut self, time: f64, surroundings: &S) -> Result<()> {
+    /// Directions and their partials only (for the mass matrix).
+    fn directions(&mut self, q: &[f64]) {
+        for k in 0..self.n {
+            let jet = DirectionJet::new(q[1 + 2 * k], q[2 + 2 * k]);
+            let seg = &mut self.ws.seg[k];
+            seg.e = jet.e;
+            seg.e_phi = jet.e_phi;
+            seg.e_psi = jet.e_psi;
+            seg.cos_psi = jet.cos_psi;
+        }
+    }
+
+    /// Walks the chain with the state's positions and velocities: calls `visit(e, e_dot, centre,
+    /// centre velocity)` per segment and returns the tip's position and velocity.
+    fn walk(&self, q: &[f64], qd: &[f64], mut visit: impl FnMut(V3, V3, V3, V3)) -> (V3, V3) {
+        let (s, sd) = (q[0], qd[0]);
+        let mut p = V3::zeros();
+        let mut pv = V3::zeros();
+        for k in 0..self.n {
+            let jet = DirectionJet::new(q[1 + 2 * k], q[2 + 2 * k]);
+            let e_dot = jet.rate(qd[1 + 2 * k], qd[2 + 2 * k]);
+            if k == 0 {
+                p = jet.e * s;
+                pv = jet.e * sd + e_dot * s;
+            }
+            visit(
+                jet.e,
+                e_dot,
+                p + jet.e * (0.5 * self.l),
+                pv + e_dot * (0.5 * self.l),
+            );
+            p += jet.e * self.l;
+            pv += e_dot * self.l;
+        }
+        (p, pv)
+    }
+
+    /// Generalized forces Q (right-hand side of the dense formulation) into `rhs`, from the loads
+    /// already computed.
+    fn generalized_forces(&mut self, q: &[f64], qd: &[f64], rhs: &mut [f64]) {
+        let (s, sd) = (q[0], qd[0]);
+        let half = 0.5 * self.l;
         let ws = &mut self.ws;
-        let g_eff = V3::new(0.0, 0.0, self.gravity) - surroundings.frame_acceleration(time);
-        let weight = g_eff * self.m;
+        if ws.com_acc0.len() != self.n {
+            ws.com_acc0.resize(self.n, V3::zeros());
+        }
+        let mut pa = ws.e_dot0 * (2.0 * sd) + ws.seg[0].w * s;
         for k in 0..self.n {
-            let e = ws.jets[k].e;
-            let c = ws.com[k];
-            let rho = surroundings.air_density(time, &c);
-            let rel = surroundings.air_velocity(time, &c) - ws.com_vel[k];
-            let vt = rel.dot(&e);
-            let vn = rel - e * vt;
-            let aero = vn * (rho * self.normal_drag * vn.norm())
-                + e * (rho * self.tangential_drag * vt * vt.abs());
-            ws.force[k] = weight + aero;
-            ws.extra[k] = ws.e_conv[k] * (-self.rod_inertia);
-            ws.omega[k] = e.cross(&ws.e_dot[k]);
+            ws.com_acc0[k] = pa + ws.seg[k].w * half;
+            pa += ws.seg[k].w * self.l;
         }
-        ws.tip_force = g_eff * self.tip_mass + surroundings.tip_force(time, &ws.tip, &ws.tip_vel);
-
-        // Bending springs and joint dampers between segments j and j+1.
-        let bend_gain = 2.0 * self.ei / self.l;
-        for j in 0..self.n.saturating_sub(1) {
-            let (ej, ek) = (ws.jets[j].e, ws.jets[j + 1].e);
-            let one_plus_cos = 1.0 + ej.dot(&ek);
-            if one_plus_cos < FOLDED_JOINT || !one_plus_cos.is_finite() {
-                return Err(TetherError::Diverged {
-                    time,
-                    reason: format!(
-                        "joint {} between segments {} and {} folded back on itself",
-                        j + 1,
-                        j + 1,
-                        j + 2
-                    ),
-                });
-            }
-            let coef = bend_gain / one_plus_cos;
-            ws.extra[j] += ek * coef;
-            ws.extra[j + 1] += ej * coef;
-            // Damping torque of this joint: on segment j+1 it is -c_b (w_{j+1} - w_j), on segment j
-            // the opposite; Q_(k,b) = E_kb . (tau_k x e_k).
-            let tau = (ws.omega[j + 1] - ws.omega[j]) * self.c_b;
-            ws.extra[j] += tau.cross(&ej);
-            ws.extra[j + 1] -= tau.cross(&ek);
-        }
-        Ok(())
-    }
-
-    /// Generalized forces Q (right-hand side) into `rhs`, from the loads already computed.
-    fn generalized_forces(&self, q: &[f64], qd: &[f64], rhs: &mut [f64]) {
-        let ws = &self.ws;
-        let s = q[0];
-        let half = 0.5 * self.l;
+        ws.tip_acc0 = pa;
         let mut suffix = ws.tip_force - ws.tip_acc0 * self.tip_mass;
         let mut total = suffix;
         for k in (0..self.n).rev() {
-            let h = ws.force[k] - ws.com_acc0[k] * self.m;
+            let seg = &ws.seg[k];
+            let h = seg.force - ws.com_acc0[k] * self.m;
             let (a_kk, l_k) = if k == 0 {
                 (half + s, self.l + s)
             } else {
                 (half, self.l)
             };
-            let g = h * a_kk + suffix * l_k + ws.extra[k];
-            rhs[1 + 2 * k] = ws.jets[k].e_phi.dot(&g);
-            rhs[2 + 2 * k] = ws.jets[k].e_psi.dot(&g);
+            let g = h * a_kk + suffix * l_k + seg.extra;
+            rhs[1 + 2 * k] = seg.e_phi.dot(&g);
+            rhs[2 + 2 * k] = seg.e_psi.dot(&g);
             suffix += h;
             total += h;
         }
-        rhs[0] = ws.jets[0].e.dot(&total) - self.k * s - self.c_s * qd[0];
+        rhs[0] = ws.seg[0].e.dot(&total) - self.k * s - self.c_s * sd;
     }
 
     /// Assembles the lower triangle of the mass matrix M(q) into the workspace.
@@ -341,13 +410,13 @@ impl TetherModel {
             ws.mass.resize(dim * dim, 0.0);
         }
         ws.mass[0] = n as f64 * m + tip;
-        let e1 = ws.jets[0].e;
+        let e1 = ws.seg[0].e;
         for k in 0..n {
             let (a_kk, l_k) = if k == 0 { (half + s, l + s) } else { (half, l) };
             let beyond = m * (n - 1 - k) as f64 + tip;
             let v_k = m * a_kk + beyond * l_k;
             let w_kk = m * a_kk * a_kk + beyond * l_k * l_k + self.rod_inertia;
-            let jk = ws.jets[k];
+            let jk = ws.seg[k];
             let (rp, rs) = (1 + 2 * k, 2 + 2 * k);
             ws.mass[rp * dim] = v_k * e1.dot(&jk.e_phi);
             ws.mass[rs * dim] = v_k * e1.dot(&jk.e_psi);
@@ -355,7 +424,7 @@ impl TetherModel {
             for j in 0..k {
                 let l_j = if j == 0 { l + s } else { l };
                 let w = l_j * v_k;
-                let jj = ws.jets[j];
+                let jj = ws.seg[j];
                 let (cp, cs) = (1 + 2 * j, 2 + 2 * j);
                 ws.mass[rp * dim + cp] = w * jk.e_phi.dot(&jj.e_phi);
                 ws.mass[rp * dim + cs] = w * jk.e_phi.dot(&jj.e_psi);
@@ -424,9 +493,7 @@ impl TetherModel {
         self.check_len("q", q)?;
         self.check_len("qd", qd)?;
         self.check_len("qdd", qdd)?;
-        self.kinematics(q, qd);
-        self.check_chart(time)?;
-        self.loads(time, surroundings)?;
+        self.prepare(time, q, qd, surroundings)?;
         self.generalized_forces(q, qd, qdd);
         self.assemble_mass(q[0]);
         let dim = self.dofs();
@@ -450,9 +517,7 @@ impl TetherModel {
         self.check_len("q", q)?;
         self.check_len("qd", qd)?;
         self.check_len("qdd", qdd)?;
-        self.kinematics(q, qd);
-        self.check_chart(time)?;
-        self.loads(time, surroundings)?;
+        self.prepare(time, q, qd, surroundings)?;
         let constants = ChainConstants {
             l: self.l,
             m: self.m,
@@ -463,11 +528,8 @@ impl TetherModel {
         };
         let ws = &mut self.ws;
         let loads = ChainLoads {
-            jets: &ws.jets,
-            e_dot: &ws.e_dot,
-            e_conv: &ws.e_conv,
-            force: &ws.force,
-            extra: &ws.extra,
+            seg: &ws.seg,
+            e_dot0: ws.e_dot0,
             tip_force: ws.tip_force,
         };
         recursive::solve(
@@ -491,8 +553,7 @@ impl TetherModel {
     /// The mass matrix M(q) (symmetric, dim x dim). Allocates; for analysis and tests.
     pub fn mass_matrix(&mut self, q: &[f64]) -> Result<DMatrix<f64>> {
         self.check_len("q", q)?;
-        let zeros = vec![0.0; q.len()];
-        self.kinematics(q, &zeros);
+        self.directions(q);
         self.assemble_mass(q[0]);
         let dim = self.dofs();
         Ok(DMatrix::from_fn(dim, dim, |r, c| {
@@ -505,21 +566,22 @@ impl TetherModel {
     pub fn energy(&mut self, q: &[f64], qd: &[f64]) -> Result<Energy> {
         self.check_len("q", q)?;
         self.check_len("qd", qd)?;
-        self.kinematics(q, qd);
-        let ws = &self.ws;
-        let mut kinetic = 0.5 * self.tip_mass * ws.tip_vel.norm_squared();
-        let mut height = self.tip_mass * ws.tip.z;
-        for k in 0..self.n {
-            kinetic += 0.5
-                * (self.m * ws.com_vel[k].norm_squared()
-                    + self.rod_inertia * ws.e_dot[k].norm_squared());
-            height += self.m * ws.com[k].z;
-        }
+        let (m, inertia) = (self.m, self.rod_inertia);
+        let mut kinetic = 0.0;
+        let mut height = 0.0;
         let mut bending = 0.0;
-        for j in 0..self.n.saturating_sub(1) {
-            let c = ws.jets[j].e.dot(&ws.jets[j + 1].e);
-            bending -= (2.0 * self.ei / self.l) * (0.5 * (1.0 + c)).ln();
-        }
+        let mut prev_e: Option<V3> = None;
+        let bend_gain = 2.0 * self.ei / self.l;
+        let (tip, tip_vel) = self.walk(q, qd, |e, e_dot, c, cv| {
+            kinetic += 0.5 * (m * cv.norm_squared() + inertia * e_dot.norm_squared());
+            height += m * c.z;
+            if let Some(p) = prev_e {
+                bending -= bend_gain * (0.5 * (1.0 + p.dot(&e))).ln();
+            }
+            prev_e = Some(e);
+        });
+        kinetic += 0.5 * self.tip_mass * tip_vel.norm_squared();
+        height += self.tip_mass * tip.z;
         Ok(Energy {
             kinetic,
             gravity: -self.gravity * height,
@@ -556,25 +618,26 @@ impl TetherModel {
         let ws = &self.ws;
         let (s, sd, sdd) = (q[0], qd[0], qdd[0]);
         let acc_dir = |k: usize| {
-            ws.e_conv[k] + ws.jets[k].e_phi * qdd[1 + 2 * k] + ws.jets[k].e_psi * qdd[2 + 2 * k]
+            let seg = &ws.seg[k];
+            seg.w + seg.e_phi * qdd[1 + 2 * k] + seg.e_psi * qdd[2 + 2 * k]
         };
         let e1dd = acc_dir(0);
-        let mut pa = ws.jets[0].e * sdd + ws.e_dot[0] * (2.0 * sd) + e1dd * s;
+        let mut pa = ws.seg[0].e * sdd + ws.e_dot0 * (2.0 * sd) + e1dd * s;
         // Accelerations of centres, stored in place of nothing: accumulate forward, then sum backward.
         // Two passes keep it allocation-free: first the tip acceleration, then walk inward.
         for k in 0..self.n {
             pa += acc_dir(k) * self.l;
         }
         let mut pull = ws.tip_force - pa * self.tip_mass;
-        tensions[self.n] = pull.dot(&ws.jets[self.n - 1].e);
+        tensions[self.n] = pull.dot(&ws.seg[self.n - 1].e);
         // Walk inward: the base of segment k is the tip position minus l e_j for j >= k.
         let mut base_acc = pa;
         for k in (0..self.n).rev() {
             let ek_dd = acc_dir(k);
             base_acc -= ek_dd * self.l;
             let com_acc = base_acc + ek_dd * (0.5 * self.l);
-            pull += ws.force[k] - com_acc * self.m;
-            tensions[k] = pull.dot(&ws.jets[k].e);
+            pull += ws.seg[k].force - com_acc * self.m;
+            tensions[k] = pull.dot(&ws.seg[k].e);
         }
         Ok(())
     }
@@ -604,8 +667,7 @@ impl TetherModel {
     pub fn tip_state(&mut self, q: &[f64], qd: &[f64]) -> Result<(V3, V3)> {
         self.check_len("q", q)?;
         self.check_len("qd", qd)?;
-        self.kinematics(q, qd);
-        Ok((self.ws.tip, self.ws.tip_vel))
+        Ok(self.walk(q, qd, |_, _, _, _| {}))
     }
 }
 

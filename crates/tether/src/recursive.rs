@@ -63,22 +63,76 @@
 //!
 //! Each sweep costs O(1) per segment with fixed-size 3x3 / 2x2 algebra and no allocation.
 
-use nalgebra::{Matrix2, Matrix2x3, Matrix3, Matrix3x2, Vector2, Vector3};
+use nalgebra::{Matrix3, Vector3};
 
-use crate::direction::DirectionJet;
+use crate::dynamics::Segment;
 
 type V3 = Vector3<f64>;
+
+/// A symmetric 3x3 matrix by its six entries.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(crate) struct Sym3 {
+    xx: f64,
+    yy: f64,
+    zz: f64,
+    xy: f64,
+    xz: f64,
+    yz: f64,
+}
+
+impl Sym3 {
+    #[inline(always)]
+    fn diagonal(d: f64) -> Self {
+        Sym3 {
+            xx: d,
+            yy: d,
+            zz: d,
+            ..Sym3::default()
+        }
+    }
+
+    #[inline(always)]
+    fn mul(&self, v: &V3) -> V3 {
+        V3::new(
+            self.xx * v.x + self.xy * v.y + self.xz * v.z,
+            self.xy * v.x + self.yy * v.y + self.yz * v.z,
+            self.xz * v.x + self.yz * v.y + self.zz * v.z,
+        )
+    }
+
+    /// `self v` for a vector with a zero y component (de/dphi).
+    #[inline(always)]
+    fn mul_xz(&self, v: &V3) -> V3 {
+        V3::new(
+            self.xx * v.x + self.xz * v.z,
+            self.xy * v.x + self.yz * v.z,
+            self.xz * v.x + self.zz * v.z,
+        )
+    }
+
+    fn to_matrix(self) -> Matrix3<f64> {
+        Matrix3::new(
+            self.xx, self.xy, self.xz, self.xy, self.yy, self.yz, self.xz, self.yz, self.zz,
+        )
+    }
+}
+
+/// `a . b` for `a` with a zero y component.
+#[inline(always)]
+fn dot_xz(a: &V3, b: &V3) -> f64 {
+    a.x * b.x + a.z * b.z
+}
 
 /// What the backward sweep leaves per segment for the forward sweep and the tensions.
 #[derive(Debug, Clone, Copy, Default)]
 pub(crate) struct Articulated {
-    /// `G_k = K^-1 (C E)^T`: the angle accelerations' dependence on the base acceleration.
-    g: Matrix2x3<f64>,
-    /// `y_k`: the angle accelerations at zero base acceleration.
-    y: Vector2<f64>,
-    /// Articulated inertia `A_k` of everything outboard of the base of segment k.
-    inertia: Matrix3<f64>,
-    /// Bias force `b_k` of everything outboard of the base of segment k.
+    /// Rows of `G_k`: `u_k = y_k - G_k a_k`.
+    g: [V3; 2],
+    /// `y_k`.
+    y: [f64; 2],
+    /// `B_k = A_k + (m/2) 1`.
+    inertia: Sym3,
+    /// `b_k`.
     bias: V3,
 }
 
@@ -93,14 +147,11 @@ pub(crate) struct ChainConstants {
     pub c_s: f64,
 }
 
-/// Per-segment inputs: directions and their partials, rates, convective accelerations,
-/// external forces on the centres and the `extra` vectors, plus the tip force.
+/// The state of the chain from [`crate::TetherModel`]'s loads pass: per segment its directions,
+/// convective accelerations, forces and `extra` vectors; the rate of e_1; the tip force.
 pub(crate) struct ChainLoads<'a> {
-    pub jets: &'a [DirectionJet],
-    pub e_dot: &'a [V3],
-    pub e_conv: &'a [V3],
-    pub force: &'a [V3],
-    pub extra: &'a [V3],
+    pub seg: &'a [Segment],
+    pub e_dot0: V3,
     pub tip_force: V3,
 }
 
@@ -109,27 +160,6 @@ pub(crate) struct ChainLoads<'a> {
 pub(crate) struct Singular {
     /// 0-based segment whose elimination failed.
     pub segment: usize,
-}
-
-#[inline]
-fn e_matrix(jet: &DirectionJet) -> Matrix3x2<f64> {
-    Matrix3x2::from_columns(&[jet.e_phi, jet.e_psi])
-}
-
-/// Inverse of a symmetric 2x2 matrix, or `None` if it is not positive definite.
-#[inline]
-fn inverse_spd2(k: &Matrix2<f64>) -> Option<Matrix2<f64>> {
-    let det = k[(0, 0)] * k[(1, 1)] - k[(0, 1)] * k[(1, 0)];
-    if !(det > 0.0 && k[(0, 0)] > 0.0) || !det.is_finite() {
-        return None;
-    }
-    let inv = 1.0 / det;
-    Some(Matrix2::new(
-        k[(1, 1)] * inv,
-        -k[(0, 1)] * inv,
-        -k[(1, 0)] * inv,
-        k[(0, 0)] * inv,
-    ))
 }
 
 /// Solves the equations of motion in O(n): writes `q''` into `qdd` and, if given, the tensions
@@ -143,83 +173,107 @@ pub(crate) fn solve(
     qdd: &mut [f64],
     tensions: Option<&mut [f64]>,
 ) -> Result<(), Singular> {
-    let n = loads.jets.len();
+    let seg = loads.seg;
+    let n = seg.len();
     let (l, m) = (c.l, c.m);
-    let eye = Matrix3::<f64>::identity();
+    let inv_l = 1.0 / l;
+    let inv_l2 = inv_l * inv_l;
+    let half_inv_l = 0.5 * inv_l;
+    let (m4, m6) = (0.25 * m, m / 6.0);
 
-    // Backward sweep, tip to segment 2.
-    let mut a_mat = eye * c.tip_mass;
-    let mut b_vec = loads.tip_force;
+    // Backward sweep, tip to segment 2, on B = A + (m/2) 1.
+    let mut bm = Sym3::diagonal(c.tip_mass + 0.5 * m);
+    let mut bias = loads.tip_force;
     for k in (1..n).rev() {
-        let jet = &loads.jets[k];
-        let e = e_matrix(jet);
-        let w = loads.e_conv[k];
-        let cm = eye * (0.5 * m * l) + a_mat * l;
-        let dpm = eye * (0.25 * m * l * l) + a_mat * (l * l);
-        let ce = cm * e;
-        let de = dpm * e + e * c.rod_inertia;
-        let kmat = e.transpose() * de;
-        let kinv = inverse_spd2(&kmat).ok_or(Singular { segment: k })?;
-        let r = loads.force[k] * (0.5 * l) + loads.extra[k] + b_vec * l;
-        let y = kinv * (e.transpose() * (r - dpm * w));
-        let g = kinv * ce.transpose();
-        a_mat = a_mat + eye * m - ce * g;
-        // Keep it exactly symmetric.
-        a_mat = (a_mat + a_mat.transpose()) * 0.5;
-        b_vec = loads.force[k] + b_vec - cm * w - ce * y;
-        let art = &mut work[k];
-        art.g = g;
-        art.y = y;
-        art.inertia = a_mat;
-        art.bias = b_vec;
+        let sg = &seg[k];
+        let (ep, es) = (&sg.e_phi, &sg.e_psi);
+        let bep = bm.mul_xz(ep);
+        let bes = bm.mul(es);
+        let k00 = dot_xz(ep, &bep) - m6 * sg.cos_psi * sg.cos_psi;
+        let k01 = dot_xz(ep, &bes);
+        let k11 = es.dot(&bes) - m6;
+        let det = k00 * k11 - k01 * k01;
+        if !(det > 0.0 && k00 > 0.0) || !det.is_finite() {
+            return Err(Singular { segment: k });
+        }
+        let inv = 1.0 / det;
+        let (i00, i01, i11) = (k11 * inv, -k01 * inv, k00 * inv);
+        // W = (B E) K^-1, columns w0, w1.
+        let w0 = bep * i00 + bes * i01;
+        let w1 = bep * i01 + bes * i11;
+        let bw = bm.mul(&sg.w);
+        let v = sg.force * half_inv_l + sg.extra * inv_l2 + bias * inv_l + sg.w * m4 - bw;
+        let (r0, r1) = (dot_xz(ep, &v), es.dot(&v));
+        let y0 = i00 * r0 + i01 * r1;
+        let y1 = i01 * r0 + i11 * r1;
+        bias = sg.force + bias - (bw + bep * y0 + bes * y1) * l;
+        bm = Sym3 {
+            xx: bm.xx + m - (w0.x * bep.x + w1.x * bes.x),
+            yy: bm.yy + m - (w0.y * bep.y + w1.y * bes.y),
+            zz: bm.zz + m - (w0.z * bep.z + w1.z * bes.z),
+            xy: bm.xy - (w0.x * bep.y + w1.x * bes.y),
+            xz: bm.xz - (w0.x * bep.z + w1.x * bes.z),
+            yz: bm.yz - (w0.y * bep.z + w1.y * bes.z),
+        };
+        work[k] = Articulated {
+            g: [w0 * inv_l, w1 * inv_l],
+            y: [y0, y1],
+            inertia: bm,
+            bias,
+        };
     }
 
-    // Root: s and segment 1's angles.
-    let jet = &loads.jets[0];
-    let e1 = jet.e;
-    let w = loads.e_conv[0];
+    // Root: s and segment 1's angles, against A_1 = B_1 - (m/2) 1 and b_1.
+    let a_mat = bm.to_matrix() - Matrix3::identity() * (0.5 * m);
+    let b_vec = bias;
+    let sg = &seg[0];
+    let e1 = sg.e;
+    let w = sg.w;
     let (rho_c, rho_t) = (s + 0.5 * l, s + l);
-    let jc = Matrix3::from_columns(&[e1, jet.e_phi * rho_c, jet.e_psi * rho_c]);
-    let jt = Matrix3::from_columns(&[e1, jet.e_phi * rho_t, jet.e_psi * rho_t]);
-    let jr = Matrix3::from_columns(&[V3::zeros(), jet.e_phi, jet.e_psi]);
+    let jc = Matrix3::from_columns(&[e1, sg.e_phi * rho_c, sg.e_psi * rho_c]);
+    let jt = Matrix3::from_columns(&[e1, sg.e_phi * rho_t, sg.e_psi * rho_t]);
+    let jr = Matrix3::from_columns(&[V3::zeros(), sg.e_phi, sg.e_psi]);
     let mass3 =
         jc.transpose() * jc * m + jt.transpose() * a_mat * jt + jr.transpose() * jr * c.rod_inertia;
-    let drift = loads.e_dot[0] * (2.0 * sd);
+    let drift = loads.e_dot0 * (2.0 * sd);
     let c0 = drift + w * rho_c;
     let t0 = drift + w * rho_t;
-    let mut rhs3 = jc.transpose() * (loads.force[0] - c0 * m)
+    let mut rhs3 = jc.transpose() * (sg.force - c0 * m)
         + jt.transpose() * (b_vec - a_mat * t0)
-        + jr.transpose() * loads.extra[0];
+        + jr.transpose() * sg.extra;
     rhs3[0] -= c.k * s + c.c_s * sd;
     let chol = mass3.cholesky().ok_or(Singular { segment: 0 })?;
     let z = chol.solve(&rhs3);
     qdd[0] = z[0];
     qdd[1] = z[1];
     qdd[2] = z[2];
-    let e1dd = w + jet.e_phi * z[1] + jet.e_psi * z[2];
     let mut acc = t0 + jt * z;
 
     let mut tensions = tensions;
     if let Some(t) = tensions.as_deref_mut() {
+        let e1dd = w + sg.e_phi * z[1] + sg.e_psi * z[2];
         let com = e1 * z[0] + drift + e1dd * rho_c;
-        let pull = loads.force[0] - com * m + b_vec - a_mat * acc;
+        let pull = sg.force - com * m + b_vec - a_mat * acc;
         t[0] = pull.dot(&e1);
     }
 
     // Forward sweep.
     for k in 1..n {
         let art = &work[k];
+        let sg = &seg[k];
         if let Some(t) = tensions.as_deref_mut() {
-            t[k] = (art.bias - art.inertia * acc).dot(&loads.jets[k].e);
+            // P_k = b_k - A_k a_k with A_k = B_k - (m/2) 1.
+            let pull = art.bias - art.inertia.mul(&acc) + acc * (0.5 * m);
+            t[k] = pull.dot(&sg.e);
         }
-        let u = art.y - art.g * acc;
-        qdd[1 + 2 * k] = u[0];
-        qdd[2 + 2 * k] = u[1];
-        let jet = &loads.jets[k];
-        acc += (loads.e_conv[k] + jet.e_phi * u[0] + jet.e_psi * u[1]) * l;
+        let u0 = art.y[0] - art.g[0].dot(&acc);
+        let u1 = art.y[1] - art.g[1].dot(&acc);
+        qdd[1 + 2 * k] = u0;
+        qdd[2 + 2 * k] = u1;
+        acc += (sg.w + sg.e_phi * u0 + sg.e_psi * u1) * l;
     }
     if let Some(t) = tensions {
-        t[n] = (loads.tip_force - acc * c.tip_mass).dot(&loads.jets[n - 1].e);
+        t[n] = (loads.tip_force - acc * c.tip_mass).dot(&seg[n - 1].e);
     }
     Ok(())
 }
