@@ -137,6 +137,9 @@ pub(crate) struct Segment {
 #[derive(Debug, Clone)]
 struct Workspace {
     seg: Vec<Segment>,
+    /// sin and cos of the 2n angles.
+    sin: Vec<f64>,
+    cos: Vec<f64>,
     /// Rate of e_1.
     e_dot0: V3,
     tip_force: V3,
@@ -176,6 +179,8 @@ impl TetherModel {
                 * config.tangential_drag_coefficient,
             ws: Workspace {
                 seg: vec![Segment::default(); n],
+                sin: vec![0.0; 2 * n],
+                cos: vec![0.0; 2 * n],
                 e_dot0: V3::zeros(),
                 tip_force: V3::zeros(),
                 com_acc0: Vec::new(),
@@ -226,8 +231,8 @@ impl TetherModel {
         }
     }
 
-    /// One pass over the chain, root to tip: directions and their partials (one sin/cos pair per
-    /// angle), velocities, convective accelerations, the external forces on the segment centres
+    /// One pass over the chain, root to tip: directions and their partials (sin and cos of all
+    /// angles in one vectorized batch, [`crate::trig`]), velocities, convective accelerations, the external forces on the segment centres
     /// and the tip, and the `extra` vectors of bending, joint damping and rotational inertia.
     /// Shared by both solvers.
     ///
@@ -247,15 +252,15 @@ impl TetherModel {
         let (c_b, rod_inertia) = (self.c_b, self.rod_inertia);
         let (normal_drag, tangential_drag) = (self.normal_drag, self.tangential_drag);
         let ws = &mut self.ws;
+        crate::trig::sin_cos_batch(&q[1..], &mut ws.sin, &mut ws.cos);
         let mut p = V3::zeros();
         let mut pv = V3::zeros();
         let mut prev_e = V3::zeros();
         let mut prev_omega = V3::zeros();
         for k in 0..self.n {
-            let (phi, psi) = (q[1 + 2 * k], q[2 + 2 * k]);
             let (phi_d, psi_d) = (qd[1 + 2 * k], qd[2 + 2 * k]);
-            let (sf, cf) = phi.sin_cos();
-            let (sp, cp) = psi.sin_cos();
+            let (sf, cf) = (ws.sin[2 * k], ws.cos[2 * k]);
+            let (sp, cp) = (ws.sin[2 * k + 1], ws.cos[2 * k + 1]);
             if !(cp.abs() >= SINGULAR_COS_PSI) {
                 return Err(Self::singular_chart(time, k, cp));
             }

@@ -31,6 +31,7 @@ pub mod reference;
 pub mod state;
 pub mod surroundings;
 pub mod tether;
+mod trig;
 
 pub use atmosphere::Atmosphere;
 pub use config::{TetherConfig, STANDARD_GRAVITY};
