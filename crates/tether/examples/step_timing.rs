@@ -18,9 +18,12 @@ fn main() {
         time_step: if n >= 300 { 0.005 } else { 0.01 },
         ..TetherConfig::table3()
     };
-    let (cfg, flow) = reference::towed(&cfg, reference::StandInBody::accd()).unwrap();
+    let (cfg, mut flow) = reference::towed(&cfg, reference::StandInBody::accd()).unwrap();
     let mut tether = Tether::new(&cfg).unwrap();
     tether.step_many(2000, &flow).unwrap();
+    if args.get(4).is_some_and(|a| a == "still") {
+        flow.density = 0.0;
+    }
     tether.model_mut().set_solver(solver);
     let mut best = f64::INFINITY;
     for _ in 0..5 {

@@ -50,7 +50,7 @@ use nalgebra::{DMatrix, Vector3};
 use crate::config::TetherConfig;
 use crate::direction::DirectionJet;
 use crate::error::{Result, TetherError};
-use crate::recursive::{self, Articulated, ChainConstants, ChainLoads};
+use crate::recursive::{self, Articulated, Chain, ChainConstants, InertiaSweep};
 use crate::surroundings::Surroundings;
 
 type V3 = Vector3<f64>;
@@ -113,16 +113,22 @@ pub struct TetherModel {
     ws: Workspace,
 }
 
-/// Everything the solvers need of one segment at the current state, from one fused pass over
-/// the chain ([`TetherModel::prepare`]).
+/// The geometry of one segment at the current state: its direction and partials.
 #[derive(Debug, Clone, Copy, Default)]
-pub(crate) struct Segment {
+pub(crate) struct Geometry {
     /// Unit direction e.
     pub e: V3,
     /// de/dphi (length cos psi, its y component is zero).
     pub e_phi: V3,
     /// de/dpsi (unit).
     pub e_psi: V3,
+    /// cos psi.
+    pub cos_psi: f64,
+}
+
+/// The loads on one segment at the current state.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct SegmentLoads {
     /// Convective acceleration of e (with zero angle accelerations).
     pub w: V3,
     /// External force on the centre (gravity, apparent, aerodynamics), N.
@@ -130,13 +136,110 @@ pub(crate) struct Segment {
     /// Vector X_k whose projections E_kb . X_k are the generalized forces of bending, damping and
     /// rotational convective inertia (-I w).
     pub extra: V3,
-    /// cos psi.
-    pub cos_psi: f64,
+}
+
+/// The walk from the root to the tip that computes velocities and loads segment by segment
+/// ([`LoadsPass::step`]), so that the recursive solver can interleave it with its tip-to-root
+/// inertia sweep.
+struct LoadsPass {
+    time: f64,
+    s: f64,
+    sd: f64,
+    l: f64,
+    weight: V3,
+    bend_gain: f64,
+    c_b: f64,
+    rod_inertia: f64,
+    normal_drag: f64,
+    tangential_drag: f64,
+    /// Base of the next segment and its velocity.
+    p: V3,
+    pv: V3,
+    prev_e: V3,
+    prev_omega: V3,
+    e_dot0: V3,
+}
+
+impl LoadsPass {
+    /// Velocities, convective acceleration, external force and bending / damping / rotational
+    /// inertia vectors of segment k; adds segment k's share of joint k's bending and damping to
+    /// segment k-1. Call for k = 0, 1, ... in order.
+    #[inline(always)]
+    fn step<S: Surroundings + ?Sized>(
+        &mut self,
+        k: usize,
+        geom: &[Geometry],
+        loads: &mut [SegmentLoads],
+        qd: &[f64],
+        surroundings: &S,
+    ) -> Result<()> {
+        let g = &geom[k];
+        let (e, e_phi, e_psi) = (g.e, g.e_phi, g.e_psi);
+        let (phi_d, psi_d) = (qd[1 + 2 * k], qd[2 + 2 * k]);
+        let e_dot = e_phi * phi_d + e_psi * psi_d;
+        // With e_phi = cp (sf, 0, cf) and e_psi = (sp cf, cp, -sp sf) (see DirectionJet):
+        // d2e/dphi2 = cp (cf, 0, -sf) = (e_phi.z, 0, -e_phi.x),
+        // d2e/dphidpsi = -sp (sf, 0, cf) = (e_psi.z, 0, -e_psi.x), d2e/dpsi2 = -e.
+        let (pp, ps2, ss) = (phi_d * phi_d, 2.0 * phi_d * psi_d, psi_d * psi_d);
+        let w = V3::new(
+            e_phi.z * pp + e_psi.z * ps2,
+            0.0,
+            -e_phi.x * pp - e_psi.x * ps2,
+        ) - e * ss;
+        let half = 0.5 * self.l;
+        if k == 0 {
+            self.p = e * self.s;
+            self.pv = e * self.sd + e_dot * self.s;
+            self.e_dot0 = e_dot;
+        }
+        let com = self.p + e * half;
+        let com_vel = self.pv + e_dot * half;
+        self.p += e * self.l;
+        self.pv += e_dot * self.l;
+
+        let rho = surroundings.air_density(self.time, &com);
+        let mut force = self.weight;
+        if rho != 0.0 {
+            let rel = surroundings.air_velocity(self.time, &com) - com_vel;
+            let vt = rel.dot(&e);
+            let vn = rel - e * vt;
+            force += vn * (rho * self.normal_drag * vn.norm())
+                + e * (rho * self.tangential_drag * vt * vt.abs());
+        }
+
+        let omega = e.cross(&e_dot);
+        let mut extra = w * (-self.rod_inertia);
+        if k > 0 {
+            // Bending spring and joint damper between segments k-1 and k.
+            let prev_e = self.prev_e;
+            let one_plus_cos = 1.0 + prev_e.dot(&e);
+            if !(one_plus_cos >= FOLDED_JOINT) || !one_plus_cos.is_finite() {
+                return Err(TetherError::Diverged {
+                    time: self.time,
+                    reason: format!(
+                        "joint {k} between segments {k} and {} folded back on itself",
+                        k + 1
+                    ),
+                });
+            }
+            let coef = self.bend_gain / one_plus_cos;
+            // Damping torque of this joint: on segment k it is -c_b (w_k - w_{k-1}), on segment
+            // k-1 the opposite; Q_(k,b) = E_kb . (tau_k x e_k).
+            let tau = (omega - self.prev_omega) * self.c_b;
+            loads[k - 1].extra += e * coef + tau.cross(&prev_e);
+            extra += prev_e * coef - tau.cross(&e);
+        }
+        loads[k] = SegmentLoads { w, force, extra };
+        self.prev_e = e;
+        self.prev_omega = omega;
+        Ok(())
+    }
 }
 
 #[derive(Debug, Clone)]
 struct Workspace {
-    seg: Vec<Segment>,
+    geom: Vec<Geometry>,
+    loads: Vec<SegmentLoads>,
     /// sin and cos of the 2n angles.
     sin: Vec<f64>,
     cos: Vec<f64>,
@@ -178,7 +281,8 @@ impl TetherModel {
                 * l
                 * config.tangential_drag_coefficient,
             ws: Workspace {
-                seg: vec![Segment::default(); n],
+                geom: vec![Geometry::default(); n],
+                loads: vec![SegmentLoads::default(); n],
                 sin: vec![0.0; 2 * n],
                 cos: vec![0.0; 2 * n],
                 e_dot0: V3::zeros(),
@@ -231,10 +335,75 @@ impl TetherModel {
         }
     }
 
-    /// One pass over the chain, root to tip: directions and their partials (sin and cos of all
-    /// angles in one vectorized batch, [`crate::trig`]), velocities, convective accelerations, the external forces on the segment centres
-    /// and the tip, and the `extra` vectors of bending, joint damping and rotational inertia.
-    /// Shared by both solvers.
+    /// Directions and their partials of all segments (sin and cos of all angles in one
+    /// vectorized batch, [`crate::trig`]). Errors at the coordinate singularity.
+    #[inline(always)]
+    fn geometry(&mut self, time: f64, q: &[f64]) -> Result<()> {
+        let ws = &mut self.ws;
+        crate::trig::sin_cos_batch(&q[1..], &mut ws.sin, &mut ws.cos);
+        for k in 0..self.n {
+            let (sf, cf) = (ws.sin[2 * k], ws.cos[2 * k]);
+            let (sp, cp) = (ws.sin[2 * k + 1], ws.cos[2 * k + 1]);
+            if !(cp.abs() >= SINGULAR_COS_PSI) {
+                return Err(Self::singular_chart(time, k, cp));
+            }
+            // See DirectionJet.
+            ws.geom[k] = Geometry {
+                e: V3::new(-cp * cf, sp, cp * sf),
+                e_phi: V3::new(cp * sf, 0.0, cp * cf),
+                e_psi: V3::new(sp * cf, cp, -sp * sf),
+                cos_psi: cp,
+            };
+        }
+        Ok(())
+    }
+
+    /// The root-to-tip loads walk, ready for segment 0.
+    #[inline(always)]
+    fn loads_pass<S: Surroundings + ?Sized>(
+        &self,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        surroundings: &S,
+    ) -> LoadsPass {
+        let g_eff = self.effective_gravity(time, surroundings);
+        LoadsPass {
+            time,
+            s: q[0],
+            sd: qd[0],
+            l: self.l,
+            weight: g_eff * self.m,
+            bend_gain: 2.0 * self.ei / self.l,
+            c_b: self.c_b,
+            rod_inertia: self.rod_inertia,
+            normal_drag: self.normal_drag,
+            tangential_drag: self.tangential_drag,
+            p: V3::zeros(),
+            pv: V3::zeros(),
+            prev_e: V3::zeros(),
+            prev_omega: V3::zeros(),
+            e_dot0: V3::zeros(),
+        }
+    }
+
+    /// Gravity plus the apparent acceleration of the accelerating frame.
+    #[inline(always)]
+    fn effective_gravity<S: Surroundings + ?Sized>(&self, time: f64, surroundings: &S) -> V3 {
+        V3::new(0.0, 0.0, self.gravity) - surroundings.frame_acceleration(time)
+    }
+
+    /// Stores what the loads walk leaves: the rate of e_1 and the force on the tip body.
+    #[inline(always)]
+    fn finish_loads<S: Surroundings + ?Sized>(&mut self, pass: &LoadsPass, surroundings: &S) {
+        let g_eff = self.effective_gravity(pass.time, surroundings);
+        self.ws.e_dot0 = pass.e_dot0;
+        self.ws.tip_force =
+            g_eff * self.tip_mass + surroundings.tip_force(pass.time, &pass.p, &pass.pv);
+    }
+
+    /// The geometry, velocities and loads of every segment and the tip in two passes over the
+    /// chain, for the dense solver: see [`TetherModel::geometry`] and [`LoadsPass`].
     ///
     /// Errors at the coordinate singularity or at a completely folded joint.
     fn prepare<S: Surroundings + ?Sized>(
@@ -244,92 +413,12 @@ impl TetherModel {
         qd: &[f64],
         surroundings: &S,
     ) -> Result<()> {
-        let (s, sd) = (q[0], qd[0]);
-        let (l, half) = (self.l, 0.5 * self.l);
-        let g_eff = V3::new(0.0, 0.0, self.gravity) - surroundings.frame_acceleration(time);
-        let weight = g_eff * self.m;
-        let bend_gain = 2.0 * self.ei / self.l;
-        let (c_b, rod_inertia) = (self.c_b, self.rod_inertia);
-        let (normal_drag, tangential_drag) = (self.normal_drag, self.tangential_drag);
-        let ws = &mut self.ws;
-        crate::trig::sin_cos_batch(&q[1..], &mut ws.sin, &mut ws.cos);
-        let mut p = V3::zeros();
-        let mut pv = V3::zeros();
-        let mut prev_e = V3::zeros();
-        let mut prev_omega = V3::zeros();
+        self.geometry(time, q)?;
+        let mut pass = self.loads_pass(time, q, qd, surroundings);
         for k in 0..self.n {
-            let (phi_d, psi_d) = (qd[1 + 2 * k], qd[2 + 2 * k]);
-            let (sf, cf) = (ws.sin[2 * k], ws.cos[2 * k]);
-            let (sp, cp) = (ws.sin[2 * k + 1], ws.cos[2 * k + 1]);
-            if !(cp.abs() >= SINGULAR_COS_PSI) {
-                return Err(Self::singular_chart(time, k, cp));
-            }
-            // See DirectionJet: e, de/dphi, de/dpsi; d2e/dphi2 = (cp cf, 0, -cp sf),
-            // d2e/dphidpsi = (-sp sf, 0, -sp cf), d2e/dpsi2 = -e.
-            let e = V3::new(-cp * cf, sp, cp * sf);
-            let e_phi = V3::new(cp * sf, 0.0, cp * cf);
-            let e_psi = V3::new(sp * cf, cp, -sp * sf);
-            let e_dot = e_phi * phi_d + e_psi * psi_d;
-            let (pp, ps2, ss) = (phi_d * phi_d, 2.0 * phi_d * psi_d, psi_d * psi_d);
-            let w = V3::new(
-                cp * cf * pp - sp * sf * ps2,
-                0.0,
-                -cp * sf * pp - sp * cf * ps2,
-            ) - e * ss;
-            if k == 0 {
-                p = e * s;
-                pv = e * sd + e_dot * s;
-                ws.e_dot0 = e_dot;
-            }
-            let com = p + e * half;
-            let com_vel = pv + e_dot * half;
-            p += e * l;
-            pv += e_dot * l;
-
-            let rho = surroundings.air_density(time, &com);
-            let mut force = weight;
-            if rho != 0.0 {
-                let rel = surroundings.air_velocity(time, &com) - com_vel;
-                let vt = rel.dot(&e);
-                let vn = rel - e * vt;
-                force += vn * (rho * normal_drag * vn.norm())
-                    + e * (rho * tangential_drag * vt * vt.abs());
-            }
-
-            let omega = e.cross(&e_dot);
-            let mut extra = w * (-rod_inertia);
-            if k > 0 {
-                // Bending spring and joint damper between segments k-1 and k.
-                let one_plus_cos = 1.0 + prev_e.dot(&e);
-                if !(one_plus_cos >= FOLDED_JOINT) || !one_plus_cos.is_finite() {
-                    return Err(TetherError::Diverged {
-                        time,
-                        reason: format!(
-                            "joint {k} between segments {k} and {} folded back on itself",
-                            k + 1
-                        ),
-                    });
-                }
-                let coef = bend_gain / one_plus_cos;
-                // Damping torque of this joint: on segment k it is -c_b (w_k - w_{k-1}), on
-                // segment k-1 the opposite; Q_(k,b) = E_kb . (tau_k x e_k).
-                let tau = (omega - prev_omega) * c_b;
-                ws.seg[k - 1].extra += e * coef + tau.cross(&prev_e);
-                extra += prev_e * coef - tau.cross(&e);
-            }
-            ws.seg[k] = Segment {
-                e,
-                e_phi,
-                e_psi,
-                w,
-                force,
-                extra,
-                cos_psi: cp,
-            };
-            prev_e = e;
-            prev_omega = omega;
+            pass.step(k, &self.ws.geom, &mut self.ws.loads, qd, surroundings)?;
         }
-        ws.tip_force = g_eff * self.tip_mass + surroundings.tip_force(time, &p, &pv);
+        self.finish_loads(&pass, surroundings);
         Ok(())
     }
 
@@ -337,11 +426,12 @@ impl TetherModel {
     fn directions(&mut self, q: &[f64]) {
         for k in 0..self.n {
             let jet = DirectionJet::new(q[1 + 2 * k], q[2 + 2 * k]);
-            let seg = &mut self.ws.seg[k];
-            seg.e = jet.e;
-            seg.e_phi = jet.e_phi;
-            seg.e_psi = jet.e_psi;
-            seg.cos_psi = jet.cos_psi;
+            self.ws.geom[k] = Geometry {
+                e: jet.e,
+                e_phi: jet.e_phi,
+                e_psi: jet.e_psi,
+                cos_psi: jet.cos_psi,
+            };
         }
     }
 
@@ -379,16 +469,16 @@ impl TetherModel {
         if ws.com_acc0.len() != self.n {
             ws.com_acc0.resize(self.n, V3::zeros());
         }
-        let mut pa = ws.e_dot0 * (2.0 * sd) + ws.seg[0].w * s;
+        let mut pa = ws.e_dot0 * (2.0 * sd) + ws.loads[0].w * s;
         for k in 0..self.n {
-            ws.com_acc0[k] = pa + ws.seg[k].w * half;
-            pa += ws.seg[k].w * self.l;
+            ws.com_acc0[k] = pa + ws.loads[k].w * half;
+            pa += ws.loads[k].w * self.l;
         }
         ws.tip_acc0 = pa;
         let mut suffix = ws.tip_force - ws.tip_acc0 * self.tip_mass;
         let mut total = suffix;
         for k in (0..self.n).rev() {
-            let seg = &ws.seg[k];
+            let (geo, seg) = (&ws.geom[k], &ws.loads[k]);
             let h = seg.force - ws.com_acc0[k] * self.m;
             let (a_kk, l_k) = if k == 0 {
                 (half + s, self.l + s)
@@ -396,12 +486,12 @@ impl TetherModel {
                 (half, self.l)
             };
             let g = h * a_kk + suffix * l_k + seg.extra;
-            rhs[1 + 2 * k] = seg.e_phi.dot(&g);
-            rhs[2 + 2 * k] = seg.e_psi.dot(&g);
+            rhs[1 + 2 * k] = geo.e_phi.dot(&g);
+            rhs[2 + 2 * k] = geo.e_psi.dot(&g);
             suffix += h;
             total += h;
         }
-        rhs[0] = ws.seg[0].e.dot(&total) - self.k * s - self.c_s * sd;
+        rhs[0] = ws.geom[0].e.dot(&total) - self.k * s - self.c_s * sd;
     }
 
     /// Assembles the lower triangle of the mass matrix M(q) into the workspace.
@@ -415,13 +505,13 @@ impl TetherModel {
             ws.mass.resize(dim * dim, 0.0);
         }
         ws.mass[0] = n as f64 * m + tip;
-        let e1 = ws.seg[0].e;
+        let e1 = ws.geom[0].e;
         for k in 0..n {
             let (a_kk, l_k) = if k == 0 { (half + s, l + s) } else { (half, l) };
             let beyond = m * (n - 1 - k) as f64 + tip;
             let v_k = m * a_kk + beyond * l_k;
             let w_kk = m * a_kk * a_kk + beyond * l_k * l_k + self.rod_inertia;
-            let jk = ws.seg[k];
+            let jk = ws.geom[k];
             let (rp, rs) = (1 + 2 * k, 2 + 2 * k);
             ws.mass[rp * dim] = v_k * e1.dot(&jk.e_phi);
             ws.mass[rs * dim] = v_k * e1.dot(&jk.e_psi);
@@ -429,7 +519,7 @@ impl TetherModel {
             for j in 0..k {
                 let l_j = if j == 0 { l + s } else { l };
                 let w = l_j * v_k;
-                let jj = ws.seg[j];
+                let jj = ws.geom[j];
                 let (cp, cs) = (1 + 2 * j, 2 + 2 * j);
                 ws.mass[rp * dim + cp] = w * jk.e_phi.dot(&jj.e_phi);
                 ws.mass[rp * dim + cs] = w * jk.e_phi.dot(&jj.e_psi);
@@ -519,10 +609,49 @@ impl TetherModel {
         qdd: &mut [f64],
         tensions: Option<&mut [f64]>,
     ) -> Result<()> {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2, checked just above.
+            return unsafe { self.solve_recursive_avx2(time, q, qd, surroundings, qdd, tensions) };
+        }
+        self.solve_recursive_body(time, q, qd, surroundings, qdd, tensions)
+    }
+
+    /// [`TetherModel::solve_recursive_body`] compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn solve_recursive_avx2<S: Surroundings + ?Sized>(
+        &mut self,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        surroundings: &S,
+        qdd: &mut [f64],
+        tensions: Option<&mut [f64]>,
+    ) -> Result<()> {
+        self.solve_recursive_body(time, q, qd, surroundings, qdd, tensions)
+    }
+
+    #[inline(always)]
+    fn solve_recursive_body<S: Surroundings + ?Sized>(
+        &mut self,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        surroundings: &S,
+        qdd: &mut [f64],
+        tensions: Option<&mut [f64]>,
+    ) -> Result<()> {
         self.check_len("q", q)?;
         self.check_len("qd", qd)?;
         self.check_len("qdd", qdd)?;
-        self.prepare(time, q, qd, surroundings)?;
+        let singular = |e: recursive::Singular| TetherError::Diverged {
+            time,
+            reason: format!(
+                "mass matrix lost positive definiteness at segment {}",
+                e.segment + 1
+            ),
+        };
         let constants = ChainConstants {
             l: self.l,
             m: self.m,
@@ -531,28 +660,40 @@ impl TetherModel {
             k: self.k,
             c_s: self.c_s,
         };
+        self.geometry(time, q)?;
+        // The loads walk (root to tip, throughput-bound) and the articulated-inertia sweep (tip
+        // to root, geometry only, latency-bound) interleaved, so that the processor overlaps them.
+        let mut pass = self.loads_pass(time, q, qd, surroundings);
+        let mut sweep = InertiaSweep::new(&constants);
+        let n = self.n;
         let ws = &mut self.ws;
-        let loads = ChainLoads {
-            seg: &ws.seg,
+        for i in 0..n {
+            pass.step(i, &ws.geom, &mut ws.loads, qd, surroundings)?;
+            let j = n - 1 - i;
+            if j > 0 {
+                sweep
+                    .step(j, &ws.geom[j], &mut ws.articulated)
+                    .map_err(singular)?;
+            }
+        }
+        self.finish_loads(&pass, surroundings);
+        let ws = &mut self.ws;
+        let chain = Chain {
+            geom: &ws.geom,
+            loads: &ws.loads,
             e_dot0: ws.e_dot0,
             tip_force: ws.tip_force,
         };
         recursive::solve(
             &constants,
-            &loads,
+            &chain,
             q[0],
             qd[0],
             &mut ws.articulated,
             qdd,
             tensions,
         )
-        .map_err(|e| TetherError::Diverged {
-            time,
-            reason: format!(
-                "mass matrix lost positive definiteness at segment {}",
-                e.segment + 1
-            ),
-        })
+        .map_err(singular)
     }
 
     /// The mass matrix M(q) (symmetric, dim x dim). Allocates; for analysis and tests.
@@ -623,26 +764,26 @@ impl TetherModel {
         let ws = &self.ws;
         let (s, sd, sdd) = (q[0], qd[0], qdd[0]);
         let acc_dir = |k: usize| {
-            let seg = &ws.seg[k];
-            seg.w + seg.e_phi * qdd[1 + 2 * k] + seg.e_psi * qdd[2 + 2 * k]
+            let geo = &ws.geom[k];
+            ws.loads[k].w + geo.e_phi * qdd[1 + 2 * k] + geo.e_psi * qdd[2 + 2 * k]
         };
         let e1dd = acc_dir(0);
-        let mut pa = ws.seg[0].e * sdd + ws.e_dot0 * (2.0 * sd) + e1dd * s;
+        let mut pa = ws.geom[0].e * sdd + ws.e_dot0 * (2.0 * sd) + e1dd * s;
         // Accelerations of centres, stored in place of nothing: accumulate forward, then sum backward.
         // Two passes keep it allocation-free: first the tip acceleration, then walk inward.
         for k in 0..self.n {
             pa += acc_dir(k) * self.l;
         }
         let mut pull = ws.tip_force - pa * self.tip_mass;
-        tensions[self.n] = pull.dot(&ws.seg[self.n - 1].e);
+        tensions[self.n] = pull.dot(&ws.geom[self.n - 1].e);
         // Walk inward: the base of segment k is the tip position minus l e_j for j >= k.
         let mut base_acc = pa;
         for k in (0..self.n).rev() {
             let ek_dd = acc_dir(k);
             base_acc -= ek_dd * self.l;
             let com_acc = base_acc + ek_dd * (0.5 * self.l);
-            pull += ws.seg[k].force - com_acc * self.m;
-            tensions[k] = pull.dot(&ws.seg[k].e);
+            pull += ws.loads[k].force - com_acc * self.m;
+            tensions[k] = pull.dot(&ws.geom[k].e);
         }
         Ok(())
     }

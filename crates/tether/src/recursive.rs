@@ -65,7 +65,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::dynamics::Segment;
+use crate::dynamics::{Geometry, SegmentLoads};
 
 type V3 = Vector3<f64>;
 
@@ -123,15 +123,20 @@ fn dot_xz(a: &V3, b: &V3) -> f64 {
     a.x * b.x + a.z * b.z
 }
 
-/// What the backward sweep leaves per segment for the forward sweep and the tensions.
+/// What the backward sweeps leave per segment for the forward sweep and the tensions.
 #[derive(Debug, Clone, Copy, Default)]
 pub(crate) struct Articulated {
+    /// `B_{k+1} E_phi`, `B_{k+1} E_psi`.
+    bep: V3,
+    bes: V3,
+    /// `K^-1` (scaled, see the module docs): entries 00, 01, 11.
+    kinv: [f64; 3],
     /// Rows of `G_k`: `u_k = y_k - G_k a_k`.
     g: [V3; 2],
-    /// `y_k`.
-    y: [f64; 2],
     /// `B_k = A_k + (m/2) 1`.
     inertia: Sym3,
+    /// `y_k`.
+    y: [f64; 2],
     /// `b_k`.
     bias: V3,
 }
@@ -147,10 +152,11 @@ pub(crate) struct ChainConstants {
     pub c_s: f64,
 }
 
-/// The state of the chain from [`crate::TetherModel`]'s loads pass: per segment its directions,
-/// convective accelerations, forces and `extra` vectors; the rate of e_1; the tip force.
-pub(crate) struct ChainLoads<'a> {
-    pub seg: &'a [Segment],
+/// The state of the chain from [`crate::TetherModel`]'s passes: per segment its geometry and
+/// loads; the rate of e_1; the tip force.
+pub(crate) struct Chain<'a> {
+    pub geom: &'a [Geometry],
+    pub loads: &'a [SegmentLoads],
     pub e_dot0: V3,
     pub tip_force: V3,
 }
@@ -162,85 +168,136 @@ pub(crate) struct Singular {
     pub segment: usize,
 }
 
-/// Solves the equations of motion in O(n): writes `q''` into `qdd` and, if given, the tensions
+/// The first backward sweep: the articulated inertias `B_k`, which depend on the geometry only.
+/// Call [`InertiaSweep::step`] for k = n-1, n-2, ..., 1.
+pub(crate) struct InertiaSweep {
+    bm: Sym3,
+    m: f64,
+    m6: f64,
+    inv_l: f64,
+}
+
+impl InertiaSweep {
+    /// Starts at the tip: `B_n = (M_t + m/2) 1`.
+    #[inline(always)]
+    pub(crate) fn new(c: &ChainConstants) -> Self {
+        InertiaSweep {
+            bm: Sym3::diagonal(c.tip_mass + 0.5 * c.m),
+            m: c.m,
+            m6: c.m / 6.0,
+            inv_l: 1.0 / c.l,
+        }
+    }
+
+    /// Eliminates segment k (>= 1): from `B_{k+1}` to `B_k`.
+    #[inline(always)]
+    pub(crate) fn step(
+        &mut self,
+        k: usize,
+        geom: &Geometry,
+        work: &mut [Articulated],
+    ) -> Result<(), Singular> {
+        let bm = self.bm;
+        let (ep, es) = (&geom.e_phi, &geom.e_psi);
+        let bep = bm.mul_xz(ep);
+        let bes = bm.mul(es);
+        let k00 = dot_xz(ep, &bep) - self.m6 * geom.cos_psi * geom.cos_psi;
+        let k01 = dot_xz(ep, &bes);
+        let k11 = es.dot(&bes) - self.m6;
+        // W = (B E) K^-1 = (B E) adj(K) / det: the adjugate products run beside the division.
+        let a0 = bep * k11 - bes * k01;
+        let a1 = bes * k00 - bep * k01;
+        let det = k00 * k11 - k01 * k01;
+        if !(det > 0.0 && k00 > 0.0) || !det.is_finite() {
+            return Err(Singular { segment: k });
+        }
+        let inv = 1.0 / det;
+        let m = self.m;
+        let upd = Sym3 {
+            xx: a0.x * bep.x + a1.x * bes.x,
+            yy: a0.y * bep.y + a1.y * bes.y,
+            zz: a0.z * bep.z + a1.z * bes.z,
+            xy: a0.x * bep.y + a1.x * bes.y,
+            xz: a0.x * bep.z + a1.x * bes.z,
+            yz: a0.y * bep.z + a1.y * bes.z,
+        };
+        self.bm = Sym3 {
+            xx: bm.xx + m - upd.xx * inv,
+            yy: bm.yy + m - upd.yy * inv,
+            zz: bm.zz + m - upd.zz * inv,
+            xy: bm.xy - upd.xy * inv,
+            xz: bm.xz - upd.xz * inv,
+            yz: bm.yz - upd.yz * inv,
+        };
+        let gs = inv * self.inv_l;
+        let art = &mut work[k];
+        art.bep = bep;
+        art.bes = bes;
+        art.kinv = [k11 * inv, -k01 * inv, k00 * inv];
+        art.g = [a0 * gs, a1 * gs];
+        art.inertia = self.bm;
+        Ok(())
+    }
+}
+
+/// After the [`InertiaSweep`] has run over segments n-1 ... 1: the bias sweep (tip to root), the
+/// root's 3x3 system and the forward sweep. Writes `q''` into `qdd` and, if given, the tensions
 /// (n + 1 values, as [`crate::TetherModel::tensions`]) into `tensions`.
+#[inline(always)]
 pub(crate) fn solve(
     c: &ChainConstants,
-    loads: &ChainLoads<'_>,
+    chain: &Chain<'_>,
     s: f64,
     sd: f64,
     work: &mut [Articulated],
     qdd: &mut [f64],
     tensions: Option<&mut [f64]>,
 ) -> Result<(), Singular> {
-    let seg = loads.seg;
-    let n = seg.len();
+    let (geom, loads) = (chain.geom, chain.loads);
+    let n = geom.len();
     let (l, m) = (c.l, c.m);
     let inv_l = 1.0 / l;
     let inv_l2 = inv_l * inv_l;
     let half_inv_l = 0.5 * inv_l;
-    let (m4, m6) = (0.25 * m, m / 6.0);
+    let m4 = 0.25 * m;
+    let tip_inertia = Sym3::diagonal(c.tip_mass + 0.5 * m);
 
-    // Backward sweep, tip to segment 2, on B = A + (m/2) 1.
-    let mut bm = Sym3::diagonal(c.tip_mass + 0.5 * m);
-    let mut bias = loads.tip_force;
+    // Bias sweep, tip to segment 2.
+    let mut bias = chain.tip_force;
+    let mut outboard = tip_inertia;
     for k in (1..n).rev() {
-        let sg = &seg[k];
-        let (ep, es) = (&sg.e_phi, &sg.e_psi);
-        let bep = bm.mul_xz(ep);
-        let bes = bm.mul(es);
-        let k00 = dot_xz(ep, &bep) - m6 * sg.cos_psi * sg.cos_psi;
-        let k01 = dot_xz(ep, &bes);
-        let k11 = es.dot(&bes) - m6;
-        let det = k00 * k11 - k01 * k01;
-        if !(det > 0.0 && k00 > 0.0) || !det.is_finite() {
-            return Err(Singular { segment: k });
-        }
-        let inv = 1.0 / det;
-        let (i00, i01, i11) = (k11 * inv, -k01 * inv, k00 * inv);
-        // W = (B E) K^-1, columns w0, w1.
-        let w0 = bep * i00 + bes * i01;
-        let w1 = bep * i01 + bes * i11;
-        let bw = bm.mul(&sg.w);
-        let v = sg.force * half_inv_l + sg.extra * inv_l2 + bias * inv_l + sg.w * m4 - bw;
-        let (r0, r1) = (dot_xz(ep, &v), es.dot(&v));
+        let (g, ld) = (&geom[k], &loads[k]);
+        let art = &mut work[k];
+        let bw = outboard.mul(&ld.w);
+        let v = ld.force * half_inv_l + ld.extra * inv_l2 + bias * inv_l + ld.w * m4 - bw;
+        let (r0, r1) = (dot_xz(&g.e_phi, &v), g.e_psi.dot(&v));
+        let [i00, i01, i11] = art.kinv;
         let y0 = i00 * r0 + i01 * r1;
         let y1 = i01 * r0 + i11 * r1;
-        bias = sg.force + bias - (bw + bep * y0 + bes * y1) * l;
-        bm = Sym3 {
-            xx: bm.xx + m - (w0.x * bep.x + w1.x * bes.x),
-            yy: bm.yy + m - (w0.y * bep.y + w1.y * bes.y),
-            zz: bm.zz + m - (w0.z * bep.z + w1.z * bes.z),
-            xy: bm.xy - (w0.x * bep.y + w1.x * bes.y),
-            xz: bm.xz - (w0.x * bep.z + w1.x * bes.z),
-            yz: bm.yz - (w0.y * bep.z + w1.y * bes.z),
-        };
-        work[k] = Articulated {
-            g: [w0 * inv_l, w1 * inv_l],
-            y: [y0, y1],
-            inertia: bm,
-            bias,
-        };
+        bias = ld.force + bias - (bw + art.bep * y0 + art.bes * y1) * l;
+        art.y = [y0, y1];
+        art.bias = bias;
+        outboard = art.inertia;
     }
 
     // Root: s and segment 1's angles, against A_1 = B_1 - (m/2) 1 and b_1.
-    let a_mat = bm.to_matrix() - Matrix3::identity() * (0.5 * m);
+    let a_mat = outboard.to_matrix() - Matrix3::identity() * (0.5 * m);
     let b_vec = bias;
-    let sg = &seg[0];
-    let e1 = sg.e;
-    let w = sg.w;
+    let (g, ld) = (&geom[0], &loads[0]);
+    let e1 = g.e;
+    let w = ld.w;
     let (rho_c, rho_t) = (s + 0.5 * l, s + l);
-    let jc = Matrix3::from_columns(&[e1, sg.e_phi * rho_c, sg.e_psi * rho_c]);
-    let jt = Matrix3::from_columns(&[e1, sg.e_phi * rho_t, sg.e_psi * rho_t]);
-    let jr = Matrix3::from_columns(&[V3::zeros(), sg.e_phi, sg.e_psi]);
+    let jc = Matrix3::from_columns(&[e1, g.e_phi * rho_c, g.e_psi * rho_c]);
+    let jt = Matrix3::from_columns(&[e1, g.e_phi * rho_t, g.e_psi * rho_t]);
+    let jr = Matrix3::from_columns(&[V3::zeros(), g.e_phi, g.e_psi]);
     let mass3 =
         jc.transpose() * jc * m + jt.transpose() * a_mat * jt + jr.transpose() * jr * c.rod_inertia;
-    let drift = loads.e_dot0 * (2.0 * sd);
+    let drift = chain.e_dot0 * (2.0 * sd);
     let c0 = drift + w * rho_c;
     let t0 = drift + w * rho_t;
-    let mut rhs3 = jc.transpose() * (sg.force - c0 * m)
+    let mut rhs3 = jc.transpose() * (ld.force - c0 * m)
         + jt.transpose() * (b_vec - a_mat * t0)
-        + jr.transpose() * sg.extra;
+        + jr.transpose() * ld.extra;
     rhs3[0] -= c.k * s + c.c_s * sd;
     let chol = mass3.cholesky().ok_or(Singular { segment: 0 })?;
     let z = chol.solve(&rhs3);
@@ -251,29 +308,29 @@ pub(crate) fn solve(
 
     let mut tensions = tensions;
     if let Some(t) = tensions.as_deref_mut() {
-        let e1dd = w + sg.e_phi * z[1] + sg.e_psi * z[2];
+        let e1dd = w + g.e_phi * z[1] + g.e_psi * z[2];
         let com = e1 * z[0] + drift + e1dd * rho_c;
-        let pull = sg.force - com * m + b_vec - a_mat * acc;
+        let pull = ld.force - com * m + b_vec - a_mat * acc;
         t[0] = pull.dot(&e1);
     }
 
     // Forward sweep.
     for k in 1..n {
         let art = &work[k];
-        let sg = &seg[k];
+        let (g, ld) = (&geom[k], &loads[k]);
         if let Some(t) = tensions.as_deref_mut() {
             // P_k = b_k - A_k a_k with A_k = B_k - (m/2) 1.
             let pull = art.bias - art.inertia.mul(&acc) + acc * (0.5 * m);
-            t[k] = pull.dot(&sg.e);
+            t[k] = pull.dot(&g.e);
         }
         let u0 = art.y[0] - art.g[0].dot(&acc);
         let u1 = art.y[1] - art.g[1].dot(&acc);
         qdd[1 + 2 * k] = u0;
         qdd[2 + 2 * k] = u1;
-        acc += (sg.w + sg.e_phi * u0 + sg.e_psi * u1) * l;
+        acc += (ld.w + g.e_phi * u0 + g.e_psi * u1) * l;
     }
     if let Some(t) = tensions {
-        t[n] = (loads.tip_force - acc * c.tip_mass).dot(&seg[n - 1].e);
+        t[n] = (chain.tip_force - acc * c.tip_mass).dot(&geom[n - 1].e);
     }
     Ok(())
 }

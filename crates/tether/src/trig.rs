@@ -59,6 +59,7 @@ fn sin_cos_reduced(x: f64) -> (f64, f64) {
 }
 
 /// `sin[i], cos[i] = sin(x[i]), cos(x[i])` for all i (the three slices of equal length).
+#[inline(always)]
 pub fn sin_cos_batch(x: &[f64], sin: &mut [f64], cos: &mut [f64]) {
     let len = x.len();
     let (sin, cos) = (&mut sin[..len], &mut cos[..len]);
