@@ -50,7 +50,7 @@ use nalgebra::{DMatrix, Vector3};
 use crate::config::TetherConfig;
 use crate::direction::DirectionJet;
 use crate::error::{Result, TetherError};
-use crate::recursive::{self, Articulated, Chain, ChainConstants, InertiaSweep};
+use crate::recursive::{self, Articulated, Chain, ChainConstants};
 use crate::surroundings::Surroundings;
 
 type V3 = Vector3<f64>;
@@ -126,94 +126,74 @@ pub(crate) struct Geometry {
     pub cos_psi: f64,
 }
 
-/// The loads on one segment at the current state.
+/// The motion of one segment at the current state.
 #[derive(Debug, Clone, Copy, Default)]
-pub(crate) struct SegmentLoads {
+pub(crate) struct Motion {
     /// Convective acceleration of e (with zero angle accelerations).
     pub w: V3,
-    /// External force on the centre (gravity, apparent, aerodynamics), N.
-    pub force: V3,
-    /// Vector X_k whose projections E_kb . X_k are the generalized forces of bending, damping and
-    /// rotational convective inertia (-I w).
-    pub extra: V3,
+    /// Angular velocity e x e'.
+    pub omega: V3,
+    /// Centre and its velocity.
+    pub com: V3,
+    pub com_vel: V3,
 }
 
-/// The walk from the root to the tip that computes velocities and loads segment by segment
-/// ([`LoadsPass::step`]), so that the recursive solver can interleave it with its tip-to-root
-/// inertia sweep.
-struct LoadsPass {
+/// The loads on one segment (dense path).
+#[derive(Debug, Clone, Copy, Default)]
+struct SegmentLoads {
+    force: V3,
+    extra: V3,
+}
+
+/// The loads on the segments, evaluated one segment at a time from the tip to the root
+/// ([`Loads::next`]), so that the recursive solver can eliminate each segment as soon as its loads
+/// are known. Both solvers use it.
+pub(crate) struct Loads<'a, S: ?Sized> {
     time: f64,
-    s: f64,
-    sd: f64,
-    l: f64,
+    geom: &'a [Geometry],
+    motion: &'a [Motion],
+    surroundings: &'a S,
+    p: LoadParameters,
+    /// Segment k's share of the joint between k and k+1, from the previous call.
+    carry: V3,
+}
+
+/// The constants of the loads at one time.
+#[derive(Debug, Clone, Copy)]
+struct LoadParameters {
     weight: V3,
     bend_gain: f64,
     c_b: f64,
     rod_inertia: f64,
     normal_drag: f64,
     tangential_drag: f64,
-    /// Base of the next segment and its velocity.
-    p: V3,
-    pv: V3,
-    prev_e: V3,
-    prev_omega: V3,
-    e_dot0: V3,
 }
 
-impl LoadsPass {
-    /// Velocities, convective acceleration, external force and bending / damping / rotational
-    /// inertia vectors of segment k; adds segment k's share of joint k's bending and damping to
-    /// segment k-1. Call for k = 0, 1, ... in order.
+impl<S: Surroundings + ?Sized> Loads<'_, S> {
+    /// External force `F_k` on the centre of segment k (gravity, apparent, aerodynamics) and its
+    /// vector `X_k` (bending, joint damping, rotational convective inertia -I w), whose
+    /// projections `E_kb . X_k` are generalized forces. Call for k = n-1, n-2, ..., 0 in order.
+    ///
+    /// Errors if the joint between k-1 and k has folded back completely.
     #[inline(always)]
-    fn step<S: Surroundings + ?Sized>(
-        &mut self,
-        k: usize,
-        geom: &[Geometry],
-        loads: &mut [SegmentLoads],
-        qd: &[f64],
-        surroundings: &S,
-    ) -> Result<()> {
-        let g = &geom[k];
-        let (e, e_phi, e_psi) = (g.e, g.e_phi, g.e_psi);
-        let (phi_d, psi_d) = (qd[1 + 2 * k], qd[2 + 2 * k]);
-        let e_dot = e_phi * phi_d + e_psi * psi_d;
-        // With e_phi = cp (sf, 0, cf) and e_psi = (sp cf, cp, -sp sf) (see DirectionJet):
-        // d2e/dphi2 = cp (cf, 0, -sf) = (e_phi.z, 0, -e_phi.x),
-        // d2e/dphidpsi = -sp (sf, 0, cf) = (e_psi.z, 0, -e_psi.x), d2e/dpsi2 = -e.
-        let (pp, ps2, ss) = (phi_d * phi_d, 2.0 * phi_d * psi_d, psi_d * psi_d);
-        let w = V3::new(
-            e_phi.z * pp + e_psi.z * ps2,
-            0.0,
-            -e_phi.x * pp - e_psi.x * ps2,
-        ) - e * ss;
-        let half = 0.5 * self.l;
-        if k == 0 {
-            self.p = e * self.s;
-            self.pv = e * self.sd + e_dot * self.s;
-            self.e_dot0 = e_dot;
-        }
-        let com = self.p + e * half;
-        let com_vel = self.pv + e_dot * half;
-        self.p += e * self.l;
-        self.pv += e_dot * self.l;
-
-        let rho = surroundings.air_density(self.time, &com);
-        let mut force = self.weight;
+    pub(crate) fn next(&mut self, k: usize) -> Result<(V3, V3)> {
+        let (g, mo) = (&self.geom[k], &self.motion[k]);
+        let e = g.e;
+        let rho = self.surroundings.air_density(self.time, &mo.com);
+        let mut force = self.p.weight;
         if rho != 0.0 {
-            let rel = surroundings.air_velocity(self.time, &com) - com_vel;
+            let rel = self.surroundings.air_velocity(self.time, &mo.com) - mo.com_vel;
             let vt = rel.dot(&e);
             let vn = rel - e * vt;
-            force += vn * (rho * self.normal_drag * vn.norm())
-                + e * (rho * self.tangential_drag * vt * vt.abs());
+            force += vn * (rho * self.p.normal_drag * vn.norm())
+                + e * (rho * self.p.tangential_drag * vt * vt.abs());
         }
-
-        let omega = e.cross(&e_dot);
-        let mut extra = w * (-self.rod_inertia);
+        let mut extra = mo.w * (-self.p.rod_inertia) + self.carry;
         if k > 0 {
             // Bending spring and joint damper between segments k-1 and k.
-            let prev_e = self.prev_e;
-            let one_plus_cos = 1.0 + prev_e.dot(&e);
-            if !(one_plus_cos >= FOLDED_JOINT) || !one_plus_cos.is_finite() {
+            let prev = &self.geom[k - 1];
+            let one_plus_cos = 1.0 + prev.e.dot(&e);
+            if !(one_plus_cos >= FOLDED_JOINT && one_plus_cos < f64::INFINITY) {
                 return Err(TetherError::Diverged {
                     time: self.time,
                     reason: format!(
@@ -222,29 +202,30 @@ impl LoadsPass {
                     ),
                 });
             }
-            let coef = self.bend_gain / one_plus_cos;
+            let coef = self.p.bend_gain / one_plus_cos;
             // Damping torque of this joint: on segment k it is -c_b (w_k - w_{k-1}), on segment
             // k-1 the opposite; Q_(k,b) = E_kb . (tau_k x e_k).
-            let tau = (omega - self.prev_omega) * self.c_b;
-            loads[k - 1].extra += e * coef + tau.cross(&prev_e);
-            extra += prev_e * coef - tau.cross(&e);
+            let tau = (mo.omega - self.motion[k - 1].omega) * self.p.c_b;
+            extra += prev.e * coef - tau.cross(&e);
+            self.carry = e * coef + tau.cross(&prev.e);
         }
-        loads[k] = SegmentLoads { w, force, extra };
-        self.prev_e = e;
-        self.prev_omega = omega;
-        Ok(())
+        Ok((force, extra))
     }
 }
 
 #[derive(Debug, Clone)]
 struct Workspace {
     geom: Vec<Geometry>,
+    motion: Vec<Motion>,
+    /// Loads per segment (dense path only).
     loads: Vec<SegmentLoads>,
     /// sin and cos of the 2n angles.
     sin: Vec<f64>,
     cos: Vec<f64>,
     /// Rate of e_1.
     e_dot0: V3,
+    tip: V3,
+    tip_vel: V3,
     tip_force: V3,
     /// Convective accelerations of the segment centres (dense path only; sized on first use).
     com_acc0: Vec<V3>,
@@ -282,10 +263,13 @@ impl TetherModel {
                 * config.tangential_drag_coefficient,
             ws: Workspace {
                 geom: vec![Geometry::default(); n],
+                motion: vec![Motion::default(); n],
                 loads: vec![SegmentLoads::default(); n],
                 sin: vec![0.0; 2 * n],
                 cos: vec![0.0; 2 * n],
                 e_dot0: V3::zeros(),
+                tip: V3::zeros(),
+                tip_vel: V3::zeros(),
                 tip_force: V3::zeros(),
                 com_acc0: Vec::new(),
                 tip_acc0: V3::zeros(),
@@ -335,56 +319,68 @@ impl TetherModel {
         }
     }
 
-    /// Directions and their partials of all segments (sin and cos of all angles in one
-    /// vectorized batch, [`crate::trig`]). Errors at the coordinate singularity.
+    /// First pass, root to tip: directions and their partials (sin and cos of all angles in one
+    /// vectorized batch, [`crate::trig`]), rates, convective accelerations, angular velocities,
+    /// the centres and their velocities, the tip and its velocity, and the force on the tip.
+    /// Errors at the coordinate singularity.
     #[inline(always)]
-    fn geometry(&mut self, time: f64, q: &[f64]) -> Result<()> {
+    fn kinematics<S: Surroundings + ?Sized>(
+        &mut self,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        surroundings: &S,
+    ) -> Result<()> {
+        let (s, sd) = (q[0], qd[0]);
+        let (l, half) = (self.l, 0.5 * self.l);
+        let tip_weight = self.effective_gravity(time, surroundings) * self.tip_mass;
         let ws = &mut self.ws;
         crate::trig::sin_cos_batch(&q[1..], &mut ws.sin, &mut ws.cos);
+        let mut p = V3::zeros();
+        let mut pv = V3::zeros();
         for k in 0..self.n {
             let (sf, cf) = (ws.sin[2 * k], ws.cos[2 * k]);
             let (sp, cp) = (ws.sin[2 * k + 1], ws.cos[2 * k + 1]);
             if !(cp.abs() >= SINGULAR_COS_PSI) {
                 return Err(Self::singular_chart(time, k, cp));
             }
-            // See DirectionJet.
+            // See DirectionJet: d2e/dphi2 = cp (cf, 0, -sf), d2e/dphidpsi = -sp (sf, 0, cf),
+            // d2e/dpsi2 = -e.
+            let e = V3::new(-cp * cf, sp, cp * sf);
+            let e_phi = V3::new(cp * sf, 0.0, cp * cf);
+            let e_psi = V3::new(sp * cf, cp, -sp * sf);
+            let (phi_d, psi_d) = (qd[1 + 2 * k], qd[2 + 2 * k]);
+            let e_dot = e_phi * phi_d + e_psi * psi_d;
+            let (pp, ps2, ss) = (phi_d * phi_d, 2.0 * phi_d * psi_d, psi_d * psi_d);
+            let w = V3::new(
+                e_phi.z * pp + e_psi.z * ps2,
+                0.0,
+                -e_phi.x * pp - e_psi.x * ps2,
+            ) - e * ss;
+            if k == 0 {
+                p = e * s;
+                pv = e * sd + e_dot * s;
+                ws.e_dot0 = e_dot;
+            }
             ws.geom[k] = Geometry {
-                e: V3::new(-cp * cf, sp, cp * sf),
-                e_phi: V3::new(cp * sf, 0.0, cp * cf),
-                e_psi: V3::new(sp * cf, cp, -sp * sf),
+                e,
+                e_phi,
+                e_psi,
                 cos_psi: cp,
             };
+            ws.motion[k] = Motion {
+                w,
+                omega: e.cross(&e_dot),
+                com: p + e * half,
+                com_vel: pv + e_dot * half,
+            };
+            p += e * l;
+            pv += e_dot * l;
         }
+        ws.tip = p;
+        ws.tip_vel = pv;
+        ws.tip_force = tip_weight + surroundings.tip_force(time, &p, &pv);
         Ok(())
-    }
-
-    /// The root-to-tip loads walk, ready for segment 0.
-    #[inline(always)]
-    fn loads_pass<S: Surroundings + ?Sized>(
-        &self,
-        time: f64,
-        q: &[f64],
-        qd: &[f64],
-        surroundings: &S,
-    ) -> LoadsPass {
-        let g_eff = self.effective_gravity(time, surroundings);
-        LoadsPass {
-            time,
-            s: q[0],
-            sd: qd[0],
-            l: self.l,
-            weight: g_eff * self.m,
-            bend_gain: 2.0 * self.ei / self.l,
-            c_b: self.c_b,
-            rod_inertia: self.rod_inertia,
-            normal_drag: self.normal_drag,
-            tangential_drag: self.tangential_drag,
-            p: V3::zeros(),
-            pv: V3::zeros(),
-            prev_e: V3::zeros(),
-            prev_omega: V3::zeros(),
-            e_dot0: V3::zeros(),
-        }
     }
 
     /// Gravity plus the apparent acceleration of the accelerating frame.
@@ -393,17 +389,24 @@ impl TetherModel {
         V3::new(0.0, 0.0, self.gravity) - surroundings.frame_acceleration(time)
     }
 
-    /// Stores what the loads walk leaves: the rate of e_1 and the force on the tip body.
+    /// The constants of the loads at `time`.
     #[inline(always)]
-    fn finish_loads<S: Surroundings + ?Sized>(&mut self, pass: &LoadsPass, surroundings: &S) {
-        let g_eff = self.effective_gravity(pass.time, surroundings);
-        self.ws.e_dot0 = pass.e_dot0;
-        self.ws.tip_force =
-            g_eff * self.tip_mass + surroundings.tip_force(pass.time, &pass.p, &pass.pv);
+    fn load_parameters<S: Surroundings + ?Sized>(
+        &self,
+        time: f64,
+        surroundings: &S,
+    ) -> LoadParameters {
+        LoadParameters {
+            weight: self.effective_gravity(time, surroundings) * self.m,
+            bend_gain: 2.0 * self.ei / self.l,
+            c_b: self.c_b,
+            rod_inertia: self.rod_inertia,
+            normal_drag: self.normal_drag,
+            tangential_drag: self.tangential_drag,
+        }
     }
 
-    /// The geometry, velocities and loads of every segment and the tip in two passes over the
-    /// chain, for the dense solver: see [`TetherModel::geometry`] and [`LoadsPass`].
+    /// Kinematics and loads of every segment and the tip, stored, for the dense solver.
     ///
     /// Errors at the coordinate singularity or at a completely folded joint.
     fn prepare<S: Surroundings + ?Sized>(
@@ -413,12 +416,21 @@ impl TetherModel {
         qd: &[f64],
         surroundings: &S,
     ) -> Result<()> {
-        self.geometry(time, q)?;
-        let mut pass = self.loads_pass(time, q, qd, surroundings);
-        for k in 0..self.n {
-            pass.step(k, &self.ws.geom, &mut self.ws.loads, qd, surroundings)?;
+        self.kinematics(time, q, qd, surroundings)?;
+        let params = self.load_parameters(time, surroundings);
+        let ws = &mut self.ws;
+        let mut loads = Loads {
+            time,
+            geom: &ws.geom,
+            motion: &ws.motion,
+            surroundings,
+            p: params,
+            carry: V3::zeros(),
+        };
+        for k in (0..self.n).rev() {
+            let (force, extra) = loads.next(k)?;
+            ws.loads[k] = SegmentLoads { force, extra };
         }
-        self.finish_loads(&pass, surroundings);
         Ok(())
     }
 
@@ -469,10 +481,10 @@ impl TetherModel {
         if ws.com_acc0.len() != self.n {
             ws.com_acc0.resize(self.n, V3::zeros());
         }
-        let mut pa = ws.e_dot0 * (2.0 * sd) + ws.loads[0].w * s;
+        let mut pa = ws.e_dot0 * (2.0 * sd) + ws.motion[0].w * s;
         for k in 0..self.n {
-            ws.com_acc0[k] = pa + ws.loads[k].w * half;
-            pa += ws.loads[k].w * self.l;
+            ws.com_acc0[k] = pa + ws.motion[k].w * half;
+            pa += ws.motion[k].w * self.l;
         }
         ws.tip_acc0 = pa;
         let mut suffix = ws.tip_force - ws.tip_acc0 * self.tip_mass;
@@ -645,13 +657,6 @@ impl TetherModel {
         self.check_len("q", q)?;
         self.check_len("qd", qd)?;
         self.check_len("qdd", qdd)?;
-        let singular = |e: recursive::Singular| TetherError::Diverged {
-            time,
-            reason: format!(
-                "mass matrix lost positive definiteness at segment {}",
-                e.segment + 1
-            ),
-        };
         let constants = ChainConstants {
             l: self.l,
             m: self.m,
@@ -660,40 +665,34 @@ impl TetherModel {
             k: self.k,
             c_s: self.c_s,
         };
-        self.geometry(time, q)?;
-        // The loads walk (root to tip, throughput-bound) and the articulated-inertia sweep (tip
-        // to root, geometry only, latency-bound) interleaved, so that the processor overlaps them.
-        let mut pass = self.loads_pass(time, q, qd, surroundings);
-        let mut sweep = InertiaSweep::new(&constants);
-        let n = self.n;
+        self.kinematics(time, q, qd, surroundings)?;
+        let params = self.load_parameters(time, surroundings);
         let ws = &mut self.ws;
-        for i in 0..n {
-            pass.step(i, &ws.geom, &mut ws.loads, qd, surroundings)?;
-            let j = n - 1 - i;
-            if j > 0 {
-                sweep
-                    .step(j, &ws.geom[j], &mut ws.articulated)
-                    .map_err(singular)?;
-            }
-        }
-        self.finish_loads(&pass, surroundings);
-        let ws = &mut self.ws;
+        let loads = Loads {
+            time,
+            geom: &ws.geom,
+            motion: &ws.motion,
+            surroundings,
+            p: params,
+            carry: V3::zeros(),
+        };
         let chain = Chain {
             geom: &ws.geom,
-            loads: &ws.loads,
+            motion: &ws.motion,
             e_dot0: ws.e_dot0,
             tip_force: ws.tip_force,
         };
         recursive::solve(
+            time,
             &constants,
             &chain,
+            loads,
             q[0],
             qd[0],
             &mut ws.articulated,
             qdd,
             tensions,
         )
-        .map_err(singular)
     }
 
     /// The mass matrix M(q) (symmetric, dim x dim). Allocates; for analysis and tests.
@@ -765,7 +764,7 @@ impl TetherModel {
         let (s, sd, sdd) = (q[0], qd[0], qdd[0]);
         let acc_dir = |k: usize| {
             let geo = &ws.geom[k];
-            ws.loads[k].w + geo.e_phi * qdd[1 + 2 * k] + geo.e_psi * qdd[2 + 2 * k]
+            ws.motion[k].w + geo.e_phi * qdd[1 + 2 * k] + geo.e_psi * qdd[2 + 2 * k]
         };
         let e1dd = acc_dir(0);
         let mut pa = ws.geom[0].e * sdd + ws.e_dot0 * (2.0 * sd) + e1dd * s;

@@ -65,7 +65,9 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::dynamics::{Geometry, SegmentLoads};
+use crate::dynamics::{Geometry, Loads, Motion};
+use crate::error::{Result, TetherError};
+use crate::surroundings::Surroundings;
 
 type V3 = Vector3<f64>;
 
@@ -123,20 +125,15 @@ fn dot_xz(a: &V3, b: &V3) -> f64 {
     a.x * b.x + a.z * b.z
 }
 
-/// What the backward sweeps leave per segment for the forward sweep and the tensions.
+/// What the backward sweep leaves per segment for the forward sweep and the tensions.
 #[derive(Debug, Clone, Copy, Default)]
 pub(crate) struct Articulated {
-    /// `B_{k+1} E_phi`, `B_{k+1} E_psi`.
-    bep: V3,
-    bes: V3,
-    /// `K^-1` (scaled, see the module docs): entries 00, 01, 11.
-    kinv: [f64; 3],
     /// Rows of `G_k`: `u_k = y_k - G_k a_k`.
     g: [V3; 2],
-    /// `B_k = A_k + (m/2) 1`.
-    inertia: Sym3,
     /// `y_k`.
     y: [f64; 2],
+    /// `B_k = A_k + (m/2) 1`.
+    inertia: Sym3,
     /// `b_k`.
     bias: V3,
 }
@@ -152,140 +149,100 @@ pub(crate) struct ChainConstants {
     pub c_s: f64,
 }
 
-/// The state of the chain from [`crate::TetherModel`]'s passes: per segment its geometry and
-/// loads; the rate of e_1; the tip force.
+/// The kinematics of the chain from [`crate::TetherModel`]'s first pass: per segment its
+/// geometry and motion; the rate of e_1; the tip force.
 pub(crate) struct Chain<'a> {
     pub geom: &'a [Geometry],
-    pub loads: &'a [SegmentLoads],
+    pub motion: &'a [Motion],
     pub e_dot0: V3,
     pub tip_force: V3,
 }
 
-/// Why the recursion failed: a non-positive pivot (the state is numerically singular).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) struct Singular {
-    /// 0-based segment whose elimination failed.
-    pub segment: usize,
-}
-
-/// The first backward sweep: the articulated inertias `B_k`, which depend on the geometry only.
-/// Call [`InertiaSweep::step`] for k = n-1, n-2, ..., 1.
-pub(crate) struct InertiaSweep {
-    bm: Sym3,
-    m: f64,
-    m6: f64,
-    inv_l: f64,
-}
-
-impl InertiaSweep {
-    /// Starts at the tip: `B_n = (M_t + m/2) 1`.
-    #[inline(always)]
-    pub(crate) fn new(c: &ChainConstants) -> Self {
-        InertiaSweep {
-            bm: Sym3::diagonal(c.tip_mass + 0.5 * c.m),
-            m: c.m,
-            m6: c.m / 6.0,
-            inv_l: 1.0 / c.l,
-        }
-    }
-
-    /// Eliminates segment k (>= 1): from `B_{k+1}` to `B_k`.
-    #[inline(always)]
-    pub(crate) fn step(
-        &mut self,
-        k: usize,
-        geom: &Geometry,
-        work: &mut [Articulated],
-    ) -> Result<(), Singular> {
-        let bm = self.bm;
-        let (ep, es) = (&geom.e_phi, &geom.e_psi);
-        let bep = bm.mul_xz(ep);
-        let bes = bm.mul(es);
-        let k00 = dot_xz(ep, &bep) - self.m6 * geom.cos_psi * geom.cos_psi;
-        let k01 = dot_xz(ep, &bes);
-        let k11 = es.dot(&bes) - self.m6;
-        // W = (B E) K^-1 = (B E) adj(K) / det: the adjugate products run beside the division.
-        let a0 = bep * k11 - bes * k01;
-        let a1 = bes * k00 - bep * k01;
-        let det = k00 * k11 - k01 * k01;
-        if !(det > 0.0 && k00 > 0.0) || !det.is_finite() {
-            return Err(Singular { segment: k });
-        }
-        let inv = 1.0 / det;
-        let m = self.m;
-        let upd = Sym3 {
-            xx: a0.x * bep.x + a1.x * bes.x,
-            yy: a0.y * bep.y + a1.y * bes.y,
-            zz: a0.z * bep.z + a1.z * bes.z,
-            xy: a0.x * bep.y + a1.x * bes.y,
-            xz: a0.x * bep.z + a1.x * bes.z,
-            yz: a0.y * bep.z + a1.y * bes.z,
-        };
-        self.bm = Sym3 {
-            xx: bm.xx + m - upd.xx * inv,
-            yy: bm.yy + m - upd.yy * inv,
-            zz: bm.zz + m - upd.zz * inv,
-            xy: bm.xy - upd.xy * inv,
-            xz: bm.xz - upd.xz * inv,
-            yz: bm.yz - upd.yz * inv,
-        };
-        let gs = inv * self.inv_l;
-        let art = &mut work[k];
-        art.bep = bep;
-        art.bes = bes;
-        art.kinv = [k11 * inv, -k01 * inv, k00 * inv];
-        art.g = [a0 * gs, a1 * gs];
-        art.inertia = self.bm;
-        Ok(())
+fn singular(time: f64, segment: usize) -> TetherError {
+    TetherError::Diverged {
+        time,
+        reason: format!("mass matrix lost positive definiteness at segment {segment}"),
     }
 }
 
-/// After the [`InertiaSweep`] has run over segments n-1 ... 1: the bias sweep (tip to root), the
-/// root's 3x3 system and the forward sweep. Writes `q''` into `qdd` and, if given, the tensions
-/// (n + 1 values, as [`crate::TetherModel::tensions`]) into `tensions`.
+/// Solves the equations of motion in O(n): the backward sweep (tip to root) takes each segment's
+/// loads from `loads` and eliminates the segment at once; then the root's 3x3 system and the
+/// forward sweep. Writes `q''` into `qdd` and, if given, the tensions (n + 1 values, as
+/// [`crate::TetherModel::tensions`]) into `tensions`.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-pub(crate) fn solve(
+pub(crate) fn solve<S: Surroundings + ?Sized>(
+    time: f64,
     c: &ChainConstants,
     chain: &Chain<'_>,
+    mut loads: Loads<'_, S>,
     s: f64,
     sd: f64,
     work: &mut [Articulated],
     qdd: &mut [f64],
     tensions: Option<&mut [f64]>,
-) -> Result<(), Singular> {
-    let (geom, loads) = (chain.geom, chain.loads);
+) -> Result<()> {
+    let (geom, motion) = (chain.geom, chain.motion);
     let n = geom.len();
     let (l, m) = (c.l, c.m);
     let inv_l = 1.0 / l;
     let inv_l2 = inv_l * inv_l;
     let half_inv_l = 0.5 * inv_l;
-    let m4 = 0.25 * m;
-    let tip_inertia = Sym3::diagonal(c.tip_mass + 0.5 * m);
+    let (m4, m6) = (0.25 * m, m / 6.0);
 
-    // Bias sweep, tip to segment 2.
+    // Backward sweep, tip to segment 2, on B = A + (m/2) 1.
+    let mut bm = Sym3::diagonal(c.tip_mass + 0.5 * m);
     let mut bias = chain.tip_force;
-    let mut outboard = tip_inertia;
     for k in (1..n).rev() {
-        let (g, ld) = (&geom[k], &loads[k]);
-        let art = &mut work[k];
-        let bw = outboard.mul(&ld.w);
-        let v = ld.force * half_inv_l + ld.extra * inv_l2 + bias * inv_l + ld.w * m4 - bw;
-        let (r0, r1) = (dot_xz(&g.e_phi, &v), g.e_psi.dot(&v));
-        let [i00, i01, i11] = art.kinv;
-        let y0 = i00 * r0 + i01 * r1;
-        let y1 = i01 * r0 + i11 * r1;
-        bias = ld.force + bias - (bw + art.bep * y0 + art.bes * y1) * l;
-        art.y = [y0, y1];
-        art.bias = bias;
-        outboard = art.inertia;
+        let (force, extra) = loads.next(k)?;
+        let g = &geom[k];
+        let w = motion[k].w;
+        let (ep, es) = (&g.e_phi, &g.e_psi);
+        // Articulated inertia: depends on the geometry only.
+        let bep = bm.mul_xz(ep);
+        let bes = bm.mul(es);
+        let k00 = dot_xz(ep, &bep) - m6 * g.cos_psi * g.cos_psi;
+        let k01 = dot_xz(ep, &bes);
+        let k11 = es.dot(&bes) - m6;
+        // W = (B E) K^-1 = (B E) adj(K) / det: the adjugate products run beside the division.
+        let a0 = bep * k11 - bes * k01;
+        let a1 = bes * k00 - bep * k01;
+        let det = k00 * k11 - k01 * k01;
+        if !(det > 0.0 && k00 > 0.0 && det < f64::INFINITY) {
+            return Err(singular(time, k + 1));
+        }
+        let inv = 1.0 / det;
+        // Bias: y = K^-1 E^T (r/l^2 + (m/4) w - B w).
+        let bw = bm.mul(&w);
+        let v = force * half_inv_l + extra * inv_l2 + bias * inv_l + w * m4 - bw;
+        let (r0, r1) = (dot_xz(ep, &v), es.dot(&v));
+        let y0 = (k11 * r0 - k01 * r1) * inv;
+        let y1 = (k00 * r1 - k01 * r0) * inv;
+        bias = force + bias - (bw + bep * y0 + bes * y1) * l;
+        bm = Sym3 {
+            xx: bm.xx + m - (a0.x * bep.x + a1.x * bes.x) * inv,
+            yy: bm.yy + m - (a0.y * bep.y + a1.y * bes.y) * inv,
+            zz: bm.zz + m - (a0.z * bep.z + a1.z * bes.z) * inv,
+            xy: bm.xy - (a0.x * bep.y + a1.x * bes.y) * inv,
+            xz: bm.xz - (a0.x * bep.z + a1.x * bes.z) * inv,
+            yz: bm.yz - (a0.y * bep.z + a1.y * bes.z) * inv,
+        };
+        let gs = inv * inv_l;
+        work[k] = Articulated {
+            g: [a0 * gs, a1 * gs],
+            y: [y0, y1],
+            inertia: bm,
+            bias,
+        };
     }
 
     // Root: s and segment 1's angles, against A_1 = B_1 - (m/2) 1 and b_1.
-    let a_mat = outboard.to_matrix() - Matrix3::identity() * (0.5 * m);
+    let (force, extra) = loads.next(0)?;
+    let a_mat = bm.to_matrix() - Matrix3::identity() * (0.5 * m);
     let b_vec = bias;
-    let (g, ld) = (&geom[0], &loads[0]);
+    let g = &geom[0];
     let e1 = g.e;
-    let w = ld.w;
+    let w = motion[0].w;
     let (rho_c, rho_t) = (s + 0.5 * l, s + l);
     let jc = Matrix3::from_columns(&[e1, g.e_phi * rho_c, g.e_psi * rho_c]);
     let jt = Matrix3::from_columns(&[e1, g.e_phi * rho_t, g.e_psi * rho_t]);
@@ -295,11 +252,11 @@ pub(crate) fn solve(
     let drift = chain.e_dot0 * (2.0 * sd);
     let c0 = drift + w * rho_c;
     let t0 = drift + w * rho_t;
-    let mut rhs3 = jc.transpose() * (ld.force - c0 * m)
+    let mut rhs3 = jc.transpose() * (force - c0 * m)
         + jt.transpose() * (b_vec - a_mat * t0)
-        + jr.transpose() * ld.extra;
+        + jr.transpose() * extra;
     rhs3[0] -= c.k * s + c.c_s * sd;
-    let chol = mass3.cholesky().ok_or(Singular { segment: 0 })?;
+    let chol = mass3.cholesky().ok_or_else(|| singular(time, 1))?;
     let z = chol.solve(&rhs3);
     qdd[0] = z[0];
     qdd[1] = z[1];
@@ -310,14 +267,14 @@ pub(crate) fn solve(
     if let Some(t) = tensions.as_deref_mut() {
         let e1dd = w + g.e_phi * z[1] + g.e_psi * z[2];
         let com = e1 * z[0] + drift + e1dd * rho_c;
-        let pull = ld.force - com * m + b_vec - a_mat * acc;
+        let pull = force - com * m + b_vec - a_mat * acc;
         t[0] = pull.dot(&e1);
     }
 
     // Forward sweep.
     for k in 1..n {
         let art = &work[k];
-        let (g, ld) = (&geom[k], &loads[k]);
+        let g = &geom[k];
         if let Some(t) = tensions.as_deref_mut() {
             // P_k = b_k - A_k a_k with A_k = B_k - (m/2) 1.
             let pull = art.bias - art.inertia.mul(&acc) + acc * (0.5 * m);
@@ -327,7 +284,7 @@ pub(crate) fn solve(
         let u1 = art.y[1] - art.g[1].dot(&acc);
         qdd[1 + 2 * k] = u0;
         qdd[2 + 2 * k] = u1;
-        acc += (ld.w + g.e_phi * u0 + g.e_psi * u1) * l;
+        acc += (motion[k].w + g.e_phi * u0 + g.e_psi * u1) * l;
     }
     if let Some(t) = tensions {
         t[n] = (chain.tip_force - acc * c.tip_mass).dot(&geom[n - 1].e);
