@@ -47,6 +47,7 @@
 
 use nalgebra::{DMatrix, Vector3};
 
+use crate::arith::{axpy, cross, dot, Madd, Plain};
 use crate::config::TetherConfig;
 use crate::direction::DirectionJet;
 use crate::error::{Result, TetherError};
@@ -176,23 +177,24 @@ impl<S: Surroundings + ?Sized> Loads<'_, S> {
     ///
     /// Errors if the joint between k-1 and k has folded back completely.
     #[inline(always)]
-    pub(crate) fn next(&mut self, k: usize) -> Result<(V3, V3)> {
+    pub(crate) fn next<M: Madd>(&mut self, k: usize) -> Result<(V3, V3)> {
         let (g, mo) = (&self.geom[k], &self.motion[k]);
         let e = g.e;
         let rho = self.surroundings.air_density(self.time, &mo.com);
         let mut force = self.p.weight;
         if rho != 0.0 {
             let rel = self.surroundings.air_velocity(self.time, &mo.com) - mo.com_vel;
-            let vt = rel.dot(&e);
-            let vn = rel - e * vt;
-            force += vn * (rho * self.p.normal_drag * vn.norm())
-                + e * (rho * self.p.tangential_drag * vt * vt.abs());
+            let vt = dot::<M>(&rel, &e);
+            let vn = axpy::<M>(&e, -vt, &rel);
+            let vn_abs = dot::<M>(&vn, &vn).sqrt();
+            force = axpy::<M>(&e, rho * self.p.tangential_drag * vt * vt.abs(), &force);
+            force = axpy::<M>(&vn, rho * self.p.normal_drag * vn_abs, &force);
         }
-        let mut extra = mo.w * (-self.p.rod_inertia) + self.carry;
+        let mut extra = axpy::<M>(&mo.w, -self.p.rod_inertia, &self.carry);
         if k > 0 {
             // Bending spring and joint damper between segments k-1 and k.
             let prev = &self.geom[k - 1];
-            let one_plus_cos = 1.0 + prev.e.dot(&e);
+            let one_plus_cos = 1.0 + dot::<M>(&prev.e, &e);
             if !(one_plus_cos >= FOLDED_JOINT && one_plus_cos < f64::INFINITY) {
                 return Err(TetherError::Diverged {
                     time: self.time,
@@ -206,8 +208,8 @@ impl<S: Surroundings + ?Sized> Loads<'_, S> {
             // Damping torque of this joint: on segment k it is -c_b (w_k - w_{k-1}), on segment
             // k-1 the opposite; Q_(k,b) = E_kb . (tau_k x e_k).
             let tau = (mo.omega - self.motion[k - 1].omega) * self.p.c_b;
-            extra += prev.e * coef - tau.cross(&e);
-            self.carry = e * coef + tau.cross(&prev.e);
+            extra = axpy::<M>(&prev.e, coef, &extra) - cross::<M>(&tau, &e);
+            self.carry = axpy::<M>(&e, coef, &cross::<M>(&tau, &prev.e));
         }
         Ok((force, extra))
     }
@@ -324,7 +326,7 @@ impl TetherModel {
     /// the centres and their velocities, the tip and its velocity, and the force on the tip.
     /// Errors at the coordinate singularity.
     #[inline(always)]
-    fn kinematics<S: Surroundings + ?Sized>(
+    fn kinematics<M: Madd, S: Surroundings + ?Sized>(
         &mut self,
         time: f64,
         q: &[f64],
@@ -350,16 +352,17 @@ impl TetherModel {
             let e_phi = V3::new(cp * sf, 0.0, cp * cf);
             let e_psi = V3::new(sp * cf, cp, -sp * sf);
             let (phi_d, psi_d) = (qd[1 + 2 * k], qd[2 + 2 * k]);
-            let e_dot = e_phi * phi_d + e_psi * psi_d;
+            let e_dot = axpy::<M>(&e_psi, psi_d, &(e_phi * phi_d));
             let (pp, ps2, ss) = (phi_d * phi_d, 2.0 * phi_d * psi_d, psi_d * psi_d);
             let w = V3::new(
-                e_phi.z * pp + e_psi.z * ps2,
+                M::madd(e_phi.z, pp, e_psi.z * ps2),
                 0.0,
-                -e_phi.x * pp - e_psi.x * ps2,
-            ) - e * ss;
+                -M::madd(e_phi.x, pp, e_psi.x * ps2),
+            );
+            let w = axpy::<M>(&e, -ss, &w);
             if k == 0 {
                 p = e * s;
-                pv = e * sd + e_dot * s;
+                pv = axpy::<M>(&e_dot, s, &(e * sd));
                 ws.e_dot0 = e_dot;
             }
             ws.geom[k] = Geometry {
@@ -370,12 +373,12 @@ impl TetherModel {
             };
             ws.motion[k] = Motion {
                 w,
-                omega: e.cross(&e_dot),
-                com: p + e * half,
-                com_vel: pv + e_dot * half,
+                omega: cross::<M>(&e, &e_dot),
+                com: axpy::<M>(&e, half, &p),
+                com_vel: axpy::<M>(&e_dot, half, &pv),
             };
-            p += e * l;
-            pv += e_dot * l;
+            p = axpy::<M>(&e, l, &p);
+            pv = axpy::<M>(&e_dot, l, &pv);
         }
         ws.tip = p;
         ws.tip_vel = pv;
@@ -416,7 +419,7 @@ impl TetherModel {
         qd: &[f64],
         surroundings: &S,
     ) -> Result<()> {
-        self.kinematics(time, q, qd, surroundings)?;
+        self.kinematics::<Plain, S>(time, q, qd, surroundings)?;
         let params = self.load_parameters(time, surroundings);
         let ws = &mut self.ws;
         let mut loads = Loads {
@@ -428,7 +431,7 @@ impl TetherModel {
             carry: V3::zeros(),
         };
         for k in (0..self.n).rev() {
-            let (force, extra) = loads.next(k)?;
+            let (force, extra) = loads.next::<Plain>(k)?;
             ws.loads[k] = SegmentLoads { force, extra };
         }
         Ok(())
@@ -622,16 +625,17 @@ impl TetherModel {
         tensions: Option<&mut [f64]>,
     ) -> Result<()> {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2, checked just above.
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
+            // SAFETY: the processor has AVX2 and FMA, checked just above.
             return unsafe { self.solve_recursive_avx2(time, q, qd, surroundings, qdd, tensions) };
         }
-        self.solve_recursive_body(time, q, qd, surroundings, qdd, tensions)
+        self.solve_recursive_body::<Plain, S>(time, q, qd, surroundings, qdd, tensions)
     }
 
-    /// [`TetherModel::solve_recursive_body`] compiled for AVX2.
+    /// [`TetherModel::solve_recursive_body`] compiled for AVX2 and FMA, with fused multiply-adds.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,fma")]
     unsafe fn solve_recursive_avx2<S: Surroundings + ?Sized>(
         &mut self,
         time: f64,
@@ -641,11 +645,18 @@ impl TetherModel {
         qdd: &mut [f64],
         tensions: Option<&mut [f64]>,
     ) -> Result<()> {
-        self.solve_recursive_body(time, q, qd, surroundings, qdd, tensions)
+        self.solve_recursive_body::<crate::arith::Fused, S>(
+            time,
+            q,
+            qd,
+            surroundings,
+            qdd,
+            tensions,
+        )
     }
 
     #[inline(always)]
-    fn solve_recursive_body<S: Surroundings + ?Sized>(
+    fn solve_recursive_body<M: Madd, S: Surroundings + ?Sized>(
         &mut self,
         time: f64,
         q: &[f64],
@@ -665,7 +676,7 @@ impl TetherModel {
             k: self.k,
             c_s: self.c_s,
         };
-        self.kinematics(time, q, qd, surroundings)?;
+        self.kinematics::<M, S>(time, q, qd, surroundings)?;
         let params = self.load_parameters(time, surroundings);
         let ws = &mut self.ws;
         let loads = Loads {
@@ -682,7 +693,7 @@ impl TetherModel {
             e_dot0: ws.e_dot0,
             tip_force: ws.tip_force,
         };
-        recursive::solve(
+        recursive::solve::<M, S>(
             time,
             &constants,
             &chain,

@@ -19,6 +19,7 @@
 //! Frames and units: SI; the towing-aircraft frame has x forward, y starboard, z down, origin at
 //! the attachment point.
 
+mod arith;
 pub mod atmosphere;
 pub mod config;
 pub mod direction;

@@ -65,6 +65,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 
+use crate::arith::{axpy, dot, dot_xz, Madd};
 use crate::dynamics::{Geometry, Loads, Motion};
 use crate::error::{Result, TetherError};
 use crate::surroundings::Surroundings;
@@ -94,21 +95,21 @@ impl Sym3 {
     }
 
     #[inline(always)]
-    fn mul(&self, v: &V3) -> V3 {
+    fn mul<M: Madd>(&self, v: &V3) -> V3 {
         V3::new(
-            self.xx * v.x + self.xy * v.y + self.xz * v.z,
-            self.xy * v.x + self.yy * v.y + self.yz * v.z,
-            self.xz * v.x + self.yz * v.y + self.zz * v.z,
+            M::madd(self.xx, v.x, M::madd(self.xy, v.y, self.xz * v.z)),
+            M::madd(self.xy, v.x, M::madd(self.yy, v.y, self.yz * v.z)),
+            M::madd(self.xz, v.x, M::madd(self.yz, v.y, self.zz * v.z)),
         )
     }
 
     /// `self v` for a vector with a zero y component (de/dphi).
     #[inline(always)]
-    fn mul_xz(&self, v: &V3) -> V3 {
+    fn mul_xz<M: Madd>(&self, v: &V3) -> V3 {
         V3::new(
-            self.xx * v.x + self.xz * v.z,
-            self.xy * v.x + self.yz * v.z,
-            self.xz * v.x + self.zz * v.z,
+            M::madd(self.xx, v.x, self.xz * v.z),
+            M::madd(self.xy, v.x, self.yz * v.z),
+            M::madd(self.xz, v.x, self.zz * v.z),
         )
     }
 
@@ -117,12 +118,6 @@ impl Sym3 {
             self.xx, self.xy, self.xz, self.xy, self.yy, self.yz, self.xz, self.yz, self.zz,
         )
     }
-}
-
-/// `a . b` for `a` with a zero y component.
-#[inline(always)]
-fn dot_xz(a: &V3, b: &V3) -> f64 {
-    a.x * b.x + a.z * b.z
 }
 
 /// What the backward sweep leaves per segment for the forward sweep and the tensions.
@@ -171,7 +166,7 @@ fn singular(time: f64, segment: usize) -> TetherError {
 /// [`crate::TetherModel::tensions`]) into `tensions`.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-pub(crate) fn solve<S: Surroundings + ?Sized>(
+pub(crate) fn solve<M: Madd, S: Surroundings + ?Sized>(
     time: f64,
     c: &ChainConstants,
     chain: &Chain<'_>,
@@ -194,38 +189,44 @@ pub(crate) fn solve<S: Surroundings + ?Sized>(
     let mut bm = Sym3::diagonal(c.tip_mass + 0.5 * m);
     let mut bias = chain.tip_force;
     for k in (1..n).rev() {
-        let (force, extra) = loads.next(k)?;
+        let (force, extra) = loads.next::<M>(k)?;
         let g = &geom[k];
         let w = motion[k].w;
         let (ep, es) = (&g.e_phi, &g.e_psi);
         // Articulated inertia: depends on the geometry only.
-        let bep = bm.mul_xz(ep);
-        let bes = bm.mul(es);
-        let k00 = dot_xz(ep, &bep) - m6 * g.cos_psi * g.cos_psi;
-        let k01 = dot_xz(ep, &bes);
-        let k11 = es.dot(&bes) - m6;
+        let bep = bm.mul_xz::<M>(ep);
+        let bes = bm.mul::<M>(es);
+        let k00 = M::madd(-m6 * g.cos_psi, g.cos_psi, dot_xz::<M>(ep, &bep));
+        let k01 = dot_xz::<M>(ep, &bes);
+        let k11 = dot::<M>(es, &bes) - m6;
         // W = (B E) K^-1 = (B E) adj(K) / det: the adjugate products run beside the division.
-        let a0 = bep * k11 - bes * k01;
-        let a1 = bes * k00 - bep * k01;
-        let det = k00 * k11 - k01 * k01;
+        let a0 = axpy::<M>(&bes, -k01, &(bep * k11));
+        let a1 = axpy::<M>(&bep, -k01, &(bes * k00));
+        let det = M::madd(k00, k11, -(k01 * k01));
         if !(det > 0.0 && k00 > 0.0 && det < f64::INFINITY) {
             return Err(singular(time, k + 1));
         }
         let inv = 1.0 / det;
         // Bias: y = K^-1 E^T (r/l^2 + (m/4) w - B w).
-        let bw = bm.mul(&w);
-        let v = force * half_inv_l + extra * inv_l2 + bias * inv_l + w * m4 - bw;
-        let (r0, r1) = (dot_xz(ep, &v), es.dot(&v));
-        let y0 = (k11 * r0 - k01 * r1) * inv;
-        let y1 = (k00 * r1 - k01 * r0) * inv;
-        bias = force + bias - (bw + bep * y0 + bes * y1) * l;
+        let bw = bm.mul::<M>(&w);
+        let v = axpy::<M>(&w, m4, &(-bw));
+        let v = axpy::<M>(&bias, inv_l, &v);
+        let v = axpy::<M>(&extra, inv_l2, &v);
+        let v = axpy::<M>(&force, half_inv_l, &v);
+        let (r0, r1) = (dot_xz::<M>(ep, &v), dot::<M>(es, &v));
+        let y0 = M::madd(k11, r0, -(k01 * r1)) * inv;
+        let y1 = M::madd(k00, r1, -(k01 * r0)) * inv;
+        let t = axpy::<M>(&bep, y0, &axpy::<M>(&bes, y1, &bw));
+        bias = axpy::<M>(&t, -l, &(force + bias));
+        let upd =
+            |a: f64, b: f64, c: f64, d: f64, base: f64| M::madd(-M::madd(a, b, c * d), inv, base);
         bm = Sym3 {
-            xx: bm.xx + m - (a0.x * bep.x + a1.x * bes.x) * inv,
-            yy: bm.yy + m - (a0.y * bep.y + a1.y * bes.y) * inv,
-            zz: bm.zz + m - (a0.z * bep.z + a1.z * bes.z) * inv,
-            xy: bm.xy - (a0.x * bep.y + a1.x * bes.y) * inv,
-            xz: bm.xz - (a0.x * bep.z + a1.x * bes.z) * inv,
-            yz: bm.yz - (a0.y * bep.z + a1.y * bes.z) * inv,
+            xx: upd(a0.x, bep.x, a1.x, bes.x, bm.xx + m),
+            yy: upd(a0.y, bep.y, a1.y, bes.y, bm.yy + m),
+            zz: upd(a0.z, bep.z, a1.z, bes.z, bm.zz + m),
+            xy: upd(a0.x, bep.y, a1.x, bes.y, bm.xy),
+            xz: upd(a0.x, bep.z, a1.x, bes.z, bm.xz),
+            yz: upd(a0.y, bep.z, a1.y, bes.z, bm.yz),
         };
         let gs = inv * inv_l;
         work[k] = Articulated {
@@ -237,7 +238,7 @@ pub(crate) fn solve<S: Surroundings + ?Sized>(
     }
 
     // Root: s and segment 1's angles, against A_1 = B_1 - (m/2) 1 and b_1.
-    let (force, extra) = loads.next(0)?;
+    let (force, extra) = loads.next::<M>(0)?;
     let a_mat = bm.to_matrix() - Matrix3::identity() * (0.5 * m);
     let b_vec = bias;
     let g = &geom[0];
@@ -277,14 +278,15 @@ pub(crate) fn solve<S: Surroundings + ?Sized>(
         let g = &geom[k];
         if let Some(t) = tensions.as_deref_mut() {
             // P_k = b_k - A_k a_k with A_k = B_k - (m/2) 1.
-            let pull = art.bias - art.inertia.mul(&acc) + acc * (0.5 * m);
+            let pull = art.bias - art.inertia.mul::<M>(&acc) + acc * (0.5 * m);
             t[k] = pull.dot(&g.e);
         }
-        let u0 = art.y[0] - art.g[0].dot(&acc);
-        let u1 = art.y[1] - art.g[1].dot(&acc);
+        let u0 = art.y[0] - dot::<M>(&art.g[0], &acc);
+        let u1 = art.y[1] - dot::<M>(&art.g[1], &acc);
         qdd[1 + 2 * k] = u0;
         qdd[2 + 2 * k] = u1;
-        acc += (motion[k].w + g.e_phi * u0 + g.e_psi * u1) * l;
+        let edd = axpy::<M>(&g.e_phi, u0, &axpy::<M>(&g.e_psi, u1, &motion[k].w));
+        acc = axpy::<M>(&edd, l, &acc);
     }
     if let Some(t) = tensions {
         t[n] = (chain.tip_force - acc * c.tip_mass).dot(&geom[n - 1].e);
