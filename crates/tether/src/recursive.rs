@@ -58,7 +58,8 @@
 //!
 //! # Forward sweep (root to tip)
 //! `a_1 = t0 + J_t z`, then for k >= 1: `u_k = y_k - G_k a_k`, `e_k'' = w_k + E_k u_k`,
-//! `a_{k+1} = a_k + l e_k''`. The chain tensions come for free: the force on the base of
+//! `a_{k+1} = a_k + l e_k''`, evaluated as the affine map
+//! `a_{k+1} = (1 - l E_k G_k) a_k + l (w_k + E_k y_k)` prepared in the backward sweep. The chain tensions come for free: the force on the base of
 //! segment k is `P_k = b_k - A_k a_k`, its tension `P_k . e_k`.
 //!
 //! Each sweep costs O(1) per segment with fixed-size 3x3 / 2x2 algebra and no allocation.
@@ -127,6 +128,9 @@ pub(crate) struct Articulated {
     g: [V3; 2],
     /// `y_k`.
     y: [f64; 2],
+    /// Rows of `Phi_k = 1 - l E_k G_k` and `phi_k = l (w_k + E_k y_k)`: `a_{k+1} = Phi_k a_k + phi_k`.
+    phi: [V3; 3],
+    phi0: V3,
     /// `B_k = A_k + (m/2) 1`.
     inertia: Sym3,
     /// `b_k`.
@@ -228,10 +232,18 @@ pub(crate) fn solve<M: Madd, S: Surroundings + ?Sized>(
             xz: upd(a0.x, bep.z, a1.x, bes.z, bm.xz),
             yz: upd(a0.y, bep.z, a1.y, bes.z, bm.yz),
         };
-        let gs = inv * inv_l;
+        // l G = W^T: rows c0, c1.
+        let (c0, c1) = (a0 * inv, a1 * inv);
+        let row = |unit: V3, p: f64, q: f64| axpy::<M>(&c0, -p, &axpy::<M>(&c1, -q, &unit));
         work[k] = Articulated {
-            g: [a0 * gs, a1 * gs],
+            g: [c0 * inv_l, c1 * inv_l],
             y: [y0, y1],
+            phi: [
+                row(V3::x(), ep.x, es.x),
+                axpy::<M>(&c1, -es.y, &V3::y()),
+                row(V3::z(), ep.z, es.z),
+            ],
+            phi0: axpy::<M>(ep, y0, &axpy::<M>(es, y1, &w)) * l,
             inertia: bm,
             bias,
         };
@@ -281,12 +293,15 @@ pub(crate) fn solve<M: Madd, S: Surroundings + ?Sized>(
             let pull = art.bias - art.inertia.mul::<M>(&acc) + acc * (0.5 * m);
             t[k] = pull.dot(&g.e);
         }
-        let u0 = art.y[0] - dot::<M>(&art.g[0], &acc);
-        let u1 = art.y[1] - dot::<M>(&art.g[1], &acc);
-        qdd[1 + 2 * k] = u0;
-        qdd[2 + 2 * k] = u1;
-        let edd = axpy::<M>(&g.e_phi, u0, &axpy::<M>(&g.e_psi, u1, &motion[k].w));
-        acc = axpy::<M>(&edd, l, &acc);
+        qdd[1 + 2 * k] = art.y[0] - dot::<M>(&art.g[0], &acc);
+        qdd[2 + 2 * k] = art.y[1] - dot::<M>(&art.g[1], &acc);
+        // a_{k+1} = a_k + l e_k'' with e_k'' = w_k + E_k u_k, as one affine map (a shorter
+        // dependency chain from segment to segment).
+        acc = V3::new(
+            dot::<M>(&art.phi[0], &acc),
+            dot::<M>(&art.phi[1], &acc),
+            dot::<M>(&art.phi[2], &acc),
+        ) + art.phi0;
     }
     if let Some(t) = tensions {
         t[n] = (chain.tip_force - acc * c.tip_mass).dot(&geom[n - 1].e);

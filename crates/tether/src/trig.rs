@@ -68,9 +68,16 @@ pub fn sin_cos_batch(x: &[f64], sin: &mut [f64], cos: &mut [f64]) {
         sin[i] = s;
         cos[i] = c;
     }
-    for i in 0..len {
-        if !(x[i].abs() <= REDUCTION_LIMIT) {
-            (sin[i], cos[i]) = x[i].sin_cos();
+    // Count the arguments out of range in a vectorizable loop; fix them (rare) one by one.
+    let mut out_of_range = 0usize;
+    for &v in x {
+        out_of_range += usize::from(!(v.abs() <= REDUCTION_LIMIT));
+    }
+    if out_of_range > 0 {
+        for i in 0..len {
+            if !(x[i].abs() <= REDUCTION_LIMIT) {
+                (sin[i], cos[i]) = x[i].sin_cos();
+            }
         }
     }
 }
