@@ -47,19 +47,15 @@
 
 use nalgebra::{DMatrix, Vector3};
 
-use crate::arith::{axpy, cross, dot, Madd, Plain};
+use crate::arith::{Madd, Plain};
+use crate::chain::{ChainState, LoadConstants};
 use crate::config::TetherConfig;
 use crate::direction::DirectionJet;
 use crate::error::{Result, TetherError};
-use crate::recursive::{self, Articulated, Chain, ChainConstants};
+use crate::recursive::{self, Articulated, ChainConstants};
 use crate::surroundings::Surroundings;
 
 type V3 = Vector3<f64>;
-
-/// Below this |cos psi| a segment is taken to have reached the coordinate singularity.
-const SINGULAR_COS_PSI: f64 = 1e-6;
-/// Below this 1 + cos(theta) a joint is taken to have folded back on itself.
-const FOLDED_JOINT: f64 = 1e-12;
 
 /// Energy of the tether and tip body, J, in the towing-aircraft frame.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -114,121 +110,10 @@ pub struct TetherModel {
     ws: Workspace,
 }
 
-/// The geometry of one segment at the current state: its direction and partials.
-#[derive(Debug, Clone, Copy, Default)]
-pub(crate) struct Geometry {
-    /// Unit direction e.
-    pub e: V3,
-    /// de/dphi (length cos psi, its y component is zero).
-    pub e_phi: V3,
-    /// de/dpsi (unit).
-    pub e_psi: V3,
-    /// cos psi.
-    pub cos_psi: f64,
-}
-
-/// The motion of one segment at the current state.
-#[derive(Debug, Clone, Copy, Default)]
-pub(crate) struct Motion {
-    /// Convective acceleration of e (with zero angle accelerations).
-    pub w: V3,
-    /// Angular velocity e x e'.
-    pub omega: V3,
-    /// Centre and its velocity.
-    pub com: V3,
-    pub com_vel: V3,
-}
-
-/// The loads on one segment (dense path).
-#[derive(Debug, Clone, Copy, Default)]
-struct SegmentLoads {
-    force: V3,
-    extra: V3,
-}
-
-/// The loads on the segments, evaluated one segment at a time from the tip to the root
-/// ([`Loads::next`]), so that the recursive solver can eliminate each segment as soon as its loads
-/// are known. Both solvers use it.
-pub(crate) struct Loads<'a, S: ?Sized> {
-    time: f64,
-    geom: &'a [Geometry],
-    motion: &'a [Motion],
-    surroundings: &'a S,
-    p: LoadParameters,
-    /// Segment k's share of the joint between k and k+1, from the previous call.
-    carry: V3,
-}
-
-/// The constants of the loads at one time.
-#[derive(Debug, Clone, Copy)]
-struct LoadParameters {
-    weight: V3,
-    bend_gain: f64,
-    c_b: f64,
-    rod_inertia: f64,
-    normal_drag: f64,
-    tangential_drag: f64,
-}
-
-impl<S: Surroundings + ?Sized> Loads<'_, S> {
-    /// External force `F_k` on the centre of segment k (gravity, apparent, aerodynamics) and its
-    /// vector `X_k` (bending, joint damping, rotational convective inertia -I w), whose
-    /// projections `E_kb . X_k` are generalized forces. Call for k = n-1, n-2, ..., 0 in order.
-    ///
-    /// Errors if the joint between k-1 and k has folded back completely.
-    #[inline(always)]
-    pub(crate) fn next<M: Madd>(&mut self, k: usize) -> Result<(V3, V3)> {
-        let (g, mo) = (&self.geom[k], &self.motion[k]);
-        let e = g.e;
-        let rho = self.surroundings.air_density(self.time, &mo.com);
-        let mut force = self.p.weight;
-        if rho != 0.0 {
-            let rel = self.surroundings.air_velocity(self.time, &mo.com) - mo.com_vel;
-            let vt = dot::<M>(&rel, &e);
-            let vn = axpy::<M>(&e, -vt, &rel);
-            let vn_abs = dot::<M>(&vn, &vn).sqrt();
-            force = axpy::<M>(&e, rho * self.p.tangential_drag * vt * vt.abs(), &force);
-            force = axpy::<M>(&vn, rho * self.p.normal_drag * vn_abs, &force);
-        }
-        let mut extra = axpy::<M>(&mo.w, -self.p.rod_inertia, &self.carry);
-        if k > 0 {
-            // Bending spring and joint damper between segments k-1 and k.
-            let prev = &self.geom[k - 1];
-            let one_plus_cos = 1.0 + dot::<M>(&prev.e, &e);
-            if !(one_plus_cos >= FOLDED_JOINT && one_plus_cos < f64::INFINITY) {
-                return Err(TetherError::Diverged {
-                    time: self.time,
-                    reason: format!(
-                        "joint {k} between segments {k} and {} folded back on itself",
-                        k + 1
-                    ),
-                });
-            }
-            let coef = self.p.bend_gain / one_plus_cos;
-            // Damping torque of this joint: on segment k it is -c_b (w_k - w_{k-1}), on segment
-            // k-1 the opposite; Q_(k,b) = E_kb . (tau_k x e_k).
-            let tau = (mo.omega - self.motion[k - 1].omega) * self.p.c_b;
-            extra = axpy::<M>(&prev.e, coef, &extra) - cross::<M>(&tau, &e);
-            self.carry = axpy::<M>(&e, coef, &cross::<M>(&tau, &prev.e));
-        }
-        Ok((force, extra))
-    }
-}
-
 #[derive(Debug, Clone)]
 struct Workspace {
-    geom: Vec<Geometry>,
-    motion: Vec<Motion>,
-    /// Loads per segment (dense path only).
-    loads: Vec<SegmentLoads>,
-    /// sin and cos of the 2n angles.
-    sin: Vec<f64>,
-    cos: Vec<f64>,
-    /// Rate of e_1.
-    e_dot0: V3,
-    tip: V3,
-    tip_vel: V3,
-    tip_force: V3,
+    /// Kinematics and loads of every segment.
+    chain: ChainState,
     /// Convective accelerations of the segment centres (dense path only; sized on first use).
     com_acc0: Vec<V3>,
     tip_acc0: V3,
@@ -264,15 +149,7 @@ impl TetherModel {
                 * l
                 * config.tangential_drag_coefficient,
             ws: Workspace {
-                geom: vec![Geometry::default(); n],
-                motion: vec![Motion::default(); n],
-                loads: vec![SegmentLoads::default(); n],
-                sin: vec![0.0; 2 * n],
-                cos: vec![0.0; 2 * n],
-                e_dot0: V3::zeros(),
-                tip: V3::zeros(),
-                tip_vel: V3::zeros(),
-                tip_force: V3::zeros(),
+                chain: ChainState::new(n),
                 com_acc0: Vec::new(),
                 tip_acc0: V3::zeros(),
                 mass: Vec::new(),
@@ -310,144 +187,35 @@ impl TetherModel {
         }
     }
 
-    fn singular_chart(time: f64, k: usize, cos_psi: f64) -> TetherError {
-        TetherError::Diverged {
-            time,
-            reason: format!(
-                "segment {} points along the lateral axis (cos psi = {:.3e}), the coordinate singularity",
-                k + 1,
-                cos_psi
-            ),
-        }
-    }
-
-    /// First pass, root to tip: directions and their partials (sin and cos of all angles in one
-    /// vectorized batch, [`crate::trig`]), rates, convective accelerations, angular velocities,
-    /// the centres and their velocities, the tip and its velocity, and the force on the tip.
-    /// Errors at the coordinate singularity.
-    #[inline(always)]
-    fn kinematics<M: Madd, S: Surroundings + ?Sized>(
-        &mut self,
-        time: f64,
-        q: &[f64],
-        qd: &[f64],
-        surroundings: &S,
-    ) -> Result<()> {
-        let (s, sd) = (q[0], qd[0]);
-        let (l, half) = (self.l, 0.5 * self.l);
-        let tip_weight = self.effective_gravity(time, surroundings) * self.tip_mass;
-        let ws = &mut self.ws;
-        crate::trig::sin_cos_batch(&q[1..], &mut ws.sin, &mut ws.cos);
-        let mut p = V3::zeros();
-        let mut pv = V3::zeros();
-        for k in 0..self.n {
-            let (sf, cf) = (ws.sin[2 * k], ws.cos[2 * k]);
-            let (sp, cp) = (ws.sin[2 * k + 1], ws.cos[2 * k + 1]);
-            if !(cp.abs() >= SINGULAR_COS_PSI) {
-                return Err(Self::singular_chart(time, k, cp));
-            }
-            // See DirectionJet: d2e/dphi2 = cp (cf, 0, -sf), d2e/dphidpsi = -sp (sf, 0, cf),
-            // d2e/dpsi2 = -e.
-            let e = V3::new(-cp * cf, sp, cp * sf);
-            let e_phi = V3::new(cp * sf, 0.0, cp * cf);
-            let e_psi = V3::new(sp * cf, cp, -sp * sf);
-            let (phi_d, psi_d) = (qd[1 + 2 * k], qd[2 + 2 * k]);
-            let e_dot = axpy::<M>(&e_psi, psi_d, &(e_phi * phi_d));
-            let (pp, ps2, ss) = (phi_d * phi_d, 2.0 * phi_d * psi_d, psi_d * psi_d);
-            let w = V3::new(
-                M::madd(e_phi.z, pp, e_psi.z * ps2),
-                0.0,
-                -M::madd(e_phi.x, pp, e_psi.x * ps2),
-            );
-            let w = axpy::<M>(&e, -ss, &w);
-            if k == 0 {
-                p = e * s;
-                pv = axpy::<M>(&e_dot, s, &(e * sd));
-                ws.e_dot0 = e_dot;
-            }
-            ws.geom[k] = Geometry {
-                e,
-                e_phi,
-                e_psi,
-                cos_psi: cp,
-            };
-            ws.motion[k] = Motion {
-                w,
-                omega: cross::<M>(&e, &e_dot),
-                com: axpy::<M>(&e, half, &p),
-                com_vel: axpy::<M>(&e_dot, half, &pv),
-            };
-            p = axpy::<M>(&e, l, &p);
-            pv = axpy::<M>(&e_dot, l, &pv);
-        }
-        ws.tip = p;
-        ws.tip_vel = pv;
-        ws.tip_force = tip_weight + surroundings.tip_force(time, &p, &pv);
-        Ok(())
-    }
-
-    /// Gravity plus the apparent acceleration of the accelerating frame.
-    #[inline(always)]
-    fn effective_gravity<S: Surroundings + ?Sized>(&self, time: f64, surroundings: &S) -> V3 {
-        V3::new(0.0, 0.0, self.gravity) - surroundings.frame_acceleration(time)
-    }
-
-    /// The constants of the loads at `time`.
-    #[inline(always)]
-    fn load_parameters<S: Surroundings + ?Sized>(
-        &self,
-        time: f64,
-        surroundings: &S,
-    ) -> LoadParameters {
-        LoadParameters {
-            weight: self.effective_gravity(time, surroundings) * self.m,
+    /// Constants of the loads.
+    fn load_constants(&self) -> LoadConstants {
+        LoadConstants {
+            m: self.m,
+            tip_mass: self.tip_mass,
+            rod_inertia: self.rod_inertia,
             bend_gain: 2.0 * self.ei / self.l,
             c_b: self.c_b,
-            rod_inertia: self.rod_inertia,
             normal_drag: self.normal_drag,
             tangential_drag: self.tangential_drag,
+            gravity: self.gravity,
         }
     }
 
-    /// Kinematics and loads of every segment and the tip, stored, for the dense solver.
+    /// Kinematics and loads of every segment and the tip ([`ChainState`]).
     ///
     /// Errors at the coordinate singularity or at a completely folded joint.
-    fn prepare<S: Surroundings + ?Sized>(
+    #[inline(always)]
+    fn prepare<M: Madd, S: Surroundings + ?Sized>(
         &mut self,
         time: f64,
         q: &[f64],
         qd: &[f64],
         surroundings: &S,
     ) -> Result<()> {
-        self.kinematics::<Plain, S>(time, q, qd, surroundings)?;
-        let params = self.load_parameters(time, surroundings);
-        let ws = &mut self.ws;
-        let mut loads = Loads {
-            time,
-            geom: &ws.geom,
-            motion: &ws.motion,
-            surroundings,
-            p: params,
-            carry: V3::zeros(),
-        };
-        for k in (0..self.n).rev() {
-            let (force, extra) = loads.next::<Plain>(k)?;
-            ws.loads[k] = SegmentLoads { force, extra };
-        }
-        Ok(())
-    }
-
-    /// Directions and their partials only (for the mass matrix).
-    fn directions(&mut self, q: &[f64]) {
-        for k in 0..self.n {
-            let jet = DirectionJet::new(q[1 + 2 * k], q[2 + 2 * k]);
-            self.ws.geom[k] = Geometry {
-                e: jet.e,
-                e_phi: jet.e_phi,
-                e_psi: jet.e_psi,
-                cos_psi: jet.cos_psi,
-            };
-        }
+        let constants = self.load_constants();
+        let chain = &mut self.ws.chain;
+        chain.kinematics::<M>(time, self.l, q, qd)?;
+        chain.loads::<M, S>(time, &constants, surroundings)
     }
 
     /// Walks the chain with the state's positions and velocities: calls `visit(e, e_dot, centre,
@@ -484,29 +252,29 @@ impl TetherModel {
         if ws.com_acc0.len() != self.n {
             ws.com_acc0.resize(self.n, V3::zeros());
         }
-        let mut pa = ws.e_dot0 * (2.0 * sd) + ws.motion[0].w * s;
+        let ch = &ws.chain;
+        let mut pa = ch.e_dot.get(0) * (2.0 * sd) + ch.w.get(0) * s;
         for k in 0..self.n {
-            ws.com_acc0[k] = pa + ws.motion[k].w * half;
-            pa += ws.motion[k].w * self.l;
+            ws.com_acc0[k] = pa + ch.w.get(k) * half;
+            pa += ch.w.get(k) * self.l;
         }
         ws.tip_acc0 = pa;
-        let mut suffix = ws.tip_force - ws.tip_acc0 * self.tip_mass;
+        let mut suffix = ch.tip_force - ws.tip_acc0 * self.tip_mass;
         let mut total = suffix;
         for k in (0..self.n).rev() {
-            let (geo, seg) = (&ws.geom[k], &ws.loads[k]);
-            let h = seg.force - ws.com_acc0[k] * self.m;
+            let h = ch.force.get(k) - ws.com_acc0[k] * self.m;
             let (a_kk, l_k) = if k == 0 {
                 (half + s, self.l + s)
             } else {
                 (half, self.l)
             };
-            let g = h * a_kk + suffix * l_k + seg.extra;
-            rhs[1 + 2 * k] = geo.e_phi.dot(&g);
-            rhs[2 + 2 * k] = geo.e_psi.dot(&g);
+            let g = h * a_kk + suffix * l_k + ch.extra.get(k);
+            rhs[1 + 2 * k] = ch.e_phi.get(k).dot(&g);
+            rhs[2 + 2 * k] = ch.e_psi.get(k).dot(&g);
             suffix += h;
             total += h;
         }
-        rhs[0] = ws.geom[0].e.dot(&total) - self.k * s - self.c_s * sd;
+        rhs[0] = ch.e.get(0).dot(&total) - self.k * s - self.c_s * sd;
     }
 
     /// Assembles the lower triangle of the mass matrix M(q) into the workspace.
@@ -520,28 +288,30 @@ impl TetherModel {
             ws.mass.resize(dim * dim, 0.0);
         }
         ws.mass[0] = n as f64 * m + tip;
-        let e1 = ws.geom[0].e;
+        let ch = &ws.chain;
+        let e1 = ch.e.get(0);
         for k in 0..n {
             let (a_kk, l_k) = if k == 0 { (half + s, l + s) } else { (half, l) };
             let beyond = m * (n - 1 - k) as f64 + tip;
             let v_k = m * a_kk + beyond * l_k;
             let w_kk = m * a_kk * a_kk + beyond * l_k * l_k + self.rod_inertia;
-            let jk = ws.geom[k];
+            let (jk_phi, jk_psi) = (ch.e_phi.get(k), ch.e_psi.get(k));
             let (rp, rs) = (1 + 2 * k, 2 + 2 * k);
-            ws.mass[rp * dim] = v_k * e1.dot(&jk.e_phi);
-            ws.mass[rs * dim] = v_k * e1.dot(&jk.e_psi);
+            ws.mass[rp * dim] = v_k * e1.dot(&jk_phi);
+            ws.mass[rs * dim] = v_k * e1.dot(&jk_psi);
             // Rows of segment k against segments j < k: W_jk = l_j V_k.
             for j in 0..k {
                 let l_j = if j == 0 { l + s } else { l };
                 let w = l_j * v_k;
-                let jj = ws.geom[j];
+                let (jj_phi, jj_psi) = (ch.e_phi.get(j), ch.e_psi.get(j));
                 let (cp, cs) = (1 + 2 * j, 2 + 2 * j);
-                ws.mass[rp * dim + cp] = w * jk.e_phi.dot(&jj.e_phi);
-                ws.mass[rp * dim + cs] = w * jk.e_phi.dot(&jj.e_psi);
-                ws.mass[rs * dim + cp] = w * jk.e_psi.dot(&jj.e_phi);
-                ws.mass[rs * dim + cs] = w * jk.e_psi.dot(&jj.e_psi);
+                ws.mass[rp * dim + cp] = w * jk_phi.dot(&jj_phi);
+                ws.mass[rp * dim + cs] = w * jk_phi.dot(&jj_psi);
+                ws.mass[rs * dim + cp] = w * jk_psi.dot(&jj_phi);
+                ws.mass[rs * dim + cs] = w * jk_psi.dot(&jj_psi);
             }
-            ws.mass[rp * dim + rp] = w_kk * jk.cos_psi * jk.cos_psi;
+            let cos_psi = ch.cos_psi[k];
+            ws.mass[rp * dim + rp] = w_kk * cos_psi * cos_psi;
             ws.mass[rs * dim + rp] = 0.0;
             ws.mass[rs * dim + rs] = w_kk;
         }
@@ -603,7 +373,7 @@ impl TetherModel {
         self.check_len("q", q)?;
         self.check_len("qd", qd)?;
         self.check_len("qdd", qdd)?;
-        self.prepare(time, q, qd, surroundings)?;
+        self.prepare::<Plain, S>(time, q, qd, surroundings)?;
         self.generalized_forces(q, qd, qdd);
         self.assemble_mass(q[0]);
         let dim = self.dofs();
@@ -676,28 +446,12 @@ impl TetherModel {
             k: self.k,
             c_s: self.c_s,
         };
-        self.kinematics::<M, S>(time, q, qd, surroundings)?;
-        let params = self.load_parameters(time, surroundings);
+        self.prepare::<M, S>(time, q, qd, surroundings)?;
         let ws = &mut self.ws;
-        let loads = Loads {
-            time,
-            geom: &ws.geom,
-            motion: &ws.motion,
-            surroundings,
-            p: params,
-            carry: V3::zeros(),
-        };
-        let chain = Chain {
-            geom: &ws.geom,
-            motion: &ws.motion,
-            e_dot0: ws.e_dot0,
-            tip_force: ws.tip_force,
-        };
-        recursive::solve::<M, S>(
+        recursive::solve::<M>(
             time,
             &constants,
-            &chain,
-            loads,
+            &ws.chain,
             q[0],
             qd[0],
             &mut ws.articulated,
@@ -709,7 +463,7 @@ impl TetherModel {
     /// The mass matrix M(q) (symmetric, dim x dim). Allocates; for analysis and tests.
     pub fn mass_matrix(&mut self, q: &[f64]) -> Result<DMatrix<f64>> {
         self.check_len("q", q)?;
-        self.directions(q);
+        self.ws.chain.directions(q);
         self.assemble_mass(q[0]);
         let dim = self.dofs();
         Ok(DMatrix::from_fn(dim, dim, |r, c| {
@@ -773,27 +527,27 @@ impl TetherModel {
         self.accelerations_dense(time, q, qd, surroundings, qdd)?;
         let ws = &self.ws;
         let (s, sd, sdd) = (q[0], qd[0], qdd[0]);
+        let ch = &ws.chain;
         let acc_dir = |k: usize| {
-            let geo = &ws.geom[k];
-            ws.motion[k].w + geo.e_phi * qdd[1 + 2 * k] + geo.e_psi * qdd[2 + 2 * k]
+            ch.w.get(k) + ch.e_phi.get(k) * qdd[1 + 2 * k] + ch.e_psi.get(k) * qdd[2 + 2 * k]
         };
         let e1dd = acc_dir(0);
-        let mut pa = ws.geom[0].e * sdd + ws.e_dot0 * (2.0 * sd) + e1dd * s;
+        let mut pa = ch.e.get(0) * sdd + ch.e_dot.get(0) * (2.0 * sd) + e1dd * s;
         // Accelerations of centres, stored in place of nothing: accumulate forward, then sum backward.
         // Two passes keep it allocation-free: first the tip acceleration, then walk inward.
         for k in 0..self.n {
             pa += acc_dir(k) * self.l;
         }
-        let mut pull = ws.tip_force - pa * self.tip_mass;
-        tensions[self.n] = pull.dot(&ws.geom[self.n - 1].e);
+        let mut pull = ch.tip_force - pa * self.tip_mass;
+        tensions[self.n] = pull.dot(&ch.e.get(self.n - 1));
         // Walk inward: the base of segment k is the tip position minus l e_j for j >= k.
         let mut base_acc = pa;
         for k in (0..self.n).rev() {
             let ek_dd = acc_dir(k);
             base_acc -= ek_dd * self.l;
             let com_acc = base_acc + ek_dd * (0.5 * self.l);
-            pull += ws.loads[k].force - com_acc * self.m;
-            tensions[k] = pull.dot(&ws.geom[k].e);
+            pull += ch.force.get(k) - com_acc * self.m;
+            tensions[k] = pull.dot(&ch.e.get(k));
         }
         Ok(())
     }

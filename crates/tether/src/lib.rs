@@ -21,6 +21,7 @@
 
 mod arith;
 pub mod atmosphere;
+mod chain;
 pub mod config;
 pub mod direction;
 pub mod dynamics;

@@ -58,8 +58,7 @@
 //!
 //! # Forward sweep (root to tip)
 //! `a_1 = t0 + J_t z`, then for k >= 1: `u_k = y_k - G_k a_k`, `e_k'' = w_k + E_k u_k`,
-//! `a_{k+1} = a_k + l e_k''`, evaluated as the affine map
-//! `a_{k+1} = (1 - l E_k G_k) a_k + l (w_k + E_k y_k)` prepared in the backward sweep. The chain tensions come for free: the force on the base of
+//! `a_{k+1} = a_k + l e_k''`. The chain tensions come for free: the force on the base of
 //! segment k is `P_k = b_k - A_k a_k`, its tension `P_k . e_k`.
 //!
 //! Each sweep costs O(1) per segment with fixed-size 3x3 / 2x2 algebra and no allocation.
@@ -67,9 +66,8 @@
 use nalgebra::{Matrix3, Vector3};
 
 use crate::arith::{axpy, dot, dot_xz, Madd};
-use crate::dynamics::{Geometry, Loads, Motion};
+use crate::chain::ChainState;
 use crate::error::{Result, TetherError};
-use crate::surroundings::Surroundings;
 
 type V3 = Vector3<f64>;
 
@@ -128,12 +126,9 @@ pub(crate) struct Articulated {
     g: [V3; 2],
     /// `y_k`.
     y: [f64; 2],
-    /// Rows of `Phi_k = 1 - l E_k G_k` and `phi_k = l (w_k + E_k y_k)`: `a_{k+1} = Phi_k a_k + phi_k`.
-    phi: [V3; 3],
-    phi0: V3,
-    /// `B_k = A_k + (m/2) 1`.
+    /// `B_k = A_k + (m/2) 1` (kept only when tensions are asked for).
     inertia: Sym3,
-    /// `b_k`.
+    /// `b_k` (kept only when tensions are asked for).
     bias: V3,
 }
 
@@ -148,15 +143,6 @@ pub(crate) struct ChainConstants {
     pub c_s: f64,
 }
 
-/// The kinematics of the chain from [`crate::TetherModel`]'s first pass: per segment its
-/// geometry and motion; the rate of e_1; the tip force.
-pub(crate) struct Chain<'a> {
-    pub geom: &'a [Geometry],
-    pub motion: &'a [Motion],
-    pub e_dot0: V3,
-    pub tip_force: V3,
-}
-
 fn singular(time: f64, segment: usize) -> TetherError {
     TetherError::Diverged {
         time,
@@ -164,25 +150,22 @@ fn singular(time: f64, segment: usize) -> TetherError {
     }
 }
 
-/// Solves the equations of motion in O(n): the backward sweep (tip to root) takes each segment's
-/// loads from `loads` and eliminates the segment at once; then the root's 3x3 system and the
-/// forward sweep. Writes `q''` into `qdd` and, if given, the tensions (n + 1 values, as
-/// [`crate::TetherModel::tensions`]) into `tensions`.
+/// Solves the equations of motion in O(n) from the kinematics and loads in `chain`: the backward
+/// sweep (tip to root), the root's 3x3 system and the forward sweep. Writes `q''` into `qdd` and,
+/// if given, the tensions (n + 1 values, as [`crate::TetherModel::tensions`]) into `tensions`.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-pub(crate) fn solve<M: Madd, S: Surroundings + ?Sized>(
+pub(crate) fn solve<M: Madd>(
     time: f64,
     c: &ChainConstants,
-    chain: &Chain<'_>,
-    mut loads: Loads<'_, S>,
+    chain: &ChainState,
     s: f64,
     sd: f64,
     work: &mut [Articulated],
     qdd: &mut [f64],
     tensions: Option<&mut [f64]>,
 ) -> Result<()> {
-    let (geom, motion) = (chain.geom, chain.motion);
-    let n = geom.len();
+    let n = chain.cos_psi.len();
     let (l, m) = (c.l, c.m);
     let inv_l = 1.0 / l;
     let inv_l2 = inv_l * inv_l;
@@ -192,15 +175,20 @@ pub(crate) fn solve<M: Madd, S: Surroundings + ?Sized>(
     // Backward sweep, tip to segment 2, on B = A + (m/2) 1.
     let mut bm = Sym3::diagonal(c.tip_mass + 0.5 * m);
     let mut bias = chain.tip_force;
+    let want_tensions = tensions.is_some();
+    let qdd = &mut qdd[..2 * n + 1];
+    let (force_k, extra_k, w_k) = (chain.force.view(n), chain.extra.view(n), chain.w.view(n));
+    let (ep_k, es_k) = (chain.e_phi.view(n), chain.e_psi.view(n));
+    let cos_psi_k = &chain.cos_psi[..n];
+    let work = &mut work[..n];
     for k in (1..n).rev() {
-        let (force, extra) = loads.next::<M>(k)?;
-        let g = &geom[k];
-        let w = motion[k].w;
-        let (ep, es) = (&g.e_phi, &g.e_psi);
+        let (force, extra, w) = (force_k.get(k), extra_k.get(k), w_k.get(k));
+        let cos_psi = cos_psi_k[k];
+        let (ep, es) = (&V3::new(ep_k.x[k], 0.0, ep_k.z[k]), &es_k.get(k));
         // Articulated inertia: depends on the geometry only.
         let bep = bm.mul_xz::<M>(ep);
         let bes = bm.mul::<M>(es);
-        let k00 = M::madd(-m6 * g.cos_psi, g.cos_psi, dot_xz::<M>(ep, &bep));
+        let k00 = M::madd(-m6 * cos_psi, cos_psi, dot_xz::<M>(ep, &bep));
         let k01 = dot_xz::<M>(ep, &bes);
         let k11 = dot::<M>(es, &bes) - m6;
         // W = (B E) K^-1 = (B E) adj(K) / det: the adjugate products run beside the division.
@@ -232,37 +220,29 @@ pub(crate) fn solve<M: Madd, S: Surroundings + ?Sized>(
             xz: upd(a0.x, bep.z, a1.x, bes.z, bm.xz),
             yz: upd(a0.y, bep.z, a1.y, bes.z, bm.yz),
         };
-        // l G = W^T: rows c0, c1.
-        let (c0, c1) = (a0 * inv, a1 * inv);
-        let row = |unit: V3, p: f64, q: f64| axpy::<M>(&c0, -p, &axpy::<M>(&c1, -q, &unit));
-        work[k] = Articulated {
-            g: [c0 * inv_l, c1 * inv_l],
-            y: [y0, y1],
-            phi: [
-                row(V3::x(), ep.x, es.x),
-                axpy::<M>(&c1, -es.y, &V3::y()),
-                row(V3::z(), ep.z, es.z),
-            ],
-            phi0: axpy::<M>(ep, y0, &axpy::<M>(es, y1, &w)) * l,
-            inertia: bm,
-            bias,
-        };
+        let gs = inv * inv_l;
+        let art = &mut work[k];
+        art.g = [a0 * gs, a1 * gs];
+        art.y = [y0, y1];
+        if want_tensions {
+            art.inertia = bm;
+            art.bias = bias;
+        }
     }
 
     // Root: s and segment 1's angles, against A_1 = B_1 - (m/2) 1 and b_1.
-    let (force, extra) = loads.next::<M>(0)?;
+    let (force, extra) = (chain.force.get(0), chain.extra.get(0));
     let a_mat = bm.to_matrix() - Matrix3::identity() * (0.5 * m);
     let b_vec = bias;
-    let g = &geom[0];
-    let e1 = g.e;
-    let w = motion[0].w;
+    let (e1, e_phi, e_psi) = (chain.e.get(0), chain.e_phi.get(0), chain.e_psi.get(0));
+    let w = chain.w.get(0);
     let (rho_c, rho_t) = (s + 0.5 * l, s + l);
-    let jc = Matrix3::from_columns(&[e1, g.e_phi * rho_c, g.e_psi * rho_c]);
-    let jt = Matrix3::from_columns(&[e1, g.e_phi * rho_t, g.e_psi * rho_t]);
-    let jr = Matrix3::from_columns(&[V3::zeros(), g.e_phi, g.e_psi]);
+    let jc = Matrix3::from_columns(&[e1, e_phi * rho_c, e_psi * rho_c]);
+    let jt = Matrix3::from_columns(&[e1, e_phi * rho_t, e_psi * rho_t]);
+    let jr = Matrix3::from_columns(&[V3::zeros(), e_phi, e_psi]);
     let mass3 =
         jc.transpose() * jc * m + jt.transpose() * a_mat * jt + jr.transpose() * jr * c.rod_inertia;
-    let drift = chain.e_dot0 * (2.0 * sd);
+    let drift = chain.e_dot.get(0) * (2.0 * sd);
     let c0 = drift + w * rho_c;
     let t0 = drift + w * rho_t;
     let mut rhs3 = jc.transpose() * (force - c0 * m)
@@ -278,7 +258,7 @@ pub(crate) fn solve<M: Madd, S: Surroundings + ?Sized>(
 
     let mut tensions = tensions;
     if let Some(t) = tensions.as_deref_mut() {
-        let e1dd = w + g.e_phi * z[1] + g.e_psi * z[2];
+        let e1dd = w + e_phi * z[1] + e_psi * z[2];
         let com = e1 * z[0] + drift + e1dd * rho_c;
         let pull = force - com * m + b_vec - a_mat * acc;
         t[0] = pull.dot(&e1);
@@ -287,24 +267,21 @@ pub(crate) fn solve<M: Madd, S: Surroundings + ?Sized>(
     // Forward sweep.
     for k in 1..n {
         let art = &work[k];
-        let g = &geom[k];
         if let Some(t) = tensions.as_deref_mut() {
             // P_k = b_k - A_k a_k with A_k = B_k - (m/2) 1.
             let pull = art.bias - art.inertia.mul::<M>(&acc) + acc * (0.5 * m);
-            t[k] = pull.dot(&g.e);
+            t[k] = pull.dot(&chain.e.get(k));
         }
-        qdd[1 + 2 * k] = art.y[0] - dot::<M>(&art.g[0], &acc);
-        qdd[2 + 2 * k] = art.y[1] - dot::<M>(&art.g[1], &acc);
-        // a_{k+1} = a_k + l e_k'' with e_k'' = w_k + E_k u_k, as one affine map (a shorter
-        // dependency chain from segment to segment).
-        acc = V3::new(
-            dot::<M>(&art.phi[0], &acc),
-            dot::<M>(&art.phi[1], &acc),
-            dot::<M>(&art.phi[2], &acc),
-        ) + art.phi0;
+        let u0 = art.y[0] - dot::<M>(&art.g[0], &acc);
+        let u1 = art.y[1] - dot::<M>(&art.g[1], &acc);
+        qdd[1 + 2 * k] = u0;
+        qdd[2 + 2 * k] = u1;
+        let (ep, es) = (V3::new(ep_k.x[k], 0.0, ep_k.z[k]), es_k.get(k));
+        let edd = axpy::<M>(&ep, u0, &axpy::<M>(&es, u1, &w_k.get(k)));
+        acc = axpy::<M>(&edd, l, &acc);
     }
     if let Some(t) = tensions {
-        t[n] = (chain.tip_force - acc * c.tip_mass).dot(&geom[n - 1].e);
+        t[n] = (chain.tip_force - acc * c.tip_mass).dot(&chain.e.get(n - 1));
     }
     Ok(())
 }
