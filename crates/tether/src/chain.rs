@@ -105,6 +105,8 @@ pub(crate) struct LoadConstants {
     pub tangential_drag: f64,
     /// Gravity, m/s^2 (along +z).
     pub gravity: f64,
+    /// Segment length l, m.
+    pub l: f64,
 }
 
 /// Per-segment state of the chain (see the module documentation).
@@ -131,6 +133,9 @@ pub(crate) struct ChainState {
     to_inboard: Lanes,
     pub force: Lanes,
     pub extra: Lanes,
+    /// `r_k = F_k / (2 l) + X_k / l^2 + (m/4) w_k`, the part of the recursive solver's bias term
+    /// that does not depend on the outboard chain (see [`crate::recursive`]).
+    pub reduced: Lanes,
     pub tip: V3,
     pub tip_vel: V3,
     pub tip_force: V3,
@@ -156,6 +161,7 @@ impl ChainState {
             to_inboard: Lanes::new(n + 1),
             force: Lanes::new(n),
             extra: Lanes::new(n),
+            reduced: Lanes::new(n),
             tip: V3::zeros(),
             tip_vel: V3::zeros(),
             tip_force: V3::zeros(),
@@ -307,6 +313,7 @@ impl ChainState {
         // Segments: external force on the centre and the vector X.
         let (fx, fy, fz) = self.force.slices(n);
         let (xx, xy, xz) = self.extra.slices(n);
+        let (rx, ry, rz) = self.reduced.slices(n);
         segment_loads::<M, S>(
             time,
             c,
@@ -336,6 +343,9 @@ impl ChainState {
             xx,
             xy,
             xz,
+            rx,
+            ry,
+            rz,
         );
         Ok(())
     }
@@ -447,6 +457,9 @@ fn segment_loads<M: Madd, S: Surroundings + ?Sized>(
     xx: &mut [f64],
     xy: &mut [f64],
     xz: &mut [f64],
+    rx: &mut [f64],
+    ry: &mut [f64],
+    rz: &mut [f64],
 ) {
     let n = ex.len();
     let (ey, ez, cx, cy, cz) = (&ey[..n], &ez[..n], &cx[..n], &cy[..n], &cz[..n]);
@@ -455,6 +468,8 @@ fn segment_loads<M: Madd, S: Surroundings + ?Sized>(
     let (tix, tiy, tiz) = (&tix[..n + 1], &tiy[..n + 1], &tiz[..n + 1]);
     let (fx, fy, fz) = (&mut fx[..n], &mut fy[..n], &mut fz[..n]);
     let (xx, xy, xz) = (&mut xx[..n], &mut xy[..n], &mut xz[..n]);
+    let (rx, ry, rz) = (&mut rx[..n], &mut ry[..n], &mut rz[..n]);
+    let (half_inv_l, inv_l2, m4) = (0.5 / c.l, 1.0 / (c.l * c.l), 0.25 * c.m);
     for k in 0..n {
         let e = V3::new(ex[k], ey[k], ez[k]);
         let com = V3::new(cx[k], cy[k], cz[k]);
@@ -470,8 +485,11 @@ fn segment_loads<M: Madd, S: Surroundings + ?Sized>(
             toy[k] + tiy[k + 1],
             toz[k] + tiz[k + 1],
         );
-        let extra = axpy::<M>(&V3::new(wx[k], wy[k], wz[k]), -c.rod_inertia, &joints);
+        let w = V3::new(wx[k], wy[k], wz[k]);
+        let extra = axpy::<M>(&w, -c.rod_inertia, &joints);
+        let r = axpy::<M>(&force, half_inv_l, &axpy::<M>(&extra, inv_l2, &(w * m4)));
         (fx[k], fy[k], fz[k]) = (force.x, force.y, force.z);
         (xx[k], xy[k], xz[k]) = (extra.x, extra.y, extra.z);
+        (rx[k], ry[k], rz[k]) = (r.x, r.y, r.z);
     }
 }

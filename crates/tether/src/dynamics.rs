@@ -198,6 +198,7 @@ impl TetherModel {
             normal_drag: self.normal_drag,
             tangential_drag: self.tangential_drag,
             gravity: self.gravity,
+            l: self.l,
         }
     }
 

@@ -168,21 +168,19 @@ pub(crate) fn solve<M: Madd>(
     let n = chain.cos_psi.len();
     let (l, m) = (c.l, c.m);
     let inv_l = 1.0 / l;
-    let inv_l2 = inv_l * inv_l;
-    let half_inv_l = 0.5 * inv_l;
-    let (m4, m6) = (0.25 * m, m / 6.0);
+    let m6 = m / 6.0;
 
     // Backward sweep, tip to segment 2, on B = A + (m/2) 1.
     let mut bm = Sym3::diagonal(c.tip_mass + 0.5 * m);
     let mut bias = chain.tip_force;
     let want_tensions = tensions.is_some();
     let qdd = &mut qdd[..2 * n + 1];
-    let (force_k, extra_k, w_k) = (chain.force.view(n), chain.extra.view(n), chain.w.view(n));
+    let (force_k, reduced_k, w_k) = (chain.force.view(n), chain.reduced.view(n), chain.w.view(n));
     let (ep_k, es_k) = (chain.e_phi.view(n), chain.e_psi.view(n));
     let cos_psi_k = &chain.cos_psi[..n];
     let work = &mut work[..n];
     for k in (1..n).rev() {
-        let (force, extra, w) = (force_k.get(k), extra_k.get(k), w_k.get(k));
+        let (force, reduced, w) = (force_k.get(k), reduced_k.get(k), w_k.get(k));
         let cos_psi = cos_psi_k[k];
         let (ep, es) = (&V3::new(ep_k.x[k], 0.0, ep_k.z[k]), &es_k.get(k));
         // Articulated inertia: depends on the geometry only.
@@ -195,16 +193,15 @@ pub(crate) fn solve<M: Madd>(
         let a0 = axpy::<M>(&bes, -k01, &(bep * k11));
         let a1 = axpy::<M>(&bep, -k01, &(bes * k00));
         let det = M::madd(k00, k11, -(k01 * k01));
-        if !(det > 0.0 && k00 > 0.0 && det < f64::INFINITY) {
+        // (Not positive or NaN. An infinite det makes the accelerations non-finite, which the
+        // integrator reports.)
+        if !(det > 0.0) {
             return Err(singular(time, k + 1));
         }
         let inv = 1.0 / det;
-        // Bias: y = K^-1 E^T (r/l^2 + (m/4) w - B w).
+        // Bias: y = K^-1 E^T (r/l^2 + (m/4) w - B w), r/l^2 + (m/4) w = `reduced` + b / l.
         let bw = bm.mul::<M>(&w);
-        let v = axpy::<M>(&w, m4, &(-bw));
-        let v = axpy::<M>(&bias, inv_l, &v);
-        let v = axpy::<M>(&extra, inv_l2, &v);
-        let v = axpy::<M>(&force, half_inv_l, &v);
+        let v = axpy::<M>(&bias, inv_l, &(reduced - bw));
         let (r0, r1) = (dot_xz::<M>(ep, &v), dot::<M>(es, &v));
         let y0 = M::madd(k11, r0, -(k01 * r1)) * inv;
         let y1 = M::madd(k00, r1, -(k01 * r0)) * inv;
