@@ -58,7 +58,9 @@
 //!
 //! # Forward sweep (root to tip)
 //! `a_1 = t0 + J_t z`, then for k >= 1: `u_k = y_k - G_k a_k`, `e_k'' = w_k + E_k u_k`,
-//! `a_{k+1} = a_k + l e_k''`. The chain tensions come for free: the force on the base of
+//! `a_{k+1} = a_k + l e_k''`, evaluated as the affine map
+//! `a_{k+1} = (1 - l E_k G_k) a_k + l (w_k + E_k y_k)` prepared in the backward sweep (a shorter
+//! chain of dependent operations from segment to segment). The chain tensions come for free: the force on the base of
 //! segment k is `P_k = b_k - A_k a_k`, its tension `P_k . e_k`.
 //!
 //! Each sweep costs O(1) per segment with fixed-size 3x3 / 2x2 algebra and no allocation.
@@ -126,6 +128,9 @@ pub(crate) struct Articulated {
     g: [V3; 2],
     /// `y_k`.
     y: [f64; 2],
+    /// Rows of `Phi_k = 1 - l E_k G_k` and `phi_k = l (w_k + E_k y_k)`: `a_{k+1} = Phi_k a_k + phi_k`.
+    phi: [V3; 3],
+    phi0: V3,
     /// `B_k = A_k + (m/2) 1` (kept only when tensions are asked for).
     inertia: Sym3,
     /// `b_k` (kept only when tensions are asked for).
@@ -217,10 +222,17 @@ pub(crate) fn solve<M: Madd>(
             xz: upd(a0.x, bep.z, a1.x, bes.z, bm.xz),
             yz: upd(a0.y, bep.z, a1.y, bes.z, bm.yz),
         };
-        let gs = inv * inv_l;
+        // l G = W^T, rows c0 and c1; Phi = 1 - E W^T.
+        let (c0, c1) = (a0 * inv, a1 * inv);
         let art = &mut work[k];
-        art.g = [a0 * gs, a1 * gs];
+        art.g = [c0 * inv_l, c1 * inv_l];
         art.y = [y0, y1];
+        art.phi = [
+            axpy::<M>(&c0, -ep.x, &axpy::<M>(&c1, -es.x, &V3::x())),
+            axpy::<M>(&c1, -es.y, &V3::y()),
+            axpy::<M>(&c0, -ep.z, &axpy::<M>(&c1, -es.z, &V3::z())),
+        ];
+        art.phi0 = axpy::<M>(ep, y0, &axpy::<M>(es, y1, &w)) * l;
         if want_tensions {
             art.inertia = bm;
             art.bias = bias;
@@ -269,13 +281,22 @@ pub(crate) fn solve<M: Madd>(
             let pull = art.bias - art.inertia.mul::<M>(&acc) + acc * (0.5 * m);
             t[k] = pull.dot(&chain.e.get(k));
         }
-        let u0 = art.y[0] - dot::<M>(&art.g[0], &acc);
-        let u1 = art.y[1] - dot::<M>(&art.g[1], &acc);
-        qdd[1 + 2 * k] = u0;
-        qdd[2 + 2 * k] = u1;
-        let (ep, es) = (V3::new(ep_k.x[k], 0.0, ep_k.z[k]), es_k.get(k));
-        let edd = axpy::<M>(&ep, u0, &axpy::<M>(&es, u1, &w_k.get(k)));
-        acc = axpy::<M>(&edd, l, &acc);
+        qdd[1 + 2 * k] = art.y[0] - dot::<M>(&art.g[0], &acc);
+        qdd[2 + 2 * k] = art.y[1] - dot::<M>(&art.g[1], &acc);
+        // a_{k+1} = a_k + l e_k'' with e_k'' = w_k + E_k u_k, as one affine map (a shorter
+        // chain of dependent operations from segment to segment).
+        let affine = |row: &V3, c: f64| {
+            M::madd(
+                row.x,
+                acc.x,
+                M::madd(row.y, acc.y, M::madd(row.z, acc.z, c)),
+            )
+        };
+        acc = V3::new(
+            affine(&art.phi[0], art.phi0.x),
+            affine(&art.phi[1], art.phi0.y),
+            affine(&art.phi[2], art.phi0.z),
+        );
     }
     if let Some(t) = tensions {
         t[n] = (chain.tip_force - acc * c.tip_mass).dot(&chain.e.get(n - 1));
