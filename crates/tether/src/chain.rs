@@ -113,6 +113,10 @@ pub(crate) struct LoadConstants {
 #[derive(Debug, Clone)]
 pub(crate) struct ChainState {
     n: usize,
+    /// The angles phi and psi, padded with zeros to a multiple of four segments so that the
+    /// vectorized sin/cos loop has no scalar remainder.
+    phi: Vec<f64>,
+    psi: Vec<f64>,
     sin_phi: Vec<f64>,
     cos_phi: Vec<f64>,
     sin_psi: Vec<f64>,
@@ -143,12 +147,15 @@ pub(crate) struct ChainState {
 
 impl ChainState {
     pub fn new(n: usize) -> Self {
+        let padded = n.div_ceil(4) * 4;
         ChainState {
             n,
-            sin_phi: vec![0.0; n],
-            cos_phi: vec![0.0; n],
-            sin_psi: vec![0.0; n],
-            cos_psi: vec![0.0; n],
+            phi: vec![0.0; padded],
+            psi: vec![0.0; padded],
+            sin_phi: vec![0.0; padded],
+            cos_phi: vec![0.0; padded],
+            sin_psi: vec![0.0; padded],
+            cos_psi: vec![0.0; padded],
             e: Lanes::new(n),
             e_phi: Lanes::new(n),
             e_psi: Lanes::new(n),
@@ -168,6 +175,11 @@ impl ChainState {
         }
     }
 
+    /// Number of segments n.
+    pub fn segments(&self) -> usize {
+        self.n
+    }
+
     /// Directions and their partials only, from libm's sin and cos (for the mass matrix).
     pub fn directions(&mut self, q: &[f64]) {
         for k in 0..self.n {
@@ -184,13 +196,12 @@ impl ChainState {
     pub fn kinematics<M: Madd>(&mut self, time: f64, l: f64, q: &[f64], qd: &[f64]) -> Result<()> {
         let n = self.n;
         let (s, sd) = (q[0], qd[0]);
-        crate::trig::sin_cos_pairs(
-            &q[1..1 + 2 * n],
-            &mut self.sin_phi,
-            &mut self.cos_phi,
-            &mut self.sin_psi,
-            &mut self.cos_psi,
-        );
+        let (phi, psi) = (&mut self.phi[..n], &mut self.psi[..n]);
+        for (k, angles) in q[1..1 + 2 * n].chunks_exact(2).enumerate() {
+            (phi[k], psi[k]) = (angles[0], angles[1]);
+        }
+        crate::trig::sin_cos_batch(&self.phi, &mut self.sin_phi, &mut self.cos_phi);
+        crate::trig::sin_cos_batch(&self.psi, &mut self.sin_psi, &mut self.cos_psi);
         let rates = &qd[1..1 + 2 * n];
         let (ex, ey, ez) = self.e.slices(n);
         let (epx, _, epz) = self.e_phi.slices(n);

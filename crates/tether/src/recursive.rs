@@ -170,7 +170,7 @@ pub(crate) fn solve<M: Madd>(
     qdd: &mut [f64],
     tensions: Option<&mut [f64]>,
 ) -> Result<()> {
-    let n = chain.cos_psi.len();
+    let n = chain.segments();
     let (l, m) = (c.l, c.m);
     let inv_l = 1.0 / l;
     let m6 = m / 6.0;

@@ -58,34 +58,21 @@ fn sin_cos_reduced(x: f64) -> (f64, f64) {
     (f64::from_bits(a ^ sin_sign), f64::from_bits(b ^ cos_sign))
 }
 
-/// Sines and cosines of interleaved angle pairs: for `x = [a_0, b_0, a_1, b_1, ...]` (2n values),
-/// `sin_a[i], cos_a[i], sin_b[i], cos_b[i] = sin(a_i), cos(a_i), sin(b_i), cos(b_i)`.
+/// `sin[i], cos[i] = sin(x[i]), cos(x[i])` for all i (`sin` and `cos` at least as long as `x`).
 #[inline(always)]
-pub fn sin_cos_pairs(
-    x: &[f64],
-    sin_a: &mut [f64],
-    cos_a: &mut [f64],
-    sin_b: &mut [f64],
-    cos_b: &mut [f64],
-) {
-    let n = x.len() / 2;
-    let (sin_a, cos_a) = (&mut sin_a[..n], &mut cos_a[..n]);
-    let (sin_b, cos_b) = (&mut sin_b[..n], &mut cos_b[..n]);
+pub fn sin_cos_batch(x: &[f64], sin: &mut [f64], cos: &mut [f64]) {
+    let len = x.len();
+    let (sin, cos) = (&mut sin[..len], &mut cos[..len]);
     let mut out_of_range = 0usize;
-    for (i, pair) in x.chunks_exact(2).enumerate() {
-        let (a, b) = (pair[0], pair[1]);
-        (sin_a[i], cos_a[i]) = sin_cos_reduced(a);
-        (sin_b[i], cos_b[i]) = sin_cos_reduced(b);
-        out_of_range +=
-            usize::from(!(a.abs() <= REDUCTION_LIMIT)) + usize::from(!(b.abs() <= REDUCTION_LIMIT));
+    for i in 0..len {
+        (sin[i], cos[i]) = sin_cos_reduced(x[i]);
+        out_of_range += usize::from(!(x[i].abs() <= REDUCTION_LIMIT));
     }
+    // Rare: redo the arguments out of range with the standard library.
     if out_of_range > 0 {
-        for i in 0..n {
-            if !(x[2 * i].abs() <= REDUCTION_LIMIT) {
-                (sin_a[i], cos_a[i]) = x[2 * i].sin_cos();
-            }
-            if !(x[2 * i + 1].abs() <= REDUCTION_LIMIT) {
-                (sin_b[i], cos_b[i]) = x[2 * i + 1].sin_cos();
+        for i in 0..len {
+            if !(x[i].abs() <= REDUCTION_LIMIT) {
+                (sin[i], cos[i]) = x[i].sin_cos();
             }
         }
     }
@@ -158,19 +145,8 @@ mod tests {
             f64::NAN,
             f64::INFINITY,
         ]);
-        if x.len() % 2 == 1 {
-            x.push(0.5);
-        }
-        let m = x.len() / 2;
-        let mut out = [vec![0.0; m], vec![0.0; m], vec![0.0; m], vec![0.0; m]];
-        let [sa, ca, sb, cb] = &mut out;
-        sin_cos_pairs(&x, sa, ca, sb, cb);
-        let s: Vec<f64> = (0..x.len())
-            .map(|i| if i % 2 == 0 { sa[i / 2] } else { sb[i / 2] })
-            .collect();
-        let c: Vec<f64> = (0..x.len())
-            .map(|i| if i % 2 == 0 { ca[i / 2] } else { cb[i / 2] })
-            .collect();
+        let (mut s, mut c) = (vec![0.0; x.len()], vec![0.0; x.len()]);
+        sin_cos_batch(&x, &mut s, &mut c);
         let mut worst = 0.0f64;
         for i in 0..x.len() {
             let (es, ec) = x[i].sin_cos();
