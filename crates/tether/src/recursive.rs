@@ -65,7 +65,7 @@
 //!
 //! Each sweep costs O(1) per segment with fixed-size 3x3 / 2x2 algebra and no allocation.
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::Vector3;
 
 use crate::arith::{axpy, dot, dot_xz, Madd};
 use crate::chain::ChainState;
@@ -111,12 +111,6 @@ impl Sym3 {
             M::madd(self.xx, v.x, self.xz * v.z),
             M::madd(self.xy, v.x, self.yz * v.z),
             M::madd(self.xz, v.x, self.zz * v.z),
-        )
-    }
-
-    fn to_matrix(self) -> Matrix3<f64> {
-        Matrix3::new(
-            self.xx, self.xy, self.xz, self.xy, self.yy, self.yz, self.xz, self.yz, self.zz,
         )
     }
 }
@@ -239,37 +233,66 @@ pub(crate) fn solve<M: Madd>(
         }
     }
 
-    // Root: s and segment 1's angles, against A_1 = B_1 - (m/2) 1 and b_1.
+    // Root: s and segment 1's angles, against A_1 = B_1 - (m/2) 1 and b_1. With e, E_phi, E_psi
+    // orthogonal (|E_phi| = cos psi), J_c^T J_c = diag(1, rho_c^2 cos^2 psi, rho_c^2) and
+    // J_r^T J_r = diag(0, cos^2 psi, 1); the 3x3 system is solved by LDL^T.
     let (force, extra) = (chain.force.get(0), chain.extra.get(0));
-    let a_mat = bm.to_matrix() - Matrix3::identity() * (0.5 * m);
+    let half_m = 0.5 * m;
+    let a_mat = Sym3 {
+        xx: bm.xx - half_m,
+        yy: bm.yy - half_m,
+        zz: bm.zz - half_m,
+        ..bm
+    };
     let b_vec = bias;
     let (e1, e_phi, e_psi) = (chain.e.get(0), chain.e_phi.get(0), chain.e_psi.get(0));
     let w = chain.w.get(0);
+    let cos2 = chain.cos_psi[0] * chain.cos_psi[0];
     let (rho_c, rho_t) = (s + 0.5 * l, s + l);
-    let jc = Matrix3::from_columns(&[e1, e_phi * rho_c, e_psi * rho_c]);
-    let jt = Matrix3::from_columns(&[e1, e_phi * rho_t, e_psi * rho_t]);
-    let jr = Matrix3::from_columns(&[V3::zeros(), e_phi, e_psi]);
-    let mass3 =
-        jc.transpose() * jc * m + jt.transpose() * a_mat * jt + jr.transpose() * jr * c.rod_inertia;
+    let (ae, aep, aes) = (
+        a_mat.mul::<M>(&e1),
+        a_mat.mul::<M>(&e_phi),
+        a_mat.mul::<M>(&e_psi),
+    );
+    let own = m * rho_c * rho_c + c.rod_inertia;
+    let rho_t2 = rho_t * rho_t;
+    let m11 = m + dot::<M>(&e1, &ae);
+    let m12 = rho_t * dot::<M>(&e1, &aep);
+    let m13 = rho_t * dot::<M>(&e1, &aes);
+    let m22 = M::madd(own, cos2, rho_t2 * dot::<M>(&e_phi, &aep));
+    let m23 = rho_t2 * dot::<M>(&e_phi, &aes);
+    let m33 = M::madd(rho_t2, dot::<M>(&e_psi, &aes), own);
     let drift = chain.e_dot.get(0) * (2.0 * sd);
-    let c0 = drift + w * rho_c;
-    let t0 = drift + w * rho_t;
-    let mut rhs3 = jc.transpose() * (force - c0 * m)
-        + jt.transpose() * (b_vec - a_mat * t0)
-        + jr.transpose() * extra;
-    rhs3[0] -= c.k * s + c.c_s * sd;
-    let chol = mass3.cholesky().ok_or_else(|| singular(time, 1))?;
-    let z = chol.solve(&rhs3);
-    qdd[0] = z[0];
-    qdd[1] = z[1];
-    qdd[2] = z[2];
-    let mut acc = t0 + jt * z;
+    let c0 = axpy::<M>(&w, rho_c, &drift);
+    let t0 = axpy::<M>(&w, rho_t, &drift);
+    let f1 = axpy::<M>(&c0, -m, &force);
+    let f2 = b_vec - a_mat.mul::<M>(&t0);
+    let moment = axpy::<M>(&f1, rho_c, &axpy::<M>(&f2, rho_t, &extra));
+    let r0 = dot::<M>(&e1, &(f1 + f2)) - M::madd(c.k, s, c.c_s * sd);
+    let (r1, r2) = (dot::<M>(&e_phi, &moment), dot::<M>(&e_psi, &moment));
+    let d1 = m11;
+    let (l21, l31) = (m12 / d1, m13 / d1);
+    let d2 = M::madd(-l21, m12, m22);
+    let l32 = M::madd(-l31, m12, m23) / d2;
+    let d3 = M::madd(-l32 * l32, d2, M::madd(-l31, m13, m33));
+    if !(d1 > 0.0 && d2 > 0.0 && d3 > 0.0) {
+        return Err(singular(time, 1));
+    }
+    let y2 = M::madd(-l21, r0, r1);
+    let y3 = M::madd(-l32, y2, M::madd(-l31, r0, r2));
+    let z2 = y3 / d3;
+    let z1 = M::madd(-l32, z2, y2 / d2);
+    let z0 = M::madd(-l31, z2, M::madd(-l21, z1, r0 / d1));
+    qdd[0] = z0;
+    qdd[1] = z1;
+    qdd[2] = z2;
+    let e1dd_ang = axpy::<M>(&e_phi, z1, &(e_psi * z2));
+    let mut acc = axpy::<M>(&e1dd_ang, rho_t, &axpy::<M>(&e1, z0, &t0));
 
     let mut tensions = tensions;
     if let Some(t) = tensions.as_deref_mut() {
-        let e1dd = w + e_phi * z[1] + e_psi * z[2];
-        let com = e1 * z[0] + drift + e1dd * rho_c;
-        let pull = force - com * m + b_vec - a_mat * acc;
+        let com = e1 * z0 + drift + (w + e1dd_ang) * rho_c;
+        let pull = force - com * m + b_vec - a_mat.mul::<M>(&acc);
         t[0] = pull.dot(&e1);
     }
 
