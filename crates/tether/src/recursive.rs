@@ -118,13 +118,10 @@ impl Sym3 {
 /// What the backward sweep leaves per segment for the forward sweep and the tensions.
 #[derive(Debug, Clone, Copy, Default)]
 pub(crate) struct Articulated {
-    /// Rows of `G_k`: `u_k = y_k - G_k a_k`.
-    g: [V3; 2],
+    /// Rows of `l G_k`: `u_k = y_k - G_k a_k`.
+    lg: [V3; 2],
     /// `y_k`.
     y: [f64; 2],
-    /// Rows of `Phi_k = 1 - l E_k G_k` and `phi_k = l (w_k + E_k y_k)`: `a_{k+1} = Phi_k a_k + phi_k`.
-    phi: [V3; 3],
-    phi0: V3,
     /// `B_k = A_k + (m/2) 1` (kept only when tensions are asked for).
     inertia: Sym3,
     /// `b_k` (kept only when tensions are asked for).
@@ -216,17 +213,10 @@ pub(crate) fn solve<M: Madd>(
             xz: upd(a0.x, bep.z, a1.x, bes.z, bm.xz),
             yz: upd(a0.y, bep.z, a1.y, bes.z, bm.yz),
         };
-        // l G = W^T, rows c0 and c1; Phi = 1 - E W^T.
-        let (c0, c1) = (a0 * inv, a1 * inv);
+        // l G = W^T.
         let art = &mut work[k];
-        art.g = [c0 * inv_l, c1 * inv_l];
+        art.lg = [a0 * inv, a1 * inv];
         art.y = [y0, y1];
-        art.phi = [
-            axpy::<M>(&c0, -ep.x, &axpy::<M>(&c1, -es.x, &V3::x())),
-            axpy::<M>(&c1, -es.y, &V3::y()),
-            axpy::<M>(&c0, -ep.z, &axpy::<M>(&c1, -es.z, &V3::z())),
-        ];
-        art.phi0 = axpy::<M>(ep, y0, &axpy::<M>(es, y1, &w)) * l;
         if want_tensions {
             art.inertia = bm;
             art.bias = bias;
@@ -304,10 +294,18 @@ pub(crate) fn solve<M: Madd>(
             let pull = art.bias - art.inertia.mul::<M>(&acc) + acc * (0.5 * m);
             t[k] = pull.dot(&chain.e.get(k));
         }
-        qdd[1 + 2 * k] = art.y[0] - dot::<M>(&art.g[0], &acc);
-        qdd[2 + 2 * k] = art.y[1] - dot::<M>(&art.g[1], &acc);
-        // a_{k+1} = a_k + l e_k'' with e_k'' = w_k + E_k u_k, as one affine map (a shorter
-        // chain of dependent operations from segment to segment).
+        let [c0, c1] = art.lg;
+        let [y0, y1] = art.y;
+        qdd[1 + 2 * k] = M::madd(-inv_l, dot::<M>(&c0, &acc), y0);
+        qdd[2 + 2 * k] = M::madd(-inv_l, dot::<M>(&c1, &acc), y1);
+        // a_{k+1} = a_k + l e_k'' with e_k'' = w_k + E_k u_k, as one affine map
+        // Phi = 1 - E (l G), phi = l (w + E y) whose construction does not wait for a_k: a shorter
+        // chain of dependent operations from segment to segment.
+        let (ep, es) = (V3::new(ep_k.x[k], 0.0, ep_k.z[k]), es_k.get(k));
+        let phi0 = axpy::<M>(&ep, y0, &axpy::<M>(&es, y1, &w_k.get(k))) * l;
+        let row_x = axpy::<M>(&c0, -ep.x, &axpy::<M>(&c1, -es.x, &V3::x()));
+        let row_y = axpy::<M>(&c1, -es.y, &V3::y());
+        let row_z = axpy::<M>(&c0, -ep.z, &axpy::<M>(&c1, -es.z, &V3::z()));
         let affine = |row: &V3, c: f64| {
             M::madd(
                 row.x,
@@ -316,9 +314,9 @@ pub(crate) fn solve<M: Madd>(
             )
         };
         acc = V3::new(
-            affine(&art.phi[0], art.phi0.x),
-            affine(&art.phi[1], art.phi0.y),
-            affine(&art.phi[2], art.phi0.z),
+            affine(&row_x, phi0.x),
+            affine(&row_y, phi0.y),
+            affine(&row_z, phi0.z),
         );
     }
     if let Some(t) = tensions {
