@@ -296,28 +296,16 @@ pub(crate) fn solve<M: Madd>(
         }
         let [c0, c1] = art.lg;
         let [y0, y1] = art.y;
-        qdd[1 + 2 * k] = M::madd(-inv_l, dot::<M>(&c0, &acc), y0);
-        qdd[2 + 2 * k] = M::madd(-inv_l, dot::<M>(&c1, &acc), y1);
-        // a_{k+1} = a_k + l e_k'' with e_k'' = w_k + E_k u_k, as one affine map
-        // Phi = 1 - E (l G), phi = l (w + E y) whose construction does not wait for a_k: a shorter
-        // chain of dependent operations from segment to segment.
+        // u = y - G a with l G a = (c0 . a, c1 . a); then a_{k+1} = a_k + l (w_k + E_k u_k)
+        // = (a_k + phi_k) - E_k (l G a_k) with phi_k = l (w_k + E_k y_k) formed aside (a shorter
+        // chain of dependent operations from segment to segment).
+        let (d0, d1) = (dot::<M>(&c0, &acc), dot::<M>(&c1, &acc));
+        qdd[1 + 2 * k] = M::madd(-inv_l, d0, y0);
+        qdd[2 + 2 * k] = M::madd(-inv_l, d1, y1);
         let (ep, es) = (V3::new(ep_k.x[k], 0.0, ep_k.z[k]), es_k.get(k));
-        let phi0 = axpy::<M>(&ep, y0, &axpy::<M>(&es, y1, &w_k.get(k))) * l;
-        let row_x = axpy::<M>(&c0, -ep.x, &axpy::<M>(&c1, -es.x, &V3::x()));
-        let row_y = axpy::<M>(&c1, -es.y, &V3::y());
-        let row_z = axpy::<M>(&c0, -ep.z, &axpy::<M>(&c1, -es.z, &V3::z()));
-        let affine = |row: &V3, c: f64| {
-            M::madd(
-                row.x,
-                acc.x,
-                M::madd(row.y, acc.y, M::madd(row.z, acc.z, c)),
-            )
-        };
-        acc = V3::new(
-            affine(&row_x, phi0.x),
-            affine(&row_y, phi0.y),
-            affine(&row_z, phi0.z),
-        );
+        let phi = axpy::<M>(&ep, y0, &axpy::<M>(&es, y1, &w_k.get(k)));
+        let shifted = axpy::<M>(&phi, l, &acc);
+        acc = axpy::<M>(&ep, -d0, &axpy::<M>(&es, -d1, &shifted));
     }
     if let Some(t) = tensions {
         t[n] = (chain.tip_force - acc * c.tip_mass).dot(&chain.e.get(n - 1));
