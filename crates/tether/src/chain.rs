@@ -235,7 +235,7 @@ impl ChainState {
         );
         if singular > 0 {
             let k = (0..n)
-                .find(|&k| !(self.cos_psi[k].abs() >= SINGULAR_COS_PSI))
+                .find(|&k| !(SINGULAR_COS_PSI..=f64::INFINITY).contains(&self.cos_psi[k].abs()))
                 .unwrap_or(0);
             return Err(TetherError::Diverged {
                 time,
@@ -295,8 +295,7 @@ impl ChainState {
                 let prev = V3::new(ex[j - 1], ey[j - 1], ez[j - 1]);
                 let e = V3::new(ex[j], ey[j], ez[j]);
                 let one_plus_cos = 1.0 + dot::<M>(&prev, &e);
-                folded +=
-                    usize::from(!(one_plus_cos >= FOLDED_JOINT && one_plus_cos < f64::INFINITY));
+                folded += usize::from(!(FOLDED_JOINT..f64::INFINITY).contains(&one_plus_cos));
                 let coef = c.bend_gain / one_plus_cos;
                 let tau = V3::new(ox[j] - ox[j - 1], oy[j] - oy[j - 1], oz[j] - oz[j - 1]) * c.c_b;
                 let out = axpy::<M>(&prev, coef, &(-cross::<M>(&tau, &e)));
@@ -309,7 +308,7 @@ impl ChainState {
             let j = (1..n)
                 .find(|&j| {
                     let v = 1.0 + self.e.get(j - 1).dot(&self.e.get(j));
-                    !(v >= FOLDED_JOINT && v < f64::INFINITY)
+                    !(FOLDED_JOINT..f64::INFINITY).contains(&v)
                 })
                 .unwrap_or(1);
             return Err(TetherError::Diverged {
@@ -408,7 +407,7 @@ fn directions_and_rates<M: Madd>(
     let mut singular = 0usize;
     for k in 0..n {
         let (sf, cf, sp, cp) = (sf[k], cf[k], sp[k], cps[k]);
-        singular += usize::from(!(cp.abs() >= SINGULAR_COS_PSI));
+        singular += usize::from(!(SINGULAR_COS_PSI..=f64::INFINITY).contains(&cp.abs()));
         // See DirectionJet: d2e/dphi2 = cp (cf, 0, -sf), d2e/dphidpsi = -sp (sf, 0, cf),
         // d2e/dpsi2 = -e.
         let e = V3::new(-cp * cf, sp, cp * sf);

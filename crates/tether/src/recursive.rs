@@ -191,7 +191,7 @@ pub(crate) fn solve<M: Madd>(
         let det = M::madd(k00, k11, -(k01 * k01));
         // (Not positive or NaN. An infinite det makes the accelerations non-finite, which the
         // integrator reports.)
-        if !(det > 0.0) {
+        if det.is_nan() || det <= 0.0 {
             return Err(singular(time, k + 1));
         }
         let inv = 1.0 / det;

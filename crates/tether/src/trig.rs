@@ -66,12 +66,12 @@ pub fn sin_cos_batch(x: &[f64], sin: &mut [f64], cos: &mut [f64]) {
     let mut out_of_range = 0usize;
     for i in 0..len {
         (sin[i], cos[i]) = sin_cos_reduced(x[i]);
-        out_of_range += usize::from(!(x[i].abs() <= REDUCTION_LIMIT));
+        out_of_range += usize::from(!(0.0..=REDUCTION_LIMIT).contains(&x[i].abs()));
     }
     // Rare: redo the arguments out of range with the standard library.
     if out_of_range > 0 {
         for i in 0..len {
-            if !(x[i].abs() <= REDUCTION_LIMIT) {
+            if !(0.0..=REDUCTION_LIMIT).contains(&x[i].abs()) {
                 (sin[i], cos[i]) = x[i].sin_cos();
             }
         }

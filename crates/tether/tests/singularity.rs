@@ -56,8 +56,8 @@ fn bent_and_lateral_shapes_stay_well_conditioned() {
             let dirs: Vec<_> = (0..n)
                 .map(|k| {
                     let f = k as f64 / (n - 1) as f64;
-                    let phi = (sag_deg as f64 * f).to_radians();
-                    let psi = (lateral_deg as f64 * f).to_radians();
+                    let phi = (sag_deg * f).to_radians();
+                    let psi = (lateral_deg * f).to_radians();
                     direction::direction(phi, psi)
                 })
                 .collect();
