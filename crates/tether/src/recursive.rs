@@ -54,14 +54,36 @@
 //!     = J_c^T (F_1 - m c0) + J_t^T (b_1 - A_1 t0) + J_r^T X_1 - (k s + c_s s', 0, 0),
 //! ```
 //!
-//! solved by Cholesky.
+//! solved by LDL^T. (e, E_phi, E_psi are orthogonal with |E_phi| = cos psi, so
+//! `J_c^T J_c = diag(1, rho_c^2 cos^2 psi, rho_c^2)` and `J_r^T J_r = diag(0, cos^2 psi, 1)`.)
 //!
 //! # Forward sweep (root to tip)
 //! `a_1 = t0 + J_t z`, then for k >= 1: `u_k = y_k - G_k a_k`, `e_k'' = w_k + E_k u_k`,
-//! `a_{k+1} = a_k + l e_k''`, evaluated as the affine map
-//! `a_{k+1} = (1 - l E_k G_k) a_k + l (w_k + E_k y_k)` prepared in the backward sweep (a shorter
-//! chain of dependent operations from segment to segment). The chain tensions come for free: the force on the base of
+//! `a_{k+1} = a_k + l e_k''`. The chain tensions come for free: the force on the base of
 //! segment k is `P_k = b_k - A_k a_k`, its tension `P_k . e_k`.
+//!
+//! # As implemented
+//! The same equations, arranged to be cheap:
+//!
+//! * The sweep carries `B = A + (m/2) 1` instead of `A`. Then `C = l B`, `D' = l^2 (B - (m/4) 1)`,
+//!   `D = l^2 (B - (m/6) 1)`, and with `K^ = K / l^2 = E^T B E - (m/6) E^T E`:
+//!
+//!   ```text
+//!   W   = (B E) K^-1                        (3x2; computed as (B E) adj(K^) / det K^)
+//!   y_k = K^-1 E^T (r_k + b_{k+1} / l - B w_k),   r_k = F_k / (2l) + X_k / l^2 + (m/4) w_k
+//!   l G_k = W^T
+//!   B_k = B_{k+1} + m 1 - W (B E)^T
+//!   b_k = F_k + b_{k+1} - l (B w_k + (B E) y_k)
+//!   ```
+//!
+//!   starting from `B_n = (M_t + m/2) 1`, `b_n = F_t`; `r_k` does not depend on the outboard chain
+//!   and comes from the vectorized loads pass (`chain.rs`).
+//! * The forward step is `a_{k+1} = (a_k + l (w_k + E_k y_k)) - E_k (l G_k a_k)`, where
+//!   `l G_k a_k` also gives `u_k`.
+//! * Only the directions, loads and `K`, `W`, `y` live in the sweep; everything independent per
+//!   segment (trigonometry, directions, rates, loads) is done beforehand in structure-of-arrays
+//!   passes the compiler vectorizes. Multiply-adds are fused where the processor has FMA
+//!   (`arith.rs`).
 //!
 //! Each sweep costs O(1) per segment with fixed-size 3x3 / 2x2 algebra and no allocation.
 
