@@ -3,6 +3,7 @@
 //! n = 10, 30, 100, 300 and the dense O(n^3) reference at n = 10, 30, 100.
 //!
 //! Run: `cargo bench -p accd-tether --bench tether -- --warm-up-time 1 --measurement-time 3`
+//! (results and machine in BENCHMARKS.md at the repository root).
 
 use std::hint::black_box;
 
