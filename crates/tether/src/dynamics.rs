@@ -46,21 +46,20 @@
 //! `F = 1/2 rho d l (C_n |v_n| v_n + pi C_t |v_t| v_t)`.
 //!
 //! All of `Q` costs O(n) through suffix sums; the dense solve of `M` costs O(n^3) and is the
-//! reference formulation.
+//! reference formulation ([`Solver::Dense`]). The hot path ([`Solver::Recursive`], the default)
+//! solves the same equations in O(n) by the articulated-body recursion of [`crate::recursive`].
 
 use nalgebra::{DMatrix, Vector3};
 
+use crate::arith::{Madd, Plain};
+use crate::chain::{ChainState, LoadConstants};
 use crate::config::TetherConfig;
 use crate::direction::DirectionJet;
 use crate::error::{Result, TetherError};
+use crate::recursive::{self, Articulated, ChainConstants};
 use crate::surroundings::Surroundings;
 
 type V3 = Vector3<f64>;
-
-/// Below this |cos psi| a segment is taken to have reached the coordinate singularity.
-const SINGULAR_COS_PSI: f64 = 1e-6;
-/// Below this 1 + cos(theta) a joint is taken to have folded back on itself.
-const FOLDED_JOINT: f64 = 1e-12;
 
 /// Energy of the tether and tip body, J, in the towing-aircraft frame.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -82,6 +81,16 @@ impl Energy {
     }
 }
 
+/// How [`TetherModel::accelerations`] solves `M(q) q'' = Q`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum Solver {
+    /// O(n) articulated-body recursion ([`crate::recursive`]): the hot path.
+    #[default]
+    Recursive,
+    /// Assemble the dense mass matrix and solve it by Cholesky, O(n^3): the reference.
+    Dense,
+}
+
 /// The tether's equations of motion, with the constants derived from a [`TetherConfig`] and
 /// preallocated work buffers: evaluating the right-hand side allocates nothing.
 #[derive(Debug, Clone)]
@@ -101,29 +110,22 @@ pub struct TetherModel {
     normal_drag: f64,
     /// 1/2 pi d l C_t, m^2: times rho |v_t| v_t gives the skin friction.
     tangential_drag: f64,
+    solver: Solver,
     ws: Workspace,
 }
 
 #[derive(Debug, Clone)]
 struct Workspace {
-    jets: Vec<DirectionJet>,
-    e_dot: Vec<V3>,
-    e_conv: Vec<V3>,
-    com: Vec<V3>,
-    com_vel: Vec<V3>,
+    /// Kinematics and loads of every segment.
+    chain: ChainState,
+    /// Convective accelerations of the segment centres (dense path only; sized on first use).
     com_acc0: Vec<V3>,
-    /// External force on each segment centre (gravity, apparent, aero), N.
-    force: Vec<V3>,
-    /// Per-segment vector X_k whose projections E_kb . X_k are the generalized forces of bending,
-    /// damping and rotational convective inertia.
-    extra: Vec<V3>,
-    omega: Vec<V3>,
-    tip: V3,
-    tip_vel: V3,
     tip_acc0: V3,
-    tip_force: V3,
     /// Lower triangle of the mass matrix, row-major, dim x dim; overwritten by its Cholesky factor.
+    /// Allocated on the first dense solve only.
     mass: Vec<f64>,
+    /// Per-segment results of the recursive solver's backward sweep.
+    articulated: Vec<Articulated>,
 }
 
 impl TetherModel {
@@ -133,7 +135,6 @@ impl TetherModel {
         let n = config.segments;
         let l = config.segment_length();
         let m = config.segment_mass();
-        let dim = config.dofs();
         Ok(TetherModel {
             n,
             l,
@@ -152,21 +153,13 @@ impl TetherModel {
                 * l
                 * config.tangential_drag_coefficient,
             ws: Workspace {
-                jets: vec![DirectionJet::default(); n],
-                e_dot: vec![V3::zeros(); n],
-                e_conv: vec![V3::zeros(); n],
-                com: vec![V3::zeros(); n],
-                com_vel: vec![V3::zeros(); n],
-                com_acc0: vec![V3::zeros(); n],
-                force: vec![V3::zeros(); n],
-                extra: vec![V3::zeros(); n],
-                omega: vec![V3::zeros(); n],
-                tip: V3::zeros(),
-                tip_vel: V3::zeros(),
+                chain: ChainState::new(n),
+                com_acc0: Vec::new(),
                 tip_acc0: V3::zeros(),
-                tip_force: V3::zeros(),
-                mass: vec![0.0; dim * dim],
+                mass: Vec::new(),
+                articulated: vec![Articulated::default(); n],
             },
+            solver: Solver::default(),
             config: config.clone(),
         })
     }
@@ -198,123 +191,95 @@ impl TetherModel {
         }
     }
 
-    /// Positions, velocities and convective (q'' = 0) accelerations of every point.
-    fn kinematics(&mut self, q: &[f64], qd: &[f64]) {
+    /// Constants of the loads.
+    fn load_constants(&self) -> LoadConstants {
+        LoadConstants {
+            m: self.m,
+            tip_mass: self.tip_mass,
+            rod_inertia: self.rod_inertia,
+            bend_gain: 2.0 * self.ei / self.l,
+            c_b: self.c_b,
+            normal_drag: self.normal_drag,
+            tangential_drag: self.tangential_drag,
+            gravity: self.gravity,
+            l: self.l,
+        }
+    }
+
+    /// Kinematics and loads of every segment and the tip ([`ChainState`]).
+    ///
+    /// Errors at the coordinate singularity or at a completely folded joint.
+    #[inline(always)]
+    fn prepare<M: Madd, S: Surroundings + ?Sized>(
+        &mut self,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        surroundings: &S,
+    ) -> Result<()> {
+        let constants = self.load_constants();
+        let chain = &mut self.ws.chain;
+        chain.kinematics::<M>(time, self.l, q, qd)?;
+        chain.loads::<M, S>(time, &constants, surroundings)
+    }
+
+    /// Walks the chain with the state's positions and velocities: calls `visit(e, e_dot, centre,
+    /// centre velocity)` per segment and returns the tip's position and velocity.
+    fn walk(&self, q: &[f64], qd: &[f64], mut visit: impl FnMut(V3, V3, V3, V3)) -> (V3, V3) {
         let (s, sd) = (q[0], qd[0]);
-        let ws = &mut self.ws;
+        let mut p = V3::zeros();
+        let mut pv = V3::zeros();
         for k in 0..self.n {
-            let (phi, psi) = (q[1 + 2 * k], q[2 + 2 * k]);
-            let (phi_d, psi_d) = (qd[1 + 2 * k], qd[2 + 2 * k]);
-            let jet = DirectionJet::new(phi, psi);
-            ws.e_dot[k] = jet.rate(phi_d, psi_d);
-            ws.e_conv[k] = jet.convective(phi_d, psi_d);
-            ws.jets[k] = jet;
+            let jet = DirectionJet::new(q[1 + 2 * k], q[2 + 2 * k]);
+            let e_dot = jet.rate(qd[1 + 2 * k], qd[2 + 2 * k]);
+            if k == 0 {
+                p = jet.e * s;
+                pv = jet.e * sd + e_dot * s;
+            }
+            visit(
+                jet.e,
+                e_dot,
+                p + jet.e * (0.5 * self.l),
+                pv + e_dot * (0.5 * self.l),
+            );
+            p += jet.e * self.l;
+            pv += e_dot * self.l;
         }
-        let e1 = ws.jets[0].e;
-        let mut p = e1 * s;
-        let mut pv = e1 * sd + ws.e_dot[0] * s;
-        let mut pa = ws.e_dot[0] * (2.0 * sd) + ws.e_conv[0] * s;
+        (p, pv)
+    }
+
+    /// Generalized forces Q (right-hand side of the dense formulation) into `rhs`, from the loads
+    /// already computed.
+    fn generalized_forces(&mut self, q: &[f64], qd: &[f64], rhs: &mut [f64]) {
+        let (s, sd) = (q[0], qd[0]);
         let half = 0.5 * self.l;
-        for k in 0..self.n {
-            let e = ws.jets[k].e;
-            ws.com[k] = p + e * half;
-            ws.com_vel[k] = pv + ws.e_dot[k] * half;
-            ws.com_acc0[k] = pa + ws.e_conv[k] * half;
-            p += e * self.l;
-            pv += ws.e_dot[k] * self.l;
-            pa += ws.e_conv[k] * self.l;
+        let ws = &mut self.ws;
+        if ws.com_acc0.len() != self.n {
+            ws.com_acc0.resize(self.n, V3::zeros());
         }
-        ws.tip = p;
-        ws.tip_vel = pv;
+        let ch = &ws.chain;
+        let mut pa = ch.e_dot.get(0) * (2.0 * sd) + ch.w.get(0) * s;
+        for k in 0..self.n {
+            ws.com_acc0[k] = pa + ch.w.get(k) * half;
+            pa += ch.w.get(k) * self.l;
+        }
         ws.tip_acc0 = pa;
-    }
-
-    fn check_chart(&self, time: f64) -> Result<()> {
-        for (k, jet) in self.ws.jets.iter().enumerate() {
-            if jet.cos_psi.abs() < SINGULAR_COS_PSI || !jet.cos_psi.is_finite() {
-                return Err(TetherError::Diverged {
-                    time,
-                    reason: format!(
-                        "segment {} points along the lateral axis (cos psi = {:.3e}), the coordinate singularity",
-                        k + 1,
-                        jet.cos_psi
-                    ),
-                });
-            }
-        }
-        Ok(())
-    }
-
-    /// External forces on the segment centres and the tip, and the generalized forces of
-    /// bending, damping and rotational inertia (as the per-segment vectors `extra`).
-    fn loads<S: Surroundings + ?Sized>(&mut self, time: f64, surroundings: &S) -> Result<()> {
-        let ws = &mut self.ws;
-        let g_eff = V3::new(0.0, 0.0, self.gravity) - surroundings.frame_acceleration(time);
-        let weight = g_eff * self.m;
-        for k in 0..self.n {
-            let e = ws.jets[k].e;
-            let c = ws.com[k];
-            let rho = surroundings.air_density(time, &c);
-            let rel = surroundings.air_velocity(time, &c) - ws.com_vel[k];
-            let vt = rel.dot(&e);
-            let vn = rel - e * vt;
-            let aero = vn * (rho * self.normal_drag * vn.norm())
-                + e * (rho * self.tangential_drag * vt * vt.abs());
-            ws.force[k] = weight + aero;
-            ws.extra[k] = ws.e_conv[k] * (-self.rod_inertia);
-            ws.omega[k] = e.cross(&ws.e_dot[k]);
-        }
-        ws.tip_force = g_eff * self.tip_mass + surroundings.tip_force(time, &ws.tip, &ws.tip_vel);
-
-        // Bending springs and joint dampers between segments j and j+1.
-        let bend_gain = 2.0 * self.ei / self.l;
-        for j in 0..self.n.saturating_sub(1) {
-            let (ej, ek) = (ws.jets[j].e, ws.jets[j + 1].e);
-            let one_plus_cos = 1.0 + ej.dot(&ek);
-            if one_plus_cos < FOLDED_JOINT || !one_plus_cos.is_finite() {
-                return Err(TetherError::Diverged {
-                    time,
-                    reason: format!(
-                        "joint {} between segments {} and {} folded back on itself",
-                        j + 1,
-                        j + 1,
-                        j + 2
-                    ),
-                });
-            }
-            let coef = bend_gain / one_plus_cos;
-            ws.extra[j] += ek * coef;
-            ws.extra[j + 1] += ej * coef;
-            // Damping torque of this joint: on segment j+1 it is -c_b (w_{j+1} - w_j), on segment j
-            // the opposite; Q_(k,b) = E_kb . (tau_k x e_k).
-            let tau = (ws.omega[j + 1] - ws.omega[j]) * self.c_b;
-            ws.extra[j] += tau.cross(&ej);
-            ws.extra[j + 1] -= tau.cross(&ek);
-        }
-        Ok(())
-    }
-
-    /// Generalized forces Q (right-hand side) into `rhs`, from the loads already computed.
-    fn generalized_forces(&self, q: &[f64], qd: &[f64], rhs: &mut [f64]) {
-        let ws = &self.ws;
-        let s = q[0];
-        let half = 0.5 * self.l;
-        let mut suffix = ws.tip_force - ws.tip_acc0 * self.tip_mass;
+        let mut suffix = ch.tip_force - ws.tip_acc0 * self.tip_mass;
         let mut total = suffix;
         for k in (0..self.n).rev() {
-            let h = ws.force[k] - ws.com_acc0[k] * self.m;
+            let h = ch.force.get(k) - ws.com_acc0[k] * self.m;
             let (a_kk, l_k) = if k == 0 {
                 (half + s, self.l + s)
             } else {
                 (half, self.l)
             };
-            let g = h * a_kk + suffix * l_k + ws.extra[k];
-            rhs[1 + 2 * k] = ws.jets[k].e_phi.dot(&g);
-            rhs[2 + 2 * k] = ws.jets[k].e_psi.dot(&g);
+            let g = h * a_kk + suffix * l_k + ch.extra.get(k);
+            rhs[1 + 2 * k] = ch.e_phi.get(k).dot(&g);
+            rhs[2 + 2 * k] = ch.e_psi.get(k).dot(&g);
             suffix += h;
             total += h;
         }
-        rhs[0] = ws.jets[0].e.dot(&total) - self.k * s - self.c_s * qd[0];
+        rhs[0] = ch.e.get(0).dot(&total) - self.k * s - self.c_s * sd;
     }
 
     /// Assembles the lower triangle of the mass matrix M(q) into the workspace.
@@ -324,35 +289,52 @@ impl TetherModel {
         let ws = &mut self.ws;
         let (m, l, tip) = (self.m, self.l, self.tip_mass);
         let half = 0.5 * l;
+        if ws.mass.len() != dim * dim {
+            ws.mass.resize(dim * dim, 0.0);
+        }
         ws.mass[0] = n as f64 * m + tip;
-        let e1 = ws.jets[0].e;
+        let ch = &ws.chain;
+        let e1 = ch.e.get(0);
         for k in 0..n {
             let (a_kk, l_k) = if k == 0 { (half + s, l + s) } else { (half, l) };
             let beyond = m * (n - 1 - k) as f64 + tip;
             let v_k = m * a_kk + beyond * l_k;
             let w_kk = m * a_kk * a_kk + beyond * l_k * l_k + self.rod_inertia;
-            let jk = ws.jets[k];
+            let (jk_phi, jk_psi) = (ch.e_phi.get(k), ch.e_psi.get(k));
             let (rp, rs) = (1 + 2 * k, 2 + 2 * k);
-            ws.mass[rp * dim] = v_k * e1.dot(&jk.e_phi);
-            ws.mass[rs * dim] = v_k * e1.dot(&jk.e_psi);
+            ws.mass[rp * dim] = v_k * e1.dot(&jk_phi);
+            ws.mass[rs * dim] = v_k * e1.dot(&jk_psi);
             // Rows of segment k against segments j < k: W_jk = l_j V_k.
             for j in 0..k {
                 let l_j = if j == 0 { l + s } else { l };
                 let w = l_j * v_k;
-                let jj = ws.jets[j];
+                let (jj_phi, jj_psi) = (ch.e_phi.get(j), ch.e_psi.get(j));
                 let (cp, cs) = (1 + 2 * j, 2 + 2 * j);
-                ws.mass[rp * dim + cp] = w * jk.e_phi.dot(&jj.e_phi);
-                ws.mass[rp * dim + cs] = w * jk.e_phi.dot(&jj.e_psi);
-                ws.mass[rs * dim + cp] = w * jk.e_psi.dot(&jj.e_phi);
-                ws.mass[rs * dim + cs] = w * jk.e_psi.dot(&jj.e_psi);
+                ws.mass[rp * dim + cp] = w * jk_phi.dot(&jj_phi);
+                ws.mass[rp * dim + cs] = w * jk_phi.dot(&jj_psi);
+                ws.mass[rs * dim + cp] = w * jk_psi.dot(&jj_phi);
+                ws.mass[rs * dim + cs] = w * jk_psi.dot(&jj_psi);
             }
-            ws.mass[rp * dim + rp] = w_kk * jk.cos_psi * jk.cos_psi;
+            let cos_psi = ch.cos_psi[k];
+            ws.mass[rp * dim + rp] = w_kk * cos_psi * cos_psi;
             ws.mass[rs * dim + rp] = 0.0;
             ws.mass[rs * dim + rs] = w_kk;
         }
     }
 
-    /// Generalized accelerations q'' = M(q)^-1 Q(t, q, q') (paper Eq. 12) into `qdd`.
+    /// The solver [`TetherModel::accelerations`] and [`TetherModel::tensions`] use.
+    pub fn solver(&self) -> Solver {
+        self.solver
+    }
+
+    /// Chooses the solver of [`TetherModel::accelerations`] and [`TetherModel::tensions`]
+    /// (default [`Solver::Recursive`]; [`Solver::Dense`] is the O(n^3) reference).
+    pub fn set_solver(&mut self, solver: Solver) {
+        self.solver = solver;
+    }
+
+    /// Generalized accelerations q'' = M(q)^-1 Q(t, q, q') (paper Eq. 12) into `qdd`, by the
+    /// configured [`Solver`] (the O(n) recursion unless set otherwise).
     ///
     /// Errors if the state reaches the coordinate singularity, folds a joint completely, or makes
     /// the mass matrix numerically singular.
@@ -364,12 +346,39 @@ impl TetherModel {
         surroundings: &S,
         qdd: &mut [f64],
     ) -> Result<()> {
+        match self.solver {
+            Solver::Recursive => self.solve_recursive(time, q, qd, surroundings, qdd, None),
+            Solver::Dense => self.accelerations_dense(time, q, qd, surroundings, qdd),
+        }
+    }
+
+    /// [`TetherModel::accelerations`] by the O(n) articulated-body recursion, whatever the
+    /// configured solver.
+    pub fn accelerations_recursive<S: Surroundings + ?Sized>(
+        &mut self,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        surroundings: &S,
+        qdd: &mut [f64],
+    ) -> Result<()> {
+        self.solve_recursive(time, q, qd, surroundings, qdd, None)
+    }
+
+    /// [`TetherModel::accelerations`] by the dense formulation, whatever the configured solver:
+    /// assembles M(q) (allocated on first use) and solves it by Cholesky, O(n^3). The reference.
+    pub fn accelerations_dense<S: Surroundings + ?Sized>(
+        &mut self,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        surroundings: &S,
+        qdd: &mut [f64],
+    ) -> Result<()> {
         self.check_len("q", q)?;
         self.check_len("qd", qd)?;
         self.check_len("qdd", qdd)?;
-        self.kinematics(q, qd);
-        self.check_chart(time)?;
-        self.loads(time, surroundings)?;
+        self.prepare::<Plain, S>(time, q, qd, surroundings)?;
         self.generalized_forces(q, qd, qdd);
         self.assemble_mass(q[0]);
         let dim = self.dofs();
@@ -381,11 +390,85 @@ impl TetherModel {
         Ok(())
     }
 
+    fn solve_recursive<S: Surroundings + ?Sized>(
+        &mut self,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        surroundings: &S,
+        qdd: &mut [f64],
+        tensions: Option<&mut [f64]>,
+    ) -> Result<()> {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
+            // SAFETY: the processor has AVX2 and FMA, checked just above.
+            return unsafe { self.solve_recursive_avx2(time, q, qd, surroundings, qdd, tensions) };
+        }
+        self.solve_recursive_body::<Plain, S>(time, q, qd, surroundings, qdd, tensions)
+    }
+
+    /// [`TetherModel::solve_recursive_body`] compiled for AVX2 and FMA, with fused multiply-adds.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn solve_recursive_avx2<S: Surroundings + ?Sized>(
+        &mut self,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        surroundings: &S,
+        qdd: &mut [f64],
+        tensions: Option<&mut [f64]>,
+    ) -> Result<()> {
+        self.solve_recursive_body::<crate::arith::Fused, S>(
+            time,
+            q,
+            qd,
+            surroundings,
+            qdd,
+            tensions,
+        )
+    }
+
+    #[inline(always)]
+    fn solve_recursive_body<M: Madd, S: Surroundings + ?Sized>(
+        &mut self,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        surroundings: &S,
+        qdd: &mut [f64],
+        tensions: Option<&mut [f64]>,
+    ) -> Result<()> {
+        self.check_len("q", q)?;
+        self.check_len("qd", qd)?;
+        self.check_len("qdd", qdd)?;
+        let constants = ChainConstants {
+            l: self.l,
+            m: self.m,
+            rod_inertia: self.rod_inertia,
+            tip_mass: self.tip_mass,
+            k: self.k,
+            c_s: self.c_s,
+        };
+        self.prepare::<M, S>(time, q, qd, surroundings)?;
+        let ws = &mut self.ws;
+        recursive::solve::<M>(
+            time,
+            &constants,
+            &ws.chain,
+            q[0],
+            qd[0],
+            &mut ws.articulated,
+            qdd,
+            tensions,
+        )
+    }
+
     /// The mass matrix M(q) (symmetric, dim x dim). Allocates; for analysis and tests.
     pub fn mass_matrix(&mut self, q: &[f64]) -> Result<DMatrix<f64>> {
         self.check_len("q", q)?;
-        let zeros = vec![0.0; q.len()];
-        self.kinematics(q, &zeros);
+        self.ws.chain.directions(q);
         self.assemble_mass(q[0]);
         let dim = self.dofs();
         Ok(DMatrix::from_fn(dim, dim, |r, c| {
@@ -398,21 +481,22 @@ impl TetherModel {
     pub fn energy(&mut self, q: &[f64], qd: &[f64]) -> Result<Energy> {
         self.check_len("q", q)?;
         self.check_len("qd", qd)?;
-        self.kinematics(q, qd);
-        let ws = &self.ws;
-        let mut kinetic = 0.5 * self.tip_mass * ws.tip_vel.norm_squared();
-        let mut height = self.tip_mass * ws.tip.z;
-        for k in 0..self.n {
-            kinetic += 0.5
-                * (self.m * ws.com_vel[k].norm_squared()
-                    + self.rod_inertia * ws.e_dot[k].norm_squared());
-            height += self.m * ws.com[k].z;
-        }
+        let (m, inertia) = (self.m, self.rod_inertia);
+        let mut kinetic = 0.0;
+        let mut height = 0.0;
         let mut bending = 0.0;
-        for j in 0..self.n.saturating_sub(1) {
-            let c = ws.jets[j].e.dot(&ws.jets[j + 1].e);
-            bending -= (2.0 * self.ei / self.l) * (0.5 * (1.0 + c)).ln();
-        }
+        let mut prev_e: Option<V3> = None;
+        let bend_gain = 2.0 * self.ei / self.l;
+        let (tip, tip_vel) = self.walk(q, qd, |e, e_dot, c, cv| {
+            kinetic += 0.5 * (m * cv.norm_squared() + inertia * e_dot.norm_squared());
+            height += m * c.z;
+            if let Some(p) = prev_e {
+                bending -= bend_gain * (0.5 * (1.0 + p.dot(&e))).ln();
+            }
+            prev_e = Some(e);
+        });
+        kinetic += 0.5 * self.tip_mass * tip_vel.norm_squared();
+        height += self.tip_mass * tip.z;
         Ok(Energy {
             kinetic,
             gravity: -self.gravity * height,
@@ -424,7 +508,8 @@ impl TetherModel {
     /// Tension along the chain (N, positive when pulling) into `tensions` (n + 1 values): entry k < n
     /// is the axial force at the inboard end of segment k + 1, entry n the force the tip body pulls
     /// with on the last segment. Entry 0 equals the axial element's k s + c_s s'. Computed from
-    /// Newton's law for everything outboard of each joint with the accelerations of this state.
+    /// Newton's law for everything outboard of each joint with the accelerations of this state
+    /// (which are written into `qdd`), by the configured [`Solver`].
     pub fn tensions<S: Surroundings + ?Sized>(
         &mut self,
         time: f64,
@@ -441,29 +526,33 @@ impl TetherModel {
                 found: tensions.len(),
             });
         }
-        self.accelerations(time, q, qd, surroundings, qdd)?;
+        if self.solver == Solver::Recursive {
+            return self.solve_recursive(time, q, qd, surroundings, qdd, Some(tensions));
+        }
+        self.accelerations_dense(time, q, qd, surroundings, qdd)?;
         let ws = &self.ws;
         let (s, sd, sdd) = (q[0], qd[0], qdd[0]);
+        let ch = &ws.chain;
         let acc_dir = |k: usize| {
-            ws.e_conv[k] + ws.jets[k].e_phi * qdd[1 + 2 * k] + ws.jets[k].e_psi * qdd[2 + 2 * k]
+            ch.w.get(k) + ch.e_phi.get(k) * qdd[1 + 2 * k] + ch.e_psi.get(k) * qdd[2 + 2 * k]
         };
         let e1dd = acc_dir(0);
-        let mut pa = ws.jets[0].e * sdd + ws.e_dot[0] * (2.0 * sd) + e1dd * s;
+        let mut pa = ch.e.get(0) * sdd + ch.e_dot.get(0) * (2.0 * sd) + e1dd * s;
         // Accelerations of centres, stored in place of nothing: accumulate forward, then sum backward.
         // Two passes keep it allocation-free: first the tip acceleration, then walk inward.
         for k in 0..self.n {
             pa += acc_dir(k) * self.l;
         }
-        let mut pull = ws.tip_force - pa * self.tip_mass;
-        tensions[self.n] = pull.dot(&ws.jets[self.n - 1].e);
+        let mut pull = ch.tip_force - pa * self.tip_mass;
+        tensions[self.n] = pull.dot(&ch.e.get(self.n - 1));
         // Walk inward: the base of segment k is the tip position minus l e_j for j >= k.
         let mut base_acc = pa;
         for k in (0..self.n).rev() {
             let ek_dd = acc_dir(k);
             base_acc -= ek_dd * self.l;
             let com_acc = base_acc + ek_dd * (0.5 * self.l);
-            pull += ws.force[k] - com_acc * self.m;
-            tensions[k] = pull.dot(&ws.jets[k].e);
+            pull += ch.force.get(k) - com_acc * self.m;
+            tensions[k] = pull.dot(&ch.e.get(k));
         }
         Ok(())
     }
@@ -493,8 +582,7 @@ impl TetherModel {
     pub fn tip_state(&mut self, q: &[f64], qd: &[f64]) -> Result<(V3, V3)> {
         self.check_len("q", q)?;
         self.check_len("qd", qd)?;
-        self.kinematics(q, qd);
-        Ok((self.ws.tip, self.ws.tip_vel))
+        Ok(self.walk(q, qd, |_, _, _, _| {}))
     }
 }
 
@@ -507,7 +595,7 @@ fn cholesky_in_place(a: &mut [f64], dim: usize) -> std::result::Result<(), usize
         for k in 0..j {
             d -= a[row_j + k] * a[row_j + k];
         }
-        if d.is_nan() || d <= 0.0 || d.is_infinite() {
+        if !(d.is_finite() && d > 0.0) {
             return Err(j);
         }
         let d = d.sqrt();
@@ -561,5 +649,56 @@ mod tests {
         }
         let mut bad = [1.0, 2.0, 2.0, 1.0];
         assert_eq!(cholesky_in_place(&mut bad, 2), Err(1));
+    }
+
+    /// Both builds of the recursive solver (plain multiply-adds, used where the processor has no
+    /// FMA, and fused ones) agree with the dense solver; the public entry points pick one of them
+    /// at run time, so the other is checked here.
+    #[test]
+    fn plain_and_fused_recursive_builds_match_dense() {
+        use crate::reference;
+        for n in [1usize, 2, 7, 30] {
+            let cfg = TetherConfig {
+                segments: n,
+                ..TetherConfig::table3()
+            };
+            let (cfg, flow) = reference::towed(&cfg, reference::StandInBody::accd()).unwrap();
+            let mut model = TetherModel::new(&cfg).unwrap();
+            let dim = cfg.dofs();
+            let mut q = vec![0.05];
+            let mut qd = vec![0.3];
+            for k in 0..n {
+                let f = k as f64;
+                q.extend([0.3 + 0.4 * (0.7 * f).sin(), 0.2 * (1.3 * f).cos()]);
+                qd.extend([0.5 * (0.4 * f).cos(), -0.3 * (0.9 * f).sin()]);
+            }
+            let mut dense = vec![0.0; dim];
+            model
+                .accelerations_dense(0.5, &q, &qd, &flow, &mut dense)
+                .unwrap();
+            let scale = dense.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+            let check = |a: &[f64], what: &str| {
+                let err = a
+                    .iter()
+                    .zip(&dense)
+                    .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+                assert!(
+                    err <= 1e-10 * scale,
+                    "n = {n}, {what}: {err:e} of {scale:e}"
+                );
+            };
+            let mut plain = vec![0.0; dim];
+            model
+                .solve_recursive_body::<Plain, _>(0.5, &q, &qd, &flow, &mut plain, None)
+                .unwrap();
+            check(&plain, "plain");
+            let mut fused = vec![0.0; dim];
+            model
+                .solve_recursive_body::<crate::arith::Fused, _>(
+                    0.5, &q, &qd, &flow, &mut fused, None,
+                )
+                .unwrap();
+            check(&fused, "fused");
+        }
     }
 }

@@ -6,6 +6,17 @@ use crate::error::{Result, TetherError};
 use crate::state::TetherState;
 use crate::surroundings::Surroundings;
 
+/// Whether any entry is infinite or NaN (a loop the compiler vectorizes: exponent bits all set).
+#[inline]
+fn any_non_finite(v: &[f64]) -> bool {
+    const EXPONENT: u64 = 0x7FF0_0000_0000_0000;
+    let mut any = 0u64;
+    for x in v {
+        any |= u64::from(x.to_bits() & EXPONENT == EXPONENT);
+    }
+    any != 0
+}
+
 /// RK4 stage buffers for one model size.
 #[derive(Debug, Clone)]
 pub struct Rk4 {
@@ -84,12 +95,13 @@ impl Rk4 {
                 qd[i] + w * (self.a1[i] + 2.0 * (self.a2[i] + self.a3[i]) + self.a4[i]);
         }
         let new_time = t + dt;
-        if let Some(i) = self
-            .q_stage
-            .iter()
-            .chain(self.qd_stage.iter())
-            .position(|v| !v.is_finite())
-        {
+        if any_non_finite(&self.q_stage) || any_non_finite(&self.qd_stage) {
+            let i = self
+                .q_stage
+                .iter()
+                .chain(self.qd_stage.iter())
+                .position(|v| !v.is_finite())
+                .unwrap_or(0);
             return Err(TetherError::Diverged {
                 time: new_time,
                 reason: format!("state entry {i} became non-finite"),

@@ -19,22 +19,26 @@
 //! Frames and units: SI; the towing-aircraft frame has x forward, y starboard, z down, origin at
 //! the attachment point.
 
+mod arith;
 pub mod atmosphere;
+mod chain;
 pub mod config;
 pub mod direction;
 pub mod dynamics;
 pub mod error;
 pub mod integrator;
 pub mod material;
+pub mod recursive;
 pub mod reference;
 pub mod state;
 pub mod surroundings;
 pub mod tether;
+mod trig;
 
 pub use atmosphere::Atmosphere;
 pub use config::{TetherConfig, STANDARD_GRAVITY};
 pub use direction::DirectionJet;
-pub use dynamics::{Energy, TetherModel};
+pub use dynamics::{Energy, Solver, TetherModel};
 pub use error::{Result, TetherError};
 pub use integrator::Rk4;
 pub use material::Material;

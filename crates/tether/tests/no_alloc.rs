@@ -1,9 +1,12 @@
-//! Stepping allocates nothing on the heap: every buffer is made when the tether is built.
+//! Stepping allocates nothing on the heap: every buffer is made when the tether is built (the
+//! dense reference's mass matrix on its first use).
+//!
+//! One test function only: the allocation counter is global, and tests run on parallel threads.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use accd_tether::{reference, Tether};
+use accd_tether::{reference, Solver, Tether, TetherModel};
 
 struct Counting;
 
@@ -30,6 +33,7 @@ static GLOBAL: Counting = Counting;
 fn stepping_does_not_allocate() {
     let (cfg, flow) = reference::towed_table3();
     let mut tether = Tether::new(&cfg).unwrap();
+    assert_eq!(tether.model_mut().solver(), Solver::Recursive);
     let mut tensions = vec![0.0; cfg.segments + 1];
     let mut joints = vec![nalgebra::Vector3::zeros(); cfg.segments + 1];
     tether.step(&flow).unwrap();
@@ -48,4 +52,33 @@ fn stepping_does_not_allocate() {
         "{} allocations in 200 steps",
         after - before
     );
+
+    // Both solvers' entry points, on a model of their own (the dense one after its first use).
+    let mut model = TetherModel::new(&cfg).unwrap();
+    let state = tether.state().clone();
+    let mut qdd = vec![0.0; model.dofs()];
+    model
+        .accelerations_dense(state.time, &state.q, &state.qd, &flow, &mut qdd)
+        .unwrap();
+    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    for _ in 0..50 {
+        model
+            .accelerations_recursive(state.time, &state.q, &state.qd, &flow, &mut qdd)
+            .unwrap();
+        model
+            .tensions(
+                state.time,
+                &state.q,
+                &state.qd,
+                &flow,
+                &mut qdd,
+                &mut tensions,
+            )
+            .unwrap();
+        model
+            .accelerations_dense(state.time, &state.q, &state.qd, &flow, &mut qdd)
+            .unwrap();
+    }
+    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    assert_eq!(after - before, 0, "{} allocations", after - before);
 }
