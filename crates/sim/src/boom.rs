@@ -14,6 +14,7 @@
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
+use crate::codec::{StateReader, StateWriter};
 use crate::error::{Result, SimError};
 use crate::rng::{Stream, RLV_STREAM};
 
@@ -186,6 +187,35 @@ impl Boom {
         let tip = self.tip(t + dt);
         self.velocity = (tip - self.previous_tip) / dt;
         self.previous_tip = tip;
+    }
+
+    /// Writes the dynamic state (formation offset, drift phases, perturbation, stream).
+    pub fn save(&self, w: &mut StateWriter) {
+        for v in [
+            &self.base,
+            &self.phase,
+            &self.perturbation,
+            &self.previous_tip,
+            &self.velocity,
+        ] {
+            w.f64s(v.as_slice());
+        }
+        self.stream.save(w);
+    }
+
+    /// Restores a state written by [`Boom::save`].
+    pub fn load(&mut self, r: &mut StateReader<'_>) -> Result<()> {
+        for (what, v) in [
+            ("boom offset", &mut self.base),
+            ("boom phase", &mut self.phase),
+            ("boom perturbation", &mut self.perturbation),
+            ("boom previous tip", &mut self.previous_tip),
+            ("boom velocity", &mut self.velocity),
+        ] {
+            r.f64s_into(what, v.as_mut_slice())?;
+        }
+        self.stream = Stream::load(r)?;
+        Ok(())
     }
 
     /// The configuration.

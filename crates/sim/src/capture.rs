@@ -22,6 +22,7 @@ use crate::accd::{aero_loads, angular_acceleration, AccdConfig, AccdState, Actua
 use crate::aero::AeroModel;
 use crate::aircraft::AircraftConfig;
 use crate::boom::{Boom, BoomConfig, CaptureStatus};
+use crate::codec::{StateReader, StateWriter};
 use crate::error::{Result, SimError};
 use crate::turbulence::{Turbulence, TurbulenceConfig};
 use crate::wake::{Wake, WakeConfig};
@@ -40,6 +41,20 @@ pub trait AirDisturbance: Send + Sync {
     fn advance(&mut self, _time: f64, _dt: f64) -> Result<()> {
         Ok(())
     }
+
+    /// Restarts at time 0 with the random streams of `wake_seed`. Must not allocate.
+    fn reset(&mut self, _wake_seed: u64) {}
+
+    /// A boxed copy (the episode is cloned for snapshots).
+    fn clone_box(&self) -> Box<dyn AirDisturbance>;
+
+    /// Writes the time-dependent state (nothing for a steady disturbance).
+    fn save(&self, _w: &mut StateWriter) {}
+
+    /// Restores a state written by `save` of a disturbance built from the same config.
+    fn load(&mut self, _r: &mut StateReader<'_>) -> Result<()> {
+        Ok(())
+    }
 }
 
 /// No disturbance: the free stream alone.
@@ -49,6 +64,10 @@ pub struct CalmAir;
 impl AirDisturbance for CalmAir {
     fn velocity(&self, _time: f64, _position: &V3) -> V3 {
         V3::zeros()
+    }
+
+    fn clone_box(&self) -> Box<dyn AirDisturbance> {
+        Box::new(*self)
     }
 }
 
@@ -235,7 +254,8 @@ pub struct Snapshot {
     pub aircraft_velocity: V3,
 }
 
-/// One capture episode's physics.
+/// One capture episode's physics. Cloning copies everything, random streams included: the clone
+/// continues exactly as the original would.
 pub struct CaptureSim {
     config: CaptureConfig,
     model: TetherModel,
@@ -253,6 +273,26 @@ pub struct CaptureSim {
     time_origin: f64,
     /// Steps taken since `time_origin`.
     steps: u64,
+}
+
+impl Clone for CaptureSim {
+    fn clone(&self) -> Self {
+        CaptureSim {
+            config: self.config.clone(),
+            model: self.model.clone(),
+            aero: Arc::clone(&self.aero),
+            inertia: self.inertia,
+            capture_offset: self.capture_offset,
+            tether: self.tether.clone(),
+            accd: self.accd,
+            actuators: self.actuators,
+            boom: self.boom.clone(),
+            disturbance: self.disturbance.clone_box(),
+            buffers: self.buffers.clone(),
+            time_origin: self.time_origin,
+            steps: self.steps,
+        }
+    }
 }
 
 impl CaptureSim {
@@ -355,6 +395,71 @@ impl CaptureSim {
         self.steps = 0;
         self.tether = state;
         Ok(())
+    }
+
+    /// Starts a new episode at t = 0 from the tether state `tether` (its time is ignored) and
+    /// the ACCD state `accd`, flaps neutral, the boom and the air disturbance restarted from
+    /// `seeds`. Allocates nothing.
+    pub fn reset(&mut self, seeds: Seeds, tether: &TetherState, accd: AccdState) -> Result<()> {
+        if tether.q.len() != self.model.dofs() || tether.qd.len() != self.model.dofs() {
+            return Err(accd_tether::TetherError::WrongSize {
+                what: "tether state",
+                expected: self.model.dofs(),
+                found: tether.q.len().min(tether.qd.len()),
+            }
+            .into());
+        }
+        tether.validate()?;
+        self.set_accd_state(accd)?;
+        self.tether.q.copy_from_slice(&tether.q);
+        self.tether.qd.copy_from_slice(&tether.qd);
+        self.tether.time = 0.0;
+        self.time_origin = 0.0;
+        self.steps = 0;
+        self.actuators = Actuators::default();
+        self.boom = Boom::new(&self.config.boom, seeds.rlv);
+        self.disturbance.reset(seeds.wake);
+        Ok(())
+    }
+
+    /// Writes the episode's dynamic state (tether, ACCD, flaps, boom, air disturbance, clock)
+    /// for [`CaptureSim::load`]; the configuration is not included.
+    pub fn save(&self, w: &mut StateWriter) {
+        w.f64(self.time_origin);
+        w.u64(self.steps);
+        w.f64(self.tether.time);
+        w.f64s(&self.tether.q);
+        w.f64s(&self.tether.qd);
+        w.f64s(self.accd.attitude.coords.as_slice());
+        w.f64s(self.accd.omega.as_slice());
+        w.f64s(&self.actuators.command);
+        w.f64s(&self.actuators.deflection);
+        self.boom.save(w);
+        self.disturbance.save(w);
+    }
+
+    /// Restores a state written by [`CaptureSim::save`] of an episode with the same
+    /// configuration; it then continues bit for bit as the saved one would.
+    pub fn load(&mut self, r: &mut StateReader<'_>) -> Result<()> {
+        self.time_origin = r.f64("time origin")?;
+        self.steps = r.u64("steps")?;
+        self.tether.time = r.f64("time")?;
+        r.f64s_into("tether q", &mut self.tether.q)?;
+        r.f64s_into("tether qd", &mut self.tether.qd)?;
+        let mut quat = [0.0; 4];
+        r.f64s_into("attitude", &mut quat)?;
+        let mut omega = [0.0; 3];
+        r.f64s_into("body rates", &mut omega)?;
+        self.accd = AccdState {
+            attitude: UnitQuaternion::new_unchecked(Quaternion::new(
+                quat[3], quat[0], quat[1], quat[2],
+            )),
+            omega: V3::from(omega),
+        };
+        r.f64s_into("flap commands", &mut self.actuators.command)?;
+        r.f64s_into("flap deflections", &mut self.actuators.deflection)?;
+        self.boom.load(r)?;
+        self.disturbance.load(r)
     }
 
     /// The flap actuators.
@@ -556,6 +661,29 @@ impl CaptureSim {
         Ok(())
     }
 
+    /// Tension at the attachment from the axial element, `k s + c s'`, N.
+    pub fn attachment_tension(&self) -> f64 {
+        let c = &self.config.tether;
+        c.axial_stiffness * self.tether.q[0] + c.axial_damping() * self.tether.qd[0]
+    }
+
+    /// The capture criteria at the current state (cheaper than a [`CaptureSim::snapshot`]: no
+    /// aerodynamics).
+    pub fn capture_status(&mut self) -> Result<CaptureStatus> {
+        let (position, velocity) = self.model.tip_state(&self.tether.q, &self.tether.qd)?;
+        let attitude = self.accd.attitude;
+        let point = position + attitude.transform_vector(&self.capture_offset);
+        let point_velocity =
+            velocity + attitude.transform_vector(&self.accd.omega.cross(&self.capture_offset));
+        Ok(CaptureStatus::evaluate(
+            &self.config.boom,
+            &point,
+            &point_velocity,
+            &self.boom.tip(self.tether.time),
+            &self.boom.velocity(),
+        ))
+    }
+
     /// Everything observable about the current state.
     pub fn snapshot(&mut self) -> Result<Snapshot> {
         let t = self.tether.time;
@@ -570,7 +698,6 @@ impl CaptureSim {
             velocity + attitude.transform_vector(&self.accd.omega.cross(&self.capture_offset));
         let boom_tip = self.boom.tip(t);
         let boom_velocity = self.boom.velocity();
-        let c = &self.config.tether;
         Ok(Snapshot {
             time: t,
             position,
@@ -591,8 +718,7 @@ impl CaptureSim {
                 &boom_velocity,
             ),
             loads,
-            attachment_tension: c.axial_stiffness * self.tether.q[0]
-                + c.axial_damping() * self.tether.qd[0],
+            attachment_tension: self.attachment_tension(),
             aircraft_velocity: self.config.aircraft.velocity(t),
         })
     }

@@ -15,9 +15,12 @@ pub mod aero;
 pub mod aircraft;
 pub mod boom;
 pub mod capture;
+pub mod codec;
+pub mod episode;
 pub mod error;
 mod interp;
 pub mod rng;
+pub mod task;
 pub mod turbulence;
 pub mod wake;
 pub mod wake_field;
@@ -27,7 +30,9 @@ pub use aero::AeroModel;
 pub use aircraft::AircraftConfig;
 pub use boom::{BoomConfig, CaptureStatus};
 pub use capture::{AirDisturbance, CalmAir, CaptureConfig, CaptureSim, Seeds, Snapshot};
+pub use episode::{Episode, Equilibrium, Outcome};
 pub use error::SimError;
+pub use task::{EnvConfig, ACT_DIM, OBSERVATION, OBS_BOUND, OBS_DIM};
 pub use turbulence::{AmbientTurbulence, Turbulence, TurbulenceConfig};
 pub use wake::{
     AnalyticWake, Wake, WakeConfig, WakeSample, WakeTable, WakeTableData, WakeTableFiles,

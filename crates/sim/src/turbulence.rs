@@ -77,6 +77,7 @@
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
+use crate::codec::{StateReader, StateWriter};
 use crate::error::{Result, SimError};
 use crate::rng::{Stream, AMBIENT_STREAM, WAKE_LANES_STREAM};
 
@@ -452,6 +453,29 @@ impl Turbulence {
         while (self.newest as f64) * self.dt < self.time {
             self.generate();
         }
+        Ok(())
+    }
+
+    /// Writes the dynamic state (seed, clock, history ring, processes, streams).
+    pub fn save(&self, w: &mut StateWriter) {
+        w.u64(self.seed);
+        w.f64(self.time);
+        w.i64(self.newest);
+        w.f32s(&self.ring);
+        w.f64s(&self.state);
+        self.wake_rng.save(w);
+        self.ambient_rng.save(w);
+    }
+
+    /// Restores a state written by [`Turbulence::save`] of turbulence with the same config.
+    pub fn load(&mut self, r: &mut StateReader<'_>) -> Result<()> {
+        self.seed = r.u64("turbulence seed")?;
+        self.time = r.f64("turbulence time")?;
+        self.newest = r.i64("turbulence grid index")?;
+        r.f32s_into("turbulence history", &mut self.ring)?;
+        r.f64s_into("turbulence processes", &mut self.state)?;
+        self.wake_rng = Stream::load(r)?;
+        self.ambient_rng = Stream::load(r)?;
         Ok(())
     }
 

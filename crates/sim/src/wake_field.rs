@@ -184,4 +184,20 @@ impl crate::capture::AirDisturbance for WakeField {
     fn advance(&mut self, _time: f64, dt: f64) -> Result<()> {
         self.turbulence.advance(dt)
     }
+
+    fn reset(&mut self, wake_seed: u64) {
+        self.turbulence.reset(wake_seed);
+    }
+
+    fn clone_box(&self) -> Box<dyn crate::capture::AirDisturbance> {
+        Box::new(self.clone())
+    }
+
+    fn save(&self, w: &mut crate::codec::StateWriter) {
+        self.turbulence.save(w);
+    }
+
+    fn load(&mut self, r: &mut crate::codec::StateReader<'_>) -> Result<()> {
+        self.turbulence.load(r)
+    }
 }

@@ -1,0 +1,436 @@
+//! One episode of the RL task ([`crate::task`]): reset from seeds around the open-loop
+//! equilibrium, agent steps of several physics steps, observation, reward and episode end.
+//! Nothing here allocates per step; divergence is an outcome, not a panic or a NaN.
+
+use std::sync::Arc;
+
+use accd_tether::TetherState;
+use nalgebra::{UnitQuaternion, Vector3};
+
+use crate::accd::AccdState;
+use crate::capture::{CaptureSim, Seeds, Snapshot};
+use crate::codec::{StateReader, StateWriter};
+use crate::error::{Result, SimError};
+use crate::rng::Stream;
+use crate::task::{tilt, EnvConfig, ACT_DIM, OBSERVATION, OBS_BOUND, OBS_DIM};
+use crate::turbulence::AmbientTurbulence;
+
+type V3 = Vector3<f64>;
+
+/// ChaCha stream label of the initial conditions ("INITIAL " in ASCII).
+pub const INITIAL_STREAM: u64 = u64::from_be_bytes(*b"INITIAL ");
+
+/// The open-loop equilibrium episodes start around: neutral flaps, mean wake, no turbulence,
+/// settled for `initial.settle_time` from the straight trailing start.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Equilibrium {
+    /// The tether's state (time 0).
+    pub tether: TetherState,
+    /// The ACCD's attitude and rates.
+    pub accd: AccdState,
+    /// The ACCD's position, m (TA frame).
+    pub position: V3,
+}
+
+impl Equilibrium {
+    /// Settles the config's system open loop (turbulence off).
+    pub fn settle(config: &EnvConfig) -> Result<Equilibrium> {
+        let mut capture = config.capture();
+        capture.turbulence.wake_turbulence = false;
+        capture.turbulence.ambient = AmbientTurbulence::None;
+        let mut sim = CaptureSim::new(&capture, Seeds::default())?;
+        let steps = (config.initial.settle_time / sim.time_step()).round() as usize;
+        sim.step_many(steps, [0.0; 4])?;
+        let position = sim.snapshot()?.position;
+        let mut tether = sim.tether_state().clone();
+        tether.time = 0.0;
+        Ok(Equilibrium {
+            tether,
+            accd: *sim.accd_state(),
+            position,
+        })
+    }
+}
+
+/// What one agent step did.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Outcome {
+    /// Reward of the step.
+    pub reward: f64,
+    /// The episode ended (capture, overload, envelope exit or divergence).
+    pub terminated: bool,
+    /// The capture window elapsed.
+    pub truncated: bool,
+    /// Captured.
+    pub captured: bool,
+    /// The attachment tension exceeded the overload limit.
+    pub overload: bool,
+    /// The ACCD left the flight envelope.
+    pub envelope_exit: bool,
+    /// The simulation diverged (the observation is the last good one).
+    pub diverged: bool,
+    /// Distance from the capture point to the boom tip at the end of the step, m.
+    pub distance: f64,
+    /// Relative speed of the capture point with respect to the boom tip, m/s.
+    pub relative_speed: f64,
+    /// Highest attachment tension during the step, N.
+    pub peak_tension: f64,
+    /// Episode time at the end of the step, s.
+    pub time: f64,
+}
+
+/// One episode: the physics, the task's bookkeeping, the latest observation.
+#[derive(Clone)]
+pub struct Episode {
+    config: Arc<EnvConfig>,
+    equilibrium: Arc<Equilibrium>,
+    sim: CaptureSim,
+    /// Scratch for the perturbed initial state.
+    start: TetherState,
+    substeps: usize,
+    total_steps: u64,
+    flap_limit: f64,
+    overload_tension: f64,
+    steps: u64,
+    seeds: Seeds,
+    previous_action: [f64; ACT_DIM],
+    obs: [f32; OBS_DIM],
+    distance: f64,
+    done: bool,
+    divergence: Option<String>,
+}
+
+impl Episode {
+    /// An episode of `config` starting around `equilibrium` (see [`Equilibrium::settle`]),
+    /// reset with `seeds`.
+    pub fn new(
+        config: Arc<EnvConfig>,
+        equilibrium: Arc<Equilibrium>,
+        seeds: Seeds,
+    ) -> Result<Episode> {
+        config.validate()?;
+        let sim = CaptureSim::new(&config.capture(), seeds)?;
+        let mut episode = Episode {
+            start: equilibrium.tether.clone(),
+            substeps: config.substeps(),
+            total_steps: config.episode_steps(),
+            flap_limit: config.accd.flap_limit_deg.to_radians(),
+            overload_tension: config.limits.overload_fraction * config.tether.breaking_tension,
+            config,
+            equilibrium,
+            sim,
+            steps: 0,
+            seeds,
+            previous_action: [0.0; ACT_DIM],
+            obs: [0.0; OBS_DIM],
+            distance: 0.0,
+            done: false,
+            divergence: None,
+        };
+        episode.reset(seeds)?;
+        Ok(episode)
+    }
+
+    /// Starts a new episode: the ACCD displaced from the equilibrium and tilted at random (from
+    /// the `initial` stream of `seeds.initial`), boom and turbulence from their seeds, t = 0.
+    pub fn reset(&mut self, seeds: Seeds) -> Result<()> {
+        let init = &self.config.initial;
+        let mut stream = Stream::new(seeds.initial, INITIAL_STREAM);
+        let length = self.config.tether.length;
+        let d_psi = stream.range(-1.0, 1.0) * init.offset[0] / length;
+        let d_phi = stream.range(-1.0, 1.0) * init.offset[1] / length;
+        let max_angle = init.attitude_deg.to_radians();
+        let roll = stream.range(-1.0, 1.0) * max_angle;
+        let pitch = stream.range(-1.0, 1.0) * max_angle;
+        let yaw = stream.range(-1.0, 1.0) * max_angle;
+
+        let eq = &self.equilibrium;
+        self.start.q.copy_from_slice(&eq.tether.q);
+        self.start.qd.copy_from_slice(&eq.tether.qd);
+        for k in 0..self.config.tether.segments {
+            self.start.q[1 + 2 * k] += d_phi;
+            self.start.q[2 + 2 * k] += d_psi;
+        }
+        let accd = AccdState {
+            attitude: eq.accd.attitude * UnitQuaternion::from_euler_angles(roll, pitch, yaw),
+            omega: eq.accd.omega,
+        };
+        self.sim.reset(seeds, &self.start, accd)?;
+        self.seeds = seeds;
+        self.steps = 0;
+        self.previous_action = [0.0; ACT_DIM];
+        self.done = false;
+        self.divergence = None;
+        let snapshot = self.sim.snapshot()?;
+        if !self.observe(&snapshot) {
+            return Err(SimError::Diverged {
+                time: 0.0,
+                reason: "non-finite initial observation".into(),
+            });
+        }
+        self.distance = snapshot.capture.distance;
+        Ok(())
+    }
+
+    /// Writes the observation of `s` into `self.obs` if it is finite; false otherwise.
+    fn observe(&mut self, s: &Snapshot) -> bool {
+        let rel = s.boom_tip - s.capture_point;
+        let rel_v = s.boom_velocity - s.capture_point_velocity;
+        let d = s.position - self.equilibrium.position;
+        let q = s.attitude.quaternion();
+        let sign = if q.w < 0.0 { -1.0 } else { 1.0 };
+        let f = self.flap_limit;
+        let window = self.config.capture_window;
+        let raw: [f64; OBS_DIM] = [
+            rel.x,
+            rel.y,
+            rel.z,
+            rel_v.x,
+            rel_v.y,
+            rel_v.z,
+            d.x,
+            d.y,
+            d.z,
+            s.velocity.x,
+            s.velocity.y,
+            s.velocity.z,
+            sign * q.w,
+            sign * q.i,
+            sign * q.j,
+            sign * q.k,
+            s.omega.x,
+            s.omega.y,
+            s.omega.z,
+            s.deflection[0] / f,
+            s.deflection[1] / f,
+            s.deflection[2] / f,
+            s.deflection[3] / f,
+            s.attachment_tension,
+            (window - s.time) / window,
+        ];
+        if !raw.iter().all(|v| v.is_finite()) {
+            return false;
+        }
+        for (o, (v, field)) in self.obs.iter_mut().zip(raw.iter().zip(&OBSERVATION)) {
+            *o = ((v * field.scale) as f32).clamp(-OBS_BOUND, OBS_BOUND);
+        }
+        true
+    }
+
+    /// One agent step with `action` (four flap commands in [-1, 1], clipped). A non-finite
+    /// action is an error and changes nothing; so is stepping an episode that has ended.
+    pub fn step(&mut self, action: &[f32]) -> Result<Outcome> {
+        if action.len() != ACT_DIM {
+            return Err(SimError::invalid_config(
+                "action",
+                format!("{} values", action.len()),
+                &format!("{ACT_DIM} flap commands"),
+            ));
+        }
+        if let Some((i, v)) = action.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+            return Err(SimError::invalid_config(
+                &format!("action[{i}]"),
+                v,
+                "a finite value in [-1, 1] (out-of-range values are clipped)",
+            ));
+        }
+        if self.done {
+            return Err(SimError::invalid_config(
+                "step",
+                "after the episode ended",
+                "reset() before stepping again",
+            ));
+        }
+        let mut a = [0.0; ACT_DIM];
+        let mut command = [0.0; ACT_DIM];
+        for i in 0..ACT_DIM {
+            a[i] = (action[i] as f64).clamp(-1.0, 1.0);
+            command[i] = a[i] * self.flap_limit;
+        }
+
+        let mut out = Outcome {
+            peak_tension: self.sim.attachment_tension(),
+            distance: self.distance,
+            ..Outcome::default()
+        };
+        for _ in 0..self.substeps {
+            if let Err(e) = self.sim.step(command) {
+                self.diverge(e);
+                out.diverged = true;
+                break;
+            }
+            let tension = self.sim.attachment_tension();
+            out.peak_tension = out.peak_tension.max(tension);
+            if tension > self.overload_tension {
+                out.overload = true;
+                break;
+            }
+            match self.sim.capture_status() {
+                Ok(status) if status.captured => {
+                    out.captured = true;
+                    break;
+                }
+                Ok(_) => {}
+                Err(e) => {
+                    self.diverge(e);
+                    out.diverged = true;
+                    break;
+                }
+            }
+        }
+        self.steps += 1;
+        out.time = self.sim.time();
+        if !out.diverged {
+            match self.sim.snapshot() {
+                Ok(s) if !self.plausible(&s) => {
+                    self.diverge(SimError::Diverged {
+                        time: s.time,
+                        reason: format!(
+                            "ACCD speed {:.3e} m/s relative to the aircraft or body rate {:.3e} rad/s beyond physical bounds",
+                            s.velocity.norm(),
+                            s.omega.norm()
+                        ),
+                    });
+                    out.diverged = true;
+                }
+                Ok(s) if self.observe(&s) => {
+                    out.distance = s.capture.distance;
+                    out.relative_speed = s.capture.relative_speed;
+                    let limits = &self.config.limits;
+                    out.envelope_exit = !out.captured
+                        && (s.capture.distance > limits.max_distance
+                            || tilt(&s.attitude) > limits.max_tilt_deg.to_radians()
+                            || s.omega.norm() > limits.max_body_rate);
+                }
+                Ok(s) => {
+                    self.diverge(SimError::Diverged {
+                        time: s.time,
+                        reason: "non-finite observation".into(),
+                    });
+                    out.diverged = true;
+                }
+                Err(e) => {
+                    self.diverge(e);
+                    out.diverged = true;
+                }
+            }
+        }
+        self.distance = out.distance;
+        out.terminated = out.captured || out.overload || out.envelope_exit || out.diverged;
+        out.truncated = !out.terminated && self.steps >= self.total_steps;
+        out.reward = self.reward(&a, &out);
+        self.previous_action = a;
+        self.done = out.terminated || out.truncated;
+        Ok(out)
+    }
+
+    /// False for a state no flight could reach: the ACCD faster than twice the airspeed
+    /// relative to the aircraft, or spinning faster than 1000 rad/s (a diverging integration).
+    fn plausible(&self, s: &Snapshot) -> bool {
+        s.velocity.norm() <= 2.0 * self.config.aircraft.airspeed && s.omega.norm() <= 1e3
+    }
+
+    fn diverge(&mut self, e: SimError) {
+        self.divergence = Some(e.to_string());
+    }
+
+    /// The reward of the module docs of [`crate::task`].
+    fn reward(&self, a: &[f64; ACT_DIM], out: &Outcome) -> f64 {
+        let w = &self.config.reward;
+        let effort = a.iter().map(|v| v * v).sum::<f64>() / ACT_DIM as f64;
+        let rate = a
+            .iter()
+            .zip(&self.previous_action)
+            .map(|(v, p)| (0.5 * (v - p)).powi(2))
+            .sum::<f64>()
+            / ACT_DIM as f64;
+        let mut r = w.proximity * (-out.distance / w.proximity_scale).exp()
+            - w.effort * effort
+            - w.smoothness * rate;
+        if out.captured {
+            let left = self.total_steps.saturating_sub(self.steps);
+            r += w.capture + w.proximity * left as f64;
+        }
+        if out.overload || out.envelope_exit || out.diverged {
+            r -= w.failure;
+        }
+        r
+    }
+
+    /// The latest observation (the last good one after a divergence).
+    pub fn observation(&self) -> &[f32; OBS_DIM] {
+        &self.obs
+    }
+
+    /// The episode's seeds.
+    pub fn seeds(&self) -> Seeds {
+        self.seeds
+    }
+
+    /// Agent steps taken in this episode.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// The episode has ended (reset before stepping again).
+    pub fn done(&self) -> bool {
+        self.done
+    }
+
+    /// Why the episode diverged, if it did.
+    pub fn divergence(&self) -> Option<&str> {
+        self.divergence.as_deref()
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &EnvConfig {
+        &self.config
+    }
+
+    /// The open-loop equilibrium.
+    pub fn equilibrium(&self) -> &Equilibrium {
+        &self.equilibrium
+    }
+
+    /// The physics (for rendering and analysis).
+    pub fn sim(&self) -> &CaptureSim {
+        &self.sim
+    }
+
+    /// The physics, mutably (snapshots need scratch space).
+    pub fn sim_mut(&mut self) -> &mut CaptureSim {
+        &mut self.sim
+    }
+
+    /// Writes the episode's dynamic state.
+    pub fn save(&self, w: &mut StateWriter) {
+        self.sim.save(w);
+        w.u64(self.steps);
+        w.u64(self.seeds.initial);
+        w.u64(self.seeds.wake);
+        w.u64(self.seeds.rlv);
+        w.f64s(&self.previous_action);
+        w.f32s(&self.obs);
+        w.f64(self.distance);
+        w.bool(self.done);
+        w.bytes(self.divergence.as_deref().unwrap_or("").as_bytes());
+    }
+
+    /// Restores a state written by [`Episode::save`] of an episode with the same config.
+    pub fn load(&mut self, r: &mut StateReader<'_>) -> Result<()> {
+        self.sim.load(r)?;
+        self.steps = r.u64("episode steps")?;
+        self.seeds = Seeds {
+            initial: r.u64("initial seed")?,
+            wake: r.u64("wake seed")?,
+            rlv: r.u64("rlv seed")?,
+        };
+        r.f64s_into("previous action", &mut self.previous_action)?;
+        r.f32s_into("observation", &mut self.obs)?;
+        self.distance = r.f64("distance")?;
+        self.done = r.bool("done")?;
+        let reason = String::from_utf8_lossy(r.bytes("divergence")?).into_owned();
+        self.divergence = (!reason.is_empty()).then_some(reason);
+        Ok(())
+    }
+}

@@ -1,0 +1,571 @@
+//! The reinforcement-learning task (design.md §6): its configuration, the observation layout,
+//! the reward and the episode-end conditions. The stepping itself is in [`crate::episode`].
+//!
+//! # Action
+//! Four flap commands in [-1, 1] (right, left, top, bottom; the order of [`crate::accd::mix`]),
+//! scaled by the flap limit (`accd.flap_limit_deg`, 15 degrees by default). Values outside
+//! [-1, 1] are clipped; non-finite values are an error. Held for one agent step
+//! ([`EnvConfig::agent_step`], 0.1 s = 10 physics steps by default).
+//!
+//! # Observation
+//! `OBS_DIM` float32 values, each a physical quantity times a fixed scale, clipped to
+//! [-`OBS_BOUND`, `OBS_BOUND`]. Vectors are in the TA frame (x forward, y starboard, z down)
+//! unless stated. See [`OBSERVATION`] for the table (index, name, unit, scale).
+//!
+//! # Reward (per agent step)
+//! With `d` the distance from the capture point to the boom tip at the end of the step (m),
+//! `a` the action, `a'` the previous action (zero at the start):
+//!
+//! ```text
+//! r = w_p exp(-d / lambda)                      proximity, in (0, w_p]
+//!   - w_e sum(a^2) / 4                          control effort, in [0, w_e]
+//!   - w_s sum(((a - a') / 2)^2) / 4             control rate, in [0, w_s]
+//!   + [captured] (w_c + w_p * steps_left)       capture bonus
+//!   - [overload or envelope exit or diverged] w_f
+//! ```
+//!
+//! `steps_left` is the number of agent steps left in the capture window after this one: a
+//! capture is always worth at least as much as hovering next to the boom for the rest of the
+//! window, so an agent gains nothing by delaying it. Defaults: `w_p` 1, `lambda` 10 m,
+//! `w_e` 0.05, `w_s` 0.05, `w_c` 100, `w_f` 50 ([`RewardConfig`]). Bounds: see
+//! [`RewardConfig::bounds`].
+//!
+//! # Episode end
+//! | condition | kind | checked |
+//! |---|---|---|
+//! | capture: capture point within `boom.capture_radius` of the boom tip at a relative speed under `boom.max_closing_speed` | terminated | every physics step |
+//! | overload: attachment tension above `limits.overload_fraction` times the tether's breaking tension | terminated | every physics step |
+//! | envelope exit: distance to the boom over `limits.max_distance`, the ACCD's nose more than `limits.max_tilt_deg` off the flight direction, or a body rate over `limits.max_body_rate` | terminated | every agent step |
+//! | diverged: the simulation reported an error or a non-finite state (every physics step), or an implausible one: the ACCD faster than twice the airspeed relative to the aircraft or a body rate over 1000 rad/s (every agent step); the last good observation is kept | terminated | see left |
+//! | capture window (`capture_window`, 70 s) elapsed | truncated | every agent step |
+
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+use crate::accd::AccdConfig;
+use crate::aircraft::AircraftConfig;
+use crate::boom::BoomConfig;
+use crate::capture::CaptureConfig;
+use crate::error::{Result, SimError};
+use crate::turbulence::TurbulenceConfig;
+use crate::wake::WakeConfig;
+use accd_tether::TetherConfig;
+
+/// Number of observation values.
+pub const OBS_DIM: usize = 25;
+/// Every observation value lies in [-OBS_BOUND, OBS_BOUND].
+pub const OBS_BOUND: f32 = 10.0;
+/// Number of action values (flap commands).
+pub const ACT_DIM: usize = 4;
+
+/// One row of the observation table.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObservationField {
+    /// Name (also the key users see).
+    pub name: &'static str,
+    /// Unit of the physical quantity.
+    pub unit: &'static str,
+    /// The observation value is the quantity times this scale (then clipped).
+    pub scale: f64,
+    /// What it is.
+    pub description: &'static str,
+}
+
+const fn field(
+    name: &'static str,
+    unit: &'static str,
+    scale: f64,
+    description: &'static str,
+) -> ObservationField {
+    ObservationField {
+        name,
+        unit,
+        scale,
+        description,
+    }
+}
+
+/// The observation table, in index order.
+pub const OBSERVATION: [ObservationField; OBS_DIM] = [
+    field(
+        "boom_rel_x",
+        "m",
+        0.05,
+        "boom tip minus capture point, x (forward)",
+    ),
+    field(
+        "boom_rel_y",
+        "m",
+        0.05,
+        "boom tip minus capture point, y (starboard)",
+    ),
+    field(
+        "boom_rel_z",
+        "m",
+        0.05,
+        "boom tip minus capture point, z (down)",
+    ),
+    field(
+        "boom_rel_vx",
+        "m/s",
+        0.1,
+        "boom-tip velocity minus capture-point velocity, x",
+    ),
+    field(
+        "boom_rel_vy",
+        "m/s",
+        0.1,
+        "boom-tip velocity minus capture-point velocity, y",
+    ),
+    field(
+        "boom_rel_vz",
+        "m/s",
+        0.1,
+        "boom-tip velocity minus capture-point velocity, z",
+    ),
+    field(
+        "accd_dx",
+        "m",
+        0.05,
+        "ACCD position minus its open-loop equilibrium, x",
+    ),
+    field(
+        "accd_dy",
+        "m",
+        0.05,
+        "ACCD position minus its open-loop equilibrium, y",
+    ),
+    field(
+        "accd_dz",
+        "m",
+        0.05,
+        "ACCD position minus its open-loop equilibrium, z",
+    ),
+    field(
+        "accd_vx",
+        "m/s",
+        0.1,
+        "ACCD velocity relative to the aircraft, x",
+    ),
+    field(
+        "accd_vy",
+        "m/s",
+        0.1,
+        "ACCD velocity relative to the aircraft, y",
+    ),
+    field(
+        "accd_vz",
+        "m/s",
+        0.1,
+        "ACCD velocity relative to the aircraft, z",
+    ),
+    field(
+        "quat_w",
+        "-",
+        1.0,
+        "attitude quaternion body -> TA frame, scalar part (>= 0)",
+    ),
+    field("quat_x", "-", 1.0, "attitude quaternion, x part"),
+    field("quat_y", "-", 1.0, "attitude quaternion, y part"),
+    field("quat_z", "-", 1.0, "attitude quaternion, z part"),
+    field("rate_p", "rad/s", 0.5, "body roll rate"),
+    field("rate_q", "rad/s", 0.5, "body pitch rate"),
+    field("rate_r", "rad/s", 0.5, "body yaw rate"),
+    field(
+        "flap_right",
+        "-",
+        1.0,
+        "right flap deflection / accd.flap_limit_deg",
+    ),
+    field(
+        "flap_left",
+        "-",
+        1.0,
+        "left flap deflection / accd.flap_limit_deg",
+    ),
+    field(
+        "flap_top",
+        "-",
+        1.0,
+        "top flap deflection / accd.flap_limit_deg",
+    ),
+    field(
+        "flap_bottom",
+        "-",
+        1.0,
+        "bottom flap deflection / accd.flap_limit_deg",
+    ),
+    field("tension", "N", 1e-4, "tension at the attachment"),
+    field(
+        "time_left",
+        "-",
+        1.0,
+        "time left in the capture window / capture_window",
+    ),
+];
+
+/// Random initial conditions of an episode, around the open-loop equilibrium.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct InitialConfig {
+    /// Time the open-loop equilibrium is settled for (neutral flaps, mean wake, no turbulence), s.
+    pub settle_time: f64,
+    /// Half-width of the uniform random displacement of the ACCD from the equilibrium, lateral
+    /// (y) and vertical (z), m: the whole tether is rotated about the attachment to put it there.
+    pub offset: [f64; 2],
+    /// Half-width of the uniform random roll, pitch and yaw of the ACCD, deg.
+    pub attitude_deg: f64,
+}
+
+impl Default for InitialConfig {
+    fn default() -> Self {
+        InitialConfig {
+            settle_time: 40.0,
+            offset: [5.0, 5.0],
+            attitude_deg: 3.0,
+        }
+    }
+}
+
+/// Reward weights (see the module docs for the formula).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RewardConfig {
+    /// `w_p`: weight of the proximity term.
+    pub proximity: f64,
+    /// `lambda`: distance scale of the proximity term, m.
+    pub proximity_scale: f64,
+    /// `w_e`: weight of the control-effort cost.
+    pub effort: f64,
+    /// `w_s`: weight of the control-rate cost.
+    pub smoothness: f64,
+    /// `w_c`: bonus on capture (plus `w_p` per agent step left).
+    pub capture: f64,
+    /// `w_f`: penalty on overload, envelope exit or divergence.
+    pub failure: f64,
+}
+
+impl Default for RewardConfig {
+    fn default() -> Self {
+        RewardConfig {
+            proximity: 1.0,
+            proximity_scale: 10.0,
+            effort: 0.05,
+            smoothness: 0.05,
+            capture: 100.0,
+            failure: 50.0,
+        }
+    }
+}
+
+impl RewardConfig {
+    /// The lowest and highest reward of one agent step in an episode of `steps` agent steps.
+    pub fn bounds(&self, steps: u64) -> (f64, f64) {
+        (
+            -self.effort - self.smoothness - self.failure,
+            self.proximity * steps as f64 + self.capture,
+        )
+    }
+
+    fn validate(&self) -> Result<()> {
+        for (name, v) in [
+            ("reward.proximity", self.proximity),
+            ("reward.effort", self.effort),
+            ("reward.smoothness", self.smoothness),
+            ("reward.capture", self.capture),
+            ("reward.failure", self.failure),
+        ] {
+            check(name, v, 0.0, 1e6, "[0, 1e6]")?;
+        }
+        if !(self.proximity_scale.is_finite()
+            && self.proximity_scale > 0.0
+            && self.proximity_scale <= 1e4)
+        {
+            return Err(SimError::invalid_config(
+                "reward.proximity_scale",
+                self.proximity_scale,
+                "(0, 1e4] m",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Limits whose violation ends an episode (terminated).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LimitsConfig {
+    /// Largest attachment tension as a fraction of the tether's breaking tension (a safety
+    /// factor of 2 by default).
+    pub overload_fraction: f64,
+    /// Largest distance from the capture point to the boom tip, m.
+    pub max_distance: f64,
+    /// Largest angle between the ACCD's nose and the flight direction, deg.
+    pub max_tilt_deg: f64,
+    /// Largest body rate (magnitude), rad/s.
+    pub max_body_rate: f64,
+}
+
+impl Default for LimitsConfig {
+    fn default() -> Self {
+        LimitsConfig {
+            overload_fraction: 0.5,
+            max_distance: 60.0,
+            max_tilt_deg: 60.0,
+            max_body_rate: 10.0,
+        }
+    }
+}
+
+impl LimitsConfig {
+    fn validate(&self) -> Result<()> {
+        if !(self.overload_fraction.is_finite()
+            && self.overload_fraction > 0.0
+            && self.overload_fraction <= 1.0)
+        {
+            return Err(SimError::invalid_config(
+                "limits.overload_fraction",
+                self.overload_fraction,
+                "(0, 1]",
+            ));
+        }
+        if !(self.max_distance.is_finite() && self.max_distance > 0.0 && self.max_distance <= 1e4) {
+            return Err(SimError::invalid_config(
+                "limits.max_distance",
+                self.max_distance,
+                "(0, 1e4] m",
+            ));
+        }
+        if !(self.max_tilt_deg.is_finite() && self.max_tilt_deg > 0.0 && self.max_tilt_deg <= 180.0)
+        {
+            return Err(SimError::invalid_config(
+                "limits.max_tilt_deg",
+                self.max_tilt_deg,
+                "(0, 180] deg",
+            ));
+        }
+        if !(self.max_body_rate.is_finite()
+            && self.max_body_rate > 0.0
+            && self.max_body_rate <= 1e3)
+        {
+            return Err(SimError::invalid_config(
+                "limits.max_body_rate",
+                self.max_body_rate,
+                "(0, 1000] rad/s",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Everything that defines the RL environment: the physics (as in [`CaptureConfig`]), the
+/// task, and the wake seeds. Missing keys take their defaults; unknown keys are errors.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EnvConfig {
+    /// The tether (Table 3 by default).
+    pub tether: TetherConfig,
+    /// The capturing device.
+    pub accd: AccdConfig,
+    /// The towing aircraft.
+    pub aircraft: AircraftConfig,
+    /// The RLV's boom.
+    pub boom: BoomConfig,
+    /// The mean wake.
+    pub wake: WakeConfig,
+    /// Wake and ambient turbulence.
+    pub turbulence: TurbulenceConfig,
+    /// Agent step: how long one action is held, s; a whole number of physics steps.
+    pub agent_step: f64,
+    /// Capture window: the episode is truncated after this time, s.
+    pub capture_window: f64,
+    /// Random initial conditions.
+    pub initial: InitialConfig,
+    /// Reward weights.
+    pub reward: RewardConfig,
+    /// Episode-ending limits.
+    pub limits: LimitsConfig,
+    /// Fixes the wake seed of every episode (otherwise drawn from the training range).
+    pub wake_seed: Option<u64>,
+    /// Wake seeds to cycle through (evaluation): env `i`'s episode `e` uses entry
+    /// `(i + e * num_envs) mod len`. Overrides `wake_seed`.
+    pub wake_seeds: Option<Vec<u64>>,
+}
+
+impl Default for EnvConfig {
+    fn default() -> Self {
+        let capture = CaptureConfig::default();
+        EnvConfig {
+            tether: capture.tether,
+            accd: capture.accd,
+            aircraft: capture.aircraft,
+            boom: capture.boom,
+            wake: capture.wake,
+            turbulence: capture.turbulence,
+            agent_step: 0.1,
+            capture_window: 70.0,
+            initial: InitialConfig::default(),
+            reward: RewardConfig::default(),
+            limits: LimitsConfig::default(),
+            wake_seed: None,
+            wake_seeds: None,
+        }
+    }
+}
+
+impl EnvConfig {
+    /// The physics part.
+    pub fn capture(&self) -> CaptureConfig {
+        CaptureConfig {
+            tether: self.tether.clone(),
+            accd: self.accd.clone(),
+            aircraft: self.aircraft.clone(),
+            boom: self.boom.clone(),
+            wake: self.wake.clone(),
+            turbulence: self.turbulence.clone(),
+        }
+    }
+
+    /// Parses JSON (unknown keys are errors) and validates.
+    pub fn from_json(text: &str) -> Result<Self> {
+        let config: EnvConfig =
+            serde_json::from_str(text).map_err(|e| SimError::InvalidConfig {
+                field: "(env config)".into(),
+                value: String::new(),
+                allowed: e.to_string(),
+            })?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// Physics steps per agent step.
+    pub fn substeps(&self) -> usize {
+        (self.agent_step / self.tether.time_step).round() as usize
+    }
+
+    /// Agent steps in the capture window.
+    pub fn episode_steps(&self) -> u64 {
+        (self.capture_window / self.agent_step).round() as u64
+    }
+
+    /// Checks every part.
+    pub fn validate(&self) -> Result<()> {
+        self.capture().validate()?;
+        let dt = self.tether.time_step;
+        if !(self.agent_step.is_finite() && self.agent_step >= dt && self.agent_step <= 10.0) {
+            return Err(SimError::invalid_config(
+                "agent_step",
+                self.agent_step,
+                &format!("[tether.time_step = {dt}, 10] s"),
+            ));
+        }
+        let k = self.substeps() as f64;
+        if (k * dt - self.agent_step).abs() > 1e-9 * self.agent_step {
+            return Err(SimError::invalid_config(
+                "agent_step",
+                self.agent_step,
+                &format!("a whole multiple of tether.time_step = {dt} s"),
+            ));
+        }
+        if !(self.capture_window.is_finite()
+            && self.capture_window >= self.agent_step
+            && self.capture_window <= 3600.0)
+        {
+            return Err(SimError::invalid_config(
+                "capture_window",
+                self.capture_window,
+                "[agent_step, 3600] s",
+            ));
+        }
+        let steps = self.capture_window / self.agent_step;
+        if (steps - steps.round()).abs() > 1e-9 * steps {
+            return Err(SimError::invalid_config(
+                "capture_window",
+                self.capture_window,
+                "a whole multiple of agent_step",
+            ));
+        }
+        check(
+            "initial.settle_time",
+            self.initial.settle_time,
+            0.0,
+            600.0,
+            "[0, 600] s",
+        )?;
+        for (i, v) in self.initial.offset.iter().enumerate() {
+            check(&format!("initial.offset[{i}]"), *v, 0.0, 50.0, "[0, 50] m")?;
+        }
+        check(
+            "initial.attitude_deg",
+            self.initial.attitude_deg,
+            0.0,
+            30.0,
+            "[0, 30] deg",
+        )?;
+        self.reward.validate()?;
+        self.limits.validate()?;
+        if let Some(list) = &self.wake_seeds {
+            if list.is_empty() {
+                return Err(SimError::invalid_config(
+                    "wake_seeds",
+                    "[]",
+                    "a non-empty list of wake seeds",
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+fn check(name: &str, v: f64, lo: f64, hi: f64, allowed: &str) -> Result<()> {
+    if !(v.is_finite() && v >= lo && v <= hi) {
+        return Err(SimError::invalid_config(name, v, allowed));
+    }
+    Ok(())
+}
+
+/// Angle between the body's nose (body x) and the flight direction (TA x), rad.
+pub fn tilt(attitude: &nalgebra::UnitQuaternion<f64>) -> f64 {
+    let nose = attitude.transform_vector(&Vector3::x());
+    nose.x.clamp(-1.0, 1.0).acos()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_validate_and_derive_the_step_counts() {
+        let c = EnvConfig::default();
+        c.validate().unwrap();
+        assert_eq!(c.substeps(), 10);
+        assert_eq!(c.episode_steps(), 700);
+    }
+
+    #[test]
+    fn bad_values_name_the_field() {
+        let mut c = EnvConfig {
+            agent_step: 0.105,
+            ..EnvConfig::default()
+        };
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("agent_step") && e.contains("0.105"), "{e}");
+        c.agent_step = 0.1;
+        c.limits.max_tilt_deg = 0.0;
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("limits.max_tilt_deg"), "{e}");
+        let e = EnvConfig::from_json(r#"{"capture_windw": 3}"#)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("capture_windw"), "{e}");
+    }
+
+    #[test]
+    fn observation_table_is_complete() {
+        let mut names: Vec<_> = OBSERVATION.iter().map(|f| f.name).collect();
+        names.sort();
+        names.dedup();
+        assert_eq!(names.len(), OBS_DIM);
+        assert!(OBSERVATION.iter().all(|f| f.scale > 0.0));
+    }
+}
