@@ -1,0 +1,533 @@
+//! N episodes stepped by one call, in parallel over threads, with autoreset.
+//!
+//! Each env is an [`Episode`] with its own seeds ([`crate::seeds`]); envs never share state, so
+//! an env's results depend only on the config, its base seed, its index and its actions: they are
+//! bitwise identical whatever the batch size and thread count. Outputs go straight into the
+//! caller's struct-of-arrays buffers ([`StepBuffers`]); nothing is allocated per step.
+
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::Arc;
+
+use accd_sim::codec::{StateReader, StateWriter};
+use accd_sim::{EnvConfig, Episode, Equilibrium, Outcome, SimError, ACT_DIM, OBS_DIM};
+use rayon::prelude::*;
+
+use crate::error::{BatchError, Result};
+use crate::seeds::{episode_seeds, WakeSchedule};
+
+/// Columns of the per-env info array ([`StepBuffers::info`]), all f64.
+pub mod info {
+    /// Episode time at the end of the step, s.
+    pub const TIME: usize = 0;
+    /// Distance from the capture point to the boom tip, m.
+    pub const DISTANCE: usize = 1;
+    /// Relative speed of the capture point with respect to the boom tip, m/s.
+    pub const RELATIVE_SPEED: usize = 2;
+    /// Highest attachment tension during the step, N.
+    pub const PEAK_TENSION: usize = 3;
+    /// 1 if captured.
+    pub const CAPTURED: usize = 4;
+    /// 1 if the tether was overloaded.
+    pub const OVERLOAD: usize = 5;
+    /// 1 if the ACCD left the flight envelope.
+    pub const ENVELOPE_EXIT: usize = 6;
+    /// 1 if the simulation diverged.
+    pub const DIVERGED: usize = 7;
+    /// Agent steps taken in the episode.
+    pub const EPISODE_STEPS: usize = 8;
+    /// Number of columns.
+    pub const DIM: usize = 9;
+    /// Column names, in order.
+    pub const NAMES: [&str; DIM] = [
+        "time",
+        "distance",
+        "relative_speed",
+        "peak_tension",
+        "captured",
+        "overload",
+        "envelope_exit",
+        "diverged",
+        "episode_steps",
+    ];
+}
+
+/// When an ended episode is replaced by a new one (gymnasium's autoreset modes).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Autoreset {
+    /// In the step that ends it: the returned observation is the new episode's first, the
+    /// ended episode's last goes to `final_obs` (stable-baselines3; gymnasium `SAME_STEP`).
+    SameStep,
+    /// In the next step, whose action is ignored for that env: it returns the new episode's
+    /// first observation, reward 0, not done, `autoreset` set (gymnasium `NEXT_STEP`).
+    NextStep,
+}
+
+/// Output buffers of one batch step, `N` envs (row-major, env by env).
+pub struct StepBuffers<'a> {
+    /// `N * OBS_DIM` observations.
+    pub obs: &'a mut [f32],
+    /// `N` rewards.
+    pub reward: &'a mut [f64],
+    /// `N` terminated flags.
+    pub terminated: &'a mut [bool],
+    /// `N` truncated flags.
+    pub truncated: &'a mut [bool],
+    /// `N * OBS_DIM`: an ended episode's last observation (same-step autoreset; rows of envs that
+    /// did not end are left as they were).
+    pub final_obs: &'a mut [f32],
+    /// `N * info::DIM` info values of the step (of the ended episode where one ended).
+    pub info: &'a mut [f64],
+    /// `N` wake seeds of the episode each step belongs to.
+    pub wake_seed: &'a mut [u64],
+    /// `N` flags: this env was reset in this step (next-step autoreset).
+    pub autoreset: &'a mut [bool],
+}
+
+/// Output buffers of a reset.
+pub struct ResetBuffers<'a> {
+    /// `N * OBS_DIM` first observations.
+    pub obs: &'a mut [f32],
+    /// `N` wake seeds of the new episodes.
+    pub wake_seed: &'a mut [u64],
+}
+
+/// How `reset` seeds the envs.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum SeedSpec {
+    /// Keep each env's base seed and start its next episode.
+    Next,
+    /// Env `i` gets base seed `s` and index `i`; episode counters restart at 0.
+    Base(u64),
+    /// Env `i` gets base seed `s_i` and index 0 (so it replays a single env seeded `s_i`);
+    /// episode counters restart at 0.
+    PerEnv(Vec<u64>),
+}
+
+#[derive(Clone)]
+struct Slot {
+    episode: Episode,
+    base: u64,
+    env_id: u64,
+    /// Index of the current episode under `base`.
+    index: u64,
+    /// Next-step autoreset: reset at the next step.
+    pending_reset: bool,
+}
+
+/// N episodes of one config.
+pub struct BatchEnv {
+    config: Arc<EnvConfig>,
+    equilibrium: Arc<Equilibrium>,
+    slots: Vec<Slot>,
+    schedule: WakeSchedule,
+    autoreset: Autoreset,
+    pool: rayon::ThreadPool,
+    threads: usize,
+}
+
+impl BatchEnv {
+    /// `num_envs` envs of `config`, env `i` seeded with base `seed` and index `i`, stepped on
+    /// `threads` threads of its own pool (0: one per core).
+    pub fn new(
+        config: EnvConfig,
+        num_envs: usize,
+        seed: u64,
+        autoreset: Autoreset,
+        threads: usize,
+    ) -> Result<BatchEnv> {
+        if !(1..=65_536).contains(&num_envs) {
+            return Err(SimError::invalid_config("num_envs", num_envs, "[1, 65536]").into());
+        }
+        if threads > 1024 {
+            return Err(SimError::invalid_config("num_threads", threads, "[0, 1024]").into());
+        }
+        config.validate()?;
+        let config = Arc::new(config);
+        let equilibrium = Arc::new(Equilibrium::settle(&config)?);
+        let schedule = WakeSchedule::from_config(&config);
+        let n = num_envs as u64;
+        let first = Episode::new(
+            Arc::clone(&config),
+            Arc::clone(&equilibrium),
+            episode_seeds(seed, 0, 0, n, &schedule),
+        )?;
+        let mut slots = Vec::with_capacity(num_envs);
+        for i in 0..n {
+            let mut episode = first.clone();
+            episode.reset(episode_seeds(seed, i, 0, n, &schedule))?;
+            slots.push(Slot {
+                episode,
+                base: seed,
+                env_id: i,
+                index: 0,
+                pending_reset: false,
+            });
+        }
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .map_err(|e| BatchError::Threads(e.to_string()))?;
+        let threads = pool.current_num_threads();
+        Ok(BatchEnv {
+            config,
+            equilibrium,
+            slots,
+            schedule,
+            autoreset,
+            pool,
+            threads,
+        })
+    }
+
+    /// Number of envs.
+    pub fn num_envs(&self) -> usize {
+        self.slots.len()
+    }
+
+    /// Threads stepping the envs.
+    pub fn threads(&self) -> usize {
+        self.threads
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &EnvConfig {
+        &self.config
+    }
+
+    /// The open-loop equilibrium the episodes start around.
+    pub fn equilibrium(&self) -> &Equilibrium {
+        &self.equilibrium
+    }
+
+    /// The autoreset mode.
+    pub fn autoreset(&self) -> Autoreset {
+        self.autoreset
+    }
+
+    /// The wake-seed schedule of new episodes.
+    pub fn wake_schedule(&self) -> &WakeSchedule {
+        &self.schedule
+    }
+
+    /// Sets the wake-seed schedule of the episodes started from now on (resets and autoresets).
+    pub fn set_wake_schedule(&mut self, schedule: WakeSchedule) -> Result<()> {
+        if let WakeSchedule::List(list) = &schedule {
+            if list.is_empty() {
+                return Err(
+                    SimError::invalid_config("wake_seeds", "[]", "a non-empty list").into(),
+                );
+            }
+        }
+        self.schedule = schedule;
+        Ok(())
+    }
+
+    /// Env `i`'s episode.
+    pub fn episode(&self, i: usize) -> Result<&Episode> {
+        self.check_index(i)?;
+        Ok(&self.slots[i].episode)
+    }
+
+    /// Env `i`'s episode, mutably (for snapshots of its physics).
+    pub fn episode_mut(&mut self, i: usize) -> Result<&mut Episode> {
+        self.check_index(i)?;
+        Ok(&mut self.slots[i].episode)
+    }
+
+    fn check_index(&self, i: usize) -> Result<()> {
+        if i >= self.slots.len() {
+            return Err(SimError::invalid_config(
+                "env index",
+                i,
+                &format!("[0, {})", self.slots.len()),
+            )
+            .into());
+        }
+        Ok(())
+    }
+
+    /// Starts new episodes in every env (seeded as `seeds` says) and writes their first
+    /// observations.
+    pub fn reset(&mut self, seeds: SeedSpec, out: ResetBuffers<'_>) -> Result<()> {
+        let n = self.slots.len();
+        check_len("obs", out.obs.len(), n * OBS_DIM)?;
+        check_len("wake_seed", out.wake_seed.len(), n)?;
+        if let SeedSpec::PerEnv(list) = &seeds {
+            check_len("seed", list.len(), n)?;
+        }
+        for (i, slot) in self.slots.iter_mut().enumerate() {
+            match &seeds {
+                SeedSpec::Next => slot.index += 1,
+                SeedSpec::Base(s) => {
+                    slot.base = *s;
+                    slot.env_id = i as u64;
+                    slot.index = 0;
+                }
+                SeedSpec::PerEnv(list) => {
+                    slot.base = list[i];
+                    slot.env_id = 0;
+                    slot.index = 0;
+                }
+            }
+            slot.pending_reset = false;
+        }
+        let schedule = &self.schedule;
+        let results: Vec<Result<()>> = {
+            let mut results = vec![Ok(()); n];
+            let job = |(slot, r): (&mut Slot, &mut Result<()>)| {
+                let s = episode_seeds(slot.base, slot.env_id, slot.index, n as u64, schedule);
+                *r = slot.episode.reset(s).map_err(BatchError::from);
+            };
+            let slots = &mut self.slots;
+            self.pool.install(|| {
+                slots
+                    .par_iter_mut()
+                    .zip(results.par_iter_mut())
+                    .for_each(job)
+            });
+            results
+        };
+        for (i, r) in results.into_iter().enumerate() {
+            r.map_err(|e| BatchError::Env {
+                env: i,
+                source: Box::new(e),
+            })?;
+        }
+        for (i, slot) in self.slots.iter().enumerate() {
+            out.obs[i * OBS_DIM..(i + 1) * OBS_DIM].copy_from_slice(slot.episode.observation());
+            out.wake_seed[i] = slot.episode.seeds().wake;
+        }
+        Ok(())
+    }
+
+    /// One agent step of every env with `actions` (`N * ACT_DIM` flap commands in [-1, 1],
+    /// clipped). A non-finite action is an error naming the env; no env is stepped then.
+    pub fn step(&mut self, actions: &[f32], out: StepBuffers<'_>) -> Result<()> {
+        let n = self.slots.len();
+        check_len("actions", actions.len(), n * ACT_DIM)?;
+        check_len("obs", out.obs.len(), n * OBS_DIM)?;
+        check_len("final_obs", out.final_obs.len(), n * OBS_DIM)?;
+        check_len("reward", out.reward.len(), n)?;
+        check_len("terminated", out.terminated.len(), n)?;
+        check_len("truncated", out.truncated.len(), n)?;
+        check_len("info", out.info.len(), n * info::DIM)?;
+        check_len("wake_seed", out.wake_seed.len(), n)?;
+        check_len("autoreset", out.autoreset.len(), n)?;
+        if let Some(k) = actions.iter().position(|v| !v.is_finite()) {
+            return Err(BatchError::Action {
+                env: k / ACT_DIM,
+                component: k % ACT_DIM,
+                value: actions[k],
+            });
+        }
+        let mode = self.autoreset;
+        let schedule = &self.schedule;
+        let n64 = n as u64;
+        let rows = (
+            self.slots.par_iter_mut(),
+            actions.par_chunks(ACT_DIM),
+            out.obs.par_chunks_mut(OBS_DIM),
+            out.final_obs.par_chunks_mut(OBS_DIM),
+            out.info.par_chunks_mut(info::DIM),
+            out.reward.par_iter_mut(),
+            out.terminated.par_iter_mut(),
+            out.truncated.par_iter_mut(),
+            out.wake_seed.par_iter_mut(),
+            out.autoreset.par_iter_mut(),
+        );
+        let job =
+            |(slot, action, obs, final_obs, info, reward, terminated, truncated, wake, reset): (
+                &mut Slot,
+                &[f32],
+                &mut [f32],
+                &mut [f32],
+                &mut [f64],
+                &mut f64,
+                &mut bool,
+                &mut bool,
+                &mut u64,
+                &mut bool,
+            )| {
+                *reset = false;
+                if slot.pending_reset {
+                    slot.pending_reset = false;
+                    slot.index += 1;
+                    let outcome = restart(slot, n64, schedule);
+                    obs.copy_from_slice(slot.episode.observation());
+                    *reward = 0.0;
+                    *terminated = outcome.is_some();
+                    *truncated = false;
+                    *reset = true;
+                    *wake = slot.episode.seeds().wake;
+                    write_info(info, &outcome.unwrap_or_default(), 0);
+                    return;
+                }
+                *wake = slot.episode.seeds().wake;
+                let o = match catch_unwind(AssertUnwindSafe(|| slot.episode.step(action))) {
+                    Ok(Ok(o)) => o,
+                    // Actions were checked; a remaining error (or a panic) is a divergence.
+                    Ok(Err(_)) | Err(_) => Outcome {
+                        terminated: true,
+                        diverged: true,
+                        ..Outcome::default()
+                    },
+                };
+                *reward = o.reward;
+                *terminated = o.terminated;
+                *truncated = o.truncated;
+                write_info(info, &o, slot.episode.steps());
+                obs.copy_from_slice(slot.episode.observation());
+                if o.terminated || o.truncated {
+                    match mode {
+                        Autoreset::NextStep => slot.pending_reset = true,
+                        Autoreset::SameStep => {
+                            final_obs.copy_from_slice(obs);
+                            slot.index += 1;
+                            restart(slot, n64, schedule);
+                            obs.copy_from_slice(slot.episode.observation());
+                        }
+                    }
+                }
+            };
+        self.pool.install(|| rows.into_par_iter().for_each(job));
+        Ok(())
+    }
+
+    /// Saves every env's state (episodes, seeds, counters, random streams) with the config, for
+    /// [`BatchEnv::load`].
+    pub fn save(&self) -> Vec<u8> {
+        let mut w = StateWriter::new();
+        w.raw(MAGIC);
+        w.bytes(config_json(&self.config).as_bytes());
+        w.u64(self.slots.len() as u64);
+        match &self.schedule {
+            WakeSchedule::Training => w.u64(0),
+            WakeSchedule::Fixed(s) => {
+                w.u64(1);
+                w.u64(*s);
+            }
+            WakeSchedule::List(list) => {
+                w.u64(2);
+                w.u64(list.len() as u64);
+                for s in list {
+                    w.u64(*s);
+                }
+            }
+        }
+        for slot in &self.slots {
+            w.u64(slot.base);
+            w.u64(slot.env_id);
+            w.u64(slot.index);
+            w.bool(slot.pending_reset);
+            slot.episode.save(&mut w);
+        }
+        w.into_bytes()
+    }
+
+    /// Restores a state saved by [`BatchEnv::save`] of a batch with the same config and size:
+    /// every env then continues exactly as the saved one would.
+    pub fn load(&mut self, bytes: &[u8]) -> Result<()> {
+        let mut r = StateReader::new(bytes);
+        let magic = r.raw::<8>("header")?;
+        if &magic != MAGIC {
+            return Err(SimError::invalid_config(
+                "state",
+                "unknown header",
+                "a state saved by accd-gym's get_state",
+            )
+            .into());
+        }
+        let saved = String::from_utf8_lossy(r.bytes("config")?).into_owned();
+        if saved != config_json(&self.config) {
+            return Err(SimError::invalid_config(
+                "state",
+                "a state of another configuration",
+                "a state saved by an env with the same configuration",
+            )
+            .into());
+        }
+        let n = r.u64("num_envs")?;
+        if n != self.slots.len() as u64 {
+            return Err(SimError::invalid_config(
+                "state",
+                format!("a state of {n} envs"),
+                &format!("a state of {} envs", self.slots.len()),
+            )
+            .into());
+        }
+        let schedule = match r.u64("wake schedule")? {
+            0 => WakeSchedule::Training,
+            1 => WakeSchedule::Fixed(r.u64("wake seed")?),
+            2 => {
+                let len = r.u64("wake seed list")?;
+                if len > bytes.len() as u64 {
+                    return Err(
+                        SimError::invalid_config("state", "corrupt", "a saved state").into(),
+                    );
+                }
+                (0..len)
+                    .map(|_| r.u64("wake seed"))
+                    .collect::<Result<Vec<_>, _>>()
+                    .map(WakeSchedule::List)?
+            }
+            _ => return Err(SimError::invalid_config("state", "corrupt", "a saved state").into()),
+        };
+        // Restore into copies first: a malformed state leaves the batch as it was.
+        let mut slots = self.slots.clone();
+        for slot in &mut slots {
+            slot.base = r.u64("base seed")?;
+            slot.env_id = r.u64("env index")?;
+            slot.index = r.u64("episode index")?;
+            slot.pending_reset = r.bool("pending reset")?;
+            slot.episode.load(&mut r)?;
+        }
+        r.finish()?;
+        self.slots = slots;
+        self.schedule = schedule;
+        Ok(())
+    }
+}
+
+const MAGIC: &[u8; 8] = b"ACCDST01";
+
+fn config_json(config: &EnvConfig) -> String {
+    serde_json::to_string(config).unwrap_or_default()
+}
+
+/// Starts the slot's episode `slot.index`; on failure the episode is marked diverged and its
+/// outcome returned.
+fn restart(slot: &mut Slot, n: u64, schedule: &WakeSchedule) -> Option<Outcome> {
+    let seeds = episode_seeds(slot.base, slot.env_id, slot.index, n, schedule);
+    match catch_unwind(AssertUnwindSafe(|| slot.episode.reset(seeds))) {
+        Ok(Ok(())) => None,
+        Ok(Err(_)) | Err(_) => Some(Outcome {
+            terminated: true,
+            diverged: true,
+            ..Outcome::default()
+        }),
+    }
+}
+
+fn write_info(info: &mut [f64], o: &Outcome, steps: u64) {
+    let flag = |b: bool| if b { 1.0 } else { 0.0 };
+    info[info::TIME] = o.time;
+    info[info::DISTANCE] = o.distance;
+    info[info::RELATIVE_SPEED] = o.relative_speed;
+    info[info::PEAK_TENSION] = o.peak_tension;
+    info[info::CAPTURED] = flag(o.captured);
+    info[info::OVERLOAD] = flag(o.overload);
+    info[info::ENVELOPE_EXIT] = flag(o.envelope_exit);
+    info[info::DIVERGED] = flag(o.diverged);
+    info[info::EPISODE_STEPS] = steps as f64;
+}
+
+fn check_len(what: &'static str, found: usize, expected: usize) -> Result<()> {
+    if found != expected {
+        return Err(BatchError::Shape {
+            what,
+            expected,
+            found,
+        });
+    }
+    Ok(())
+}

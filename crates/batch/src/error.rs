@@ -1,0 +1,46 @@
+//! Errors of the batch env. Every variant names what is wrong, where, and the values involved.
+
+use accd_sim::SimError;
+use thiserror::Error;
+
+/// What can go wrong creating, stepping, resetting or restoring a batch.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum BatchError {
+    /// An action is not finite.
+    #[error("non-finite action {value} for env {env} (component {component}): actions must be finite (values outside [-1, 1] are clipped)")]
+    Action {
+        /// Env index.
+        env: usize,
+        /// Component (flap) index.
+        component: usize,
+        /// The value.
+        value: f32,
+    },
+    /// A buffer or input has the wrong length.
+    #[error("`{what}` has {found} values, expected {expected}")]
+    Shape {
+        /// Which buffer or input.
+        what: &'static str,
+        /// Expected number of values.
+        expected: usize,
+        /// Found.
+        found: usize,
+    },
+    /// One env failed.
+    #[error("env {env}: {source}")]
+    Env {
+        /// Env index.
+        env: usize,
+        /// The error.
+        source: Box<BatchError>,
+    },
+    /// The thread pool could not be built.
+    #[error("cannot start the thread pool: {0}")]
+    Threads(String),
+    /// The simulation reported an error (configuration, state).
+    #[error(transparent)]
+    Sim(#[from] SimError),
+}
+
+/// Result alias of this crate.
+pub type Result<T, E = BatchError> = std::result::Result<T, E>;

@@ -1,0 +1,15 @@
+//! # accd-batch
+//!
+//! N In-Air Capturing episodes ([`accd_sim::Episode`]) stepped by one call, in parallel over
+//! threads, into struct-of-arrays buffers, with same-step or next-step autoreset and the seed
+//! scheme of design.md §8 ([`seeds`]). Nothing here knows about Python.
+
+#![warn(missing_docs)]
+
+pub mod batch;
+pub mod error;
+pub mod seeds;
+
+pub use batch::{info, Autoreset, BatchEnv, ResetBuffers, SeedSpec, StepBuffers};
+pub use error::{BatchError, Result};
+pub use seeds::{episode_seeds, WakeSchedule, HELD_OUT_WAKE_SEEDS, TRAINING_WAKE_SEEDS};

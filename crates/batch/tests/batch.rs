@@ -1,0 +1,295 @@
+//! The batch env: bitwise-identical results whatever the thread count and batch size, both
+//! autoreset modes as documented, per-env seeding, bad input named, saved states restored.
+
+use accd_batch::{info, Autoreset, BatchEnv, ResetBuffers, SeedSpec, StepBuffers, WakeSchedule};
+use accd_sim::{EnvConfig, ACT_DIM, OBS_DIM};
+
+/// Short episodes (2 s) so that autoresets happen within a test.
+fn config() -> EnvConfig {
+    EnvConfig {
+        capture_window: 2.0,
+        initial: accd_sim::task::InitialConfig {
+            settle_time: 20.0,
+            ..Default::default()
+        },
+        ..EnvConfig::default()
+    }
+}
+
+#[derive(Debug, Clone, PartialEq)]
+struct Step {
+    obs: Vec<f32>,
+    final_obs: Vec<f32>,
+    reward: Vec<f64>,
+    terminated: Vec<bool>,
+    truncated: Vec<bool>,
+    info: Vec<f64>,
+    wake: Vec<u64>,
+    reset: Vec<bool>,
+}
+
+struct Runner {
+    env: BatchEnv,
+    s: Step,
+}
+
+impl Runner {
+    fn new(n: usize, threads: usize, mode: Autoreset) -> Runner {
+        let env = BatchEnv::new(config(), n, 11, mode, threads).unwrap();
+        Runner {
+            env,
+            s: Step {
+                obs: vec![0.0; n * OBS_DIM],
+                final_obs: vec![0.0; n * OBS_DIM],
+                reward: vec![0.0; n],
+                terminated: vec![false; n],
+                truncated: vec![false; n],
+                info: vec![0.0; n * info::DIM],
+                wake: vec![0; n],
+                reset: vec![false; n],
+            },
+        }
+    }
+
+    fn step(&mut self, actions: &[f32]) -> accd_batch::Result<Step> {
+        let s = &mut self.s;
+        self.env.step(
+            actions,
+            StepBuffers {
+                obs: &mut s.obs,
+                reward: &mut s.reward,
+                terminated: &mut s.terminated,
+                truncated: &mut s.truncated,
+                final_obs: &mut s.final_obs,
+                info: &mut s.info,
+                wake_seed: &mut s.wake,
+                autoreset: &mut s.reset,
+            },
+        )?;
+        Ok(s.clone())
+    }
+
+    fn reset(&mut self, seeds: SeedSpec) -> Vec<f32> {
+        let n = self.env.num_envs();
+        let mut obs = vec![0.0; n * OBS_DIM];
+        let mut wake = vec![0; n];
+        self.env
+            .reset(
+                seeds,
+                ResetBuffers {
+                    obs: &mut obs,
+                    wake_seed: &mut wake,
+                },
+            )
+            .unwrap();
+        obs
+    }
+}
+
+/// Env `i`'s action at step `k`: different per env, a few beyond the limit.
+fn actions(n: usize, k: usize) -> Vec<f32> {
+    (0..n * ACT_DIM)
+        .map(|j| {
+            let (i, c) = (j / ACT_DIM, j % ACT_DIM);
+            let t = 0.1 * k as f32 + 0.37 * i as f32;
+            let pitch = 1.1 * (0.8 * t).sin();
+            let yaw = 0.6 * (0.45 * t + 1.0).cos();
+            [pitch, pitch, yaw, yaw][c]
+        })
+        .collect()
+}
+
+/// Env `i`'s row of a per-env array with `width` values per env.
+fn row<T: Clone>(v: &[T], i: usize, width: usize) -> Vec<T> {
+    v[i * width..(i + 1) * width].to_vec()
+}
+
+fn env_history(steps: &[Step], i: usize) -> String {
+    steps
+        .iter()
+        .map(|s| {
+            format!(
+                "{:?}{:?}{:?}{:?}{:?}{:?}{:?}",
+                row(&s.obs, i, OBS_DIM),
+                s.reward[i],
+                s.terminated[i],
+                s.truncated[i],
+                row(&s.info, i, info::DIM),
+                s.wake[i],
+                if s.terminated[i] || s.truncated[i] {
+                    row(&s.final_obs, i, OBS_DIM)
+                } else {
+                    vec![]
+                }
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn results_are_bitwise_identical_whatever_threads_and_batch_size() {
+    let run = |n: usize, threads: usize| -> Vec<Step> {
+        let mut r = Runner::new(n, threads, Autoreset::SameStep);
+        // 45 steps: every env crosses at least one autoreset (2 s = 20 steps).
+        (0..45).map(|k| r.step(&actions(n, k)).unwrap()).collect()
+    };
+    let a = run(5, 1);
+    let b = run(5, 2);
+    let c = run(3, 2);
+    let d = run(8, 1);
+    for i in 0..3 {
+        let h = env_history(&a, i);
+        assert_eq!(h, env_history(&b, i), "env {i}: 1 vs 2 threads");
+        assert_eq!(h, env_history(&c, i), "env {i}: batch 5 vs 3");
+        assert_eq!(h, env_history(&d, i), "env {i}: batch 5 vs 8");
+    }
+    assert_ne!(env_history(&a, 0), env_history(&a, 1), "envs differ");
+    assert!(a.iter().any(|s| s.truncated.iter().any(|&t| t)));
+}
+
+#[test]
+fn same_step_autoreset_returns_the_new_episode_and_keeps_the_final_observation() {
+    let mut r = Runner::new(2, 1, Autoreset::SameStep);
+    let mut wakes = vec![r.s.wake.clone()];
+    let mut last = Vec::new();
+    for k in 0..20 {
+        let s = r.step(&actions(2, k)).unwrap();
+        if k < 19 {
+            assert!(!s.truncated[0] && !s.terminated[0], "step {k}");
+            last = row(&s.obs, 0, OBS_DIM);
+        } else {
+            assert!(s.truncated[0] && s.truncated[1]);
+            let final0 = row(&s.final_obs, 0, OBS_DIM);
+            assert_ne!(final0, last, "final obs is the last step's");
+            // The new episode starts with a full window left.
+            assert_eq!(s.obs[OBS_DIM - 1], 1.0);
+            assert!((final0[OBS_DIM - 1] - 0.0).abs() < 1e-6);
+            assert_eq!(s.info[info::EPISODE_STEPS], 20.0);
+        }
+        wakes.push(s.wake.clone());
+    }
+    let s = r.step(&actions(2, 20)).unwrap();
+    assert_ne!(s.wake, wakes[1], "the next episode draws new wake seeds");
+}
+
+#[test]
+fn next_step_autoreset_resets_in_the_following_step() {
+    let mut r = Runner::new(1, 1, Autoreset::NextStep);
+    for k in 0..20 {
+        let s = r.step(&actions(1, k)).unwrap();
+        assert_eq!(s.truncated[0], k == 19);
+        assert!(!s.reset[0]);
+    }
+    let s = r.step(&[9.0; 4]).unwrap();
+    assert!(s.reset[0] && !s.truncated[0] && !s.terminated[0]);
+    assert_eq!(s.reward[0], 0.0);
+    assert_eq!(s.obs[OBS_DIM - 1], 1.0);
+    let s = r.step(&actions(1, 0)).unwrap();
+    assert!(!s.reset[0]);
+    assert_eq!(s.info[info::EPISODE_STEPS], 1.0);
+}
+
+#[test]
+fn seeds_reset_and_replay_and_per_env_seeds_match_a_single_env() {
+    let mut a = Runner::new(3, 2, Autoreset::SameStep);
+    let first = a.reset(SeedSpec::Base(5));
+    let h1: Vec<Step> = (0..5).map(|k| a.step(&actions(3, k)).unwrap()).collect();
+    assert_eq!(a.reset(SeedSpec::Base(5)), first);
+    let h2: Vec<Step> = (0..5).map(|k| a.step(&actions(3, k)).unwrap()).collect();
+    assert_eq!(h1, h2);
+    assert_ne!(a.reset(SeedSpec::Next), first);
+
+    let per_env = a.reset(SeedSpec::PerEnv(vec![40, 41, 42]));
+    let mut single = Runner::new(1, 1, Autoreset::SameStep);
+    assert_eq!(single.reset(SeedSpec::Base(41)), row(&per_env, 1, OBS_DIM));
+}
+
+#[test]
+fn wake_schedules_fix_or_cycle_the_wake_seed() {
+    let mut r = Runner::new(2, 1, Autoreset::SameStep);
+    r.env
+        .set_wake_schedule(WakeSchedule::List(vec![
+            1_000_000_000,
+            1_000_000_001,
+            1_000_000_002,
+        ]))
+        .unwrap();
+    let n = r.env.num_envs();
+    let mut wake = vec![0; n];
+    let mut obs = vec![0.0; n * OBS_DIM];
+    r.env
+        .reset(
+            SeedSpec::Base(3),
+            ResetBuffers {
+                obs: &mut obs,
+                wake_seed: &mut wake,
+            },
+        )
+        .unwrap();
+    assert_eq!(wake, vec![1_000_000_000, 1_000_000_001]);
+    let mut seen = vec![];
+    for k in 0..21 {
+        let s = r.step(&actions(2, k)).unwrap();
+        seen.push(s.wake.clone());
+    }
+    assert_eq!(seen[20], vec![1_000_000_002, 1_000_000_000]);
+    r.env.set_wake_schedule(WakeSchedule::Fixed(9)).unwrap();
+    r.env
+        .reset(
+            SeedSpec::Next,
+            ResetBuffers {
+                obs: &mut obs,
+                wake_seed: &mut wake,
+            },
+        )
+        .unwrap();
+    assert_eq!(wake, vec![9, 9]);
+    assert!(r.env.set_wake_schedule(WakeSchedule::List(vec![])).is_err());
+}
+
+#[test]
+fn bad_actions_and_shapes_are_named_and_step_nothing() {
+    let mut r = Runner::new(3, 1, Autoreset::SameStep);
+    let before = r.s.clone();
+    let mut a = actions(3, 0);
+    a[2 * ACT_DIM + 1] = f32::INFINITY;
+    let e = r.step(&a).unwrap_err().to_string();
+    assert!(e.contains("env 2") && e.contains("component 1"), "{e}");
+    assert_eq!(r.s, before);
+    let e = r.step(&a[..5]).unwrap_err().to_string();
+    assert!(e.contains("actions") && e.contains("12"), "{e}");
+    assert_eq!(r.env.episode(0).unwrap().steps(), 0);
+    assert!(r.env.episode(3).is_err());
+    assert!(BatchEnv::new(config(), 0, 1, Autoreset::SameStep, 1).is_err());
+}
+
+#[test]
+fn a_saved_batch_continues_bit_for_bit_and_foreign_states_are_refused() {
+    let mut a = Runner::new(3, 2, Autoreset::SameStep);
+    for k in 0..12 {
+        a.step(&actions(3, k)).unwrap();
+    }
+    let saved = a.env.save();
+    let tail_a: Vec<Step> = (12..40).map(|k| a.step(&actions(3, k)).unwrap()).collect();
+    let mut b = Runner::new(3, 1, Autoreset::SameStep);
+    b.env.load(&saved).unwrap();
+    let tail_b: Vec<Step> = (12..40).map(|k| b.step(&actions(3, k)).unwrap()).collect();
+    assert_eq!(tail_a, tail_b);
+
+    let mut c = Runner::new(2, 1, Autoreset::SameStep);
+    assert!(c
+        .env
+        .load(&saved)
+        .unwrap_err()
+        .to_string()
+        .contains("3 envs"));
+    assert!(c.env.load(&saved[..saved.len() - 3]).is_err());
+    let mut other = config();
+    other.capture_window = 3.0;
+    let mut d = BatchEnv::new(other, 3, 1, Autoreset::SameStep, 1).unwrap();
+    assert!(d
+        .load(&saved)
+        .unwrap_err()
+        .to_string()
+        .contains("configuration"));
+}
