@@ -437,11 +437,18 @@ def max_tension_readings(case: MaxTensionCase = MaxTensionCase()) -> list[dict[s
     """Quasi-static tension (N) under other readings of the paper's case, and what its 125 kN
     mean would require; each entry has ``reading``, ``quasi_static_tension_N`` or a requirement."""
     sigma = accd_gym.isa(case.altitude)["density"] / accd_gym.isa(0.0)["density"]
-    lapsed = MaxTensionCase(thrust_N=case.thrust_N * sigma)
+    lapsed = MaxTensionCase(
+        thrust_N=case.thrust_N * sigma,
+        rlv_drag_N=case.rlv_drag_N,
+        rlv_mass_kg=case.rlv_mass_kg,
+        ta_mass_kg=case.ta_mass_kg,
+        ta_drag_N=case.ta_drag_N,
+    )
     needed_a = (PAPER_MAX_TENSION_MEAN_N - case.rlv_drag_N) / case.rlv_mass_kg
     return [
         {
-            "reading": "this study: sea-level thrust, TA drag 0, TA 368 t",
+            "reading": f"this study: thrust {case.thrust_N / 1e3:.0f} kN (sea level), TA drag "
+            f"{case.ta_drag_N / 1e3:.0f} kN, TA {case.ta_mass_kg / 1e3:.0f} t",
             "quasi_static_tension_N": case.quasi_static_tension(),
         },
         {
@@ -711,6 +718,10 @@ def plot_cases(results: list[CaseResult], path: Path, title: str, dpi: int = 90)
         for r in results:
             ax.plot(r.time, get(r), lw=1.0, label=r.case.label)
         _shade(ax, results[0].case.commands)
+        low, high = ax.get_ylim()
+        if high - low < 2.0:  # a flat line (no lateral motion): show it on a metre scale
+            mid = 0.5 * (low + high)
+            ax.set_ylim(mid - 1.0, mid + 1.0)
         ax.set_xlabel("time [s]")
         ax.set_ylabel(ylabel)
         ax.set_title(name, fontsize=10)
