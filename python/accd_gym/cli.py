@@ -19,6 +19,18 @@ def _settle(args: argparse.Namespace) -> int:
     return 0
 
 
+def _study(args: argparse.Namespace) -> int:
+    from accd_gym import study
+
+    out = Path(args.out)
+    docs = study.run(args.studies, out, progress=not args.quiet, dpi=args.dpi)
+    for name, doc in docs.items():
+        print(f"{name}: wrote {', '.join(str(out / f) for f in doc['figures'])}, {out / (name + '.json')}, {out / (name + '.md')}")
+    if len(docs) > 1:
+        print(f"all tables: {out / 'summary.md'}")
+    return 0
+
+
 def _export_aero(args: argparse.Namespace) -> int:
     from accd_gym import default_aero_table_json
 
@@ -39,6 +51,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, default=120.0, help="simulated time in seconds (default 120)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_settle)
+    from accd_gym.study import STUDIES
+
+    p = sub.add_parser("study", help="run the paper's section-4 tether design studies: plots, JSON, markdown tables")
+    p.add_argument("studies", nargs="+", choices=[*STUDIES, "all"], metavar="STUDY",
+                   help=f"one or more of: {', '.join(STUDIES)}, all")
+    p.add_argument("--out", default="runs/study", help="output folder (default: runs/study)")
+    p.add_argument("--dpi", type=int, default=90, help="resolution of the PNGs (default 90)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_study)
     p = sub.add_parser("export-aero", help="write the default ACCD aerodynamic tables (JSON) to start your own")
     p.add_argument("--out", default="accd-aero.json", help="output file (default: accd-aero.json)")
     p.set_defaults(func=_export_aero)
