@@ -335,60 +335,59 @@ impl BatchEnv {
             out.wake_seed.par_iter_mut(),
             out.autoreset.par_iter_mut(),
         );
-        let job =
-            |(slot, action, obs, final_obs, info, reward, terminated, truncated, wake, reset): (
-                &mut Slot,
-                &[f32],
-                &mut [f32],
-                &mut [f32],
-                &mut [f64],
-                &mut f64,
-                &mut bool,
-                &mut bool,
-                &mut u64,
-                &mut bool,
-            )| {
-                *reset = false;
-                if slot.pending_reset {
-                    slot.pending_reset = false;
-                    slot.index += 1;
-                    let outcome = restart(slot, n64, schedule);
-                    obs.copy_from_slice(slot.episode.observation());
-                    *reward = 0.0;
-                    *terminated = outcome.is_some();
-                    *truncated = false;
-                    *reset = true;
-                    *wake = slot.episode.seeds().wake;
-                    write_info(info, &outcome.unwrap_or_default(), 0);
-                    return;
-                }
-                *wake = slot.episode.seeds().wake;
-                let o = match catch_unwind(AssertUnwindSafe(|| slot.episode.step(action))) {
-                    Ok(Ok(o)) => o,
-                    // Actions were checked; a remaining error (or a panic) is a divergence.
-                    Ok(Err(_)) | Err(_) => Outcome {
-                        terminated: true,
-                        diverged: true,
-                        ..Outcome::default()
-                    },
-                };
-                *reward = o.reward;
-                *terminated = o.terminated;
-                *truncated = o.truncated;
-                write_info(info, &o, slot.episode.steps());
+        let job = |(
+            slot,
+            action,
+            obs,
+            final_obs,
+            info,
+            reward,
+            terminated,
+            truncated,
+            wake,
+            reset,
+        ): Row<'_>| {
+            *reset = false;
+            if slot.pending_reset {
+                slot.pending_reset = false;
+                slot.index += 1;
+                let outcome = restart(slot, n64, schedule);
                 obs.copy_from_slice(slot.episode.observation());
-                if o.terminated || o.truncated {
-                    match mode {
-                        Autoreset::NextStep => slot.pending_reset = true,
-                        Autoreset::SameStep => {
-                            final_obs.copy_from_slice(obs);
-                            slot.index += 1;
-                            restart(slot, n64, schedule);
-                            obs.copy_from_slice(slot.episode.observation());
-                        }
+                *reward = 0.0;
+                *terminated = outcome.is_some();
+                *truncated = false;
+                *reset = true;
+                *wake = slot.episode.seeds().wake;
+                write_info(info, &outcome.unwrap_or_default(), 0);
+                return;
+            }
+            *wake = slot.episode.seeds().wake;
+            let o = match catch_unwind(AssertUnwindSafe(|| slot.episode.step(action))) {
+                Ok(Ok(o)) => o,
+                // Actions were checked; a remaining error (or a panic) is a divergence.
+                Ok(Err(_)) | Err(_) => Outcome {
+                    terminated: true,
+                    diverged: true,
+                    ..Outcome::default()
+                },
+            };
+            *reward = o.reward;
+            *terminated = o.terminated;
+            *truncated = o.truncated;
+            write_info(info, &o, slot.episode.steps());
+            obs.copy_from_slice(slot.episode.observation());
+            if o.terminated || o.truncated {
+                match mode {
+                    Autoreset::NextStep => slot.pending_reset = true,
+                    Autoreset::SameStep => {
+                        final_obs.copy_from_slice(obs);
+                        slot.index += 1;
+                        restart(slot, n64, schedule);
+                        obs.copy_from_slice(slot.episode.observation());
                     }
                 }
-            };
+            }
+        };
         self.pool.install(|| rows.into_par_iter().for_each(job));
         Ok(())
     }
@@ -487,6 +486,20 @@ impl BatchEnv {
         Ok(())
     }
 }
+
+/// One env's share of a step: its slot, action and output rows.
+type Row<'a> = (
+    &'a mut Slot,
+    &'a [f32],
+    &'a mut [f32],
+    &'a mut [f32],
+    &'a mut [f64],
+    &'a mut f64,
+    &'a mut bool,
+    &'a mut bool,
+    &'a mut u64,
+    &'a mut bool,
+);
 
 const MAGIC: &[u8; 8] = b"ACCDST01";
 

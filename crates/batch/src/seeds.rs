@@ -36,6 +36,9 @@ pub const TRAINING_WAKE_SEEDS: Range<u64> = 0..1_000_000_000;
 /// Wake seeds kept for held-out evaluation; training never draws them.
 pub const HELD_OUT_WAKE_SEEDS: Range<u64> = 1_000_000_000..1_000_001_000;
 
+// The two sets are disjoint (checked at compile time).
+const _: () = assert!(TRAINING_WAKE_SEEDS.end <= HELD_OUT_WAKE_SEEDS.start);
+
 const A: u64 = 0x2545_F491_4F6C_DD1D;
 const B: u64 = 0x9E37_79B9_7F4A_7C15;
 const INITIAL: u64 = u64::from_be_bytes(*b"INITIAL ");
@@ -129,7 +132,6 @@ mod tests {
                 assert!(!HELD_OUT_WAKE_SEEDS.contains(&s.wake));
             }
         }
-        assert!(TRAINING_WAKE_SEEDS.end <= HELD_OUT_WAKE_SEEDS.start);
     }
 
     #[test]
