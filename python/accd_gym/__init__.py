@@ -10,6 +10,13 @@ x forward, y to starboard, z down.
 
 Public API:
 
+* ``gymnasium.make("accd_gym/InAirCapture-v0", **config)`` -- the single env
+  (:class:`InAirCaptureEnv`); ``gymnasium.make_vec("accd_gym/InAirCapture-v0", num_envs=N)`` --
+  the native vector env (:class:`InAirCaptureVectorEnv`); :class:`AccdVecEnv` -- the native
+  stable-baselines3 VecEnv (imports stable-baselines3 on first use).
+* :func:`env_config`, :func:`default_config` -- validated environment configurations;
+  :data:`TRAINING_WAKE_SEEDS`, :data:`HELD_OUT_WAKE_SEEDS` -- the wake-seed sets;
+  :func:`reward_bounds`.
 * :class:`CaptureSim` -- one capture episode's physics (tether, 6-DoF capturing device, towing
   aircraft, RLV boom) for scripted runs; :func:`mix_flaps` turns pitch/yaw/roll into flaps.
 * :class:`Tether` -- the tether model alone, for design studies and validation.
@@ -32,10 +39,50 @@ from accd_gym._core import (
     tether_config,
     towed_tether,
 )
+from accd_gym._core import reward_bounds as _core_reward_bounds
 from accd_gym.errors import AccdError, ConfigError, SimulationError, StateError
+from accd_gym.config import default_config, env_config
+from accd_gym.task import HELD_OUT_WAKE_SEEDS, TRAINING_WAKE_SEEDS
+from accd_gym.env import InAirCaptureEnv
+from accd_gym.vector import InAirCaptureVectorEnv
+
+import gymnasium as _gym
+
+ENV_ID = "accd_gym/InAirCapture-v0"
+if ENV_ID not in _gym.registry:
+    _gym.register(
+        id=ENV_ID,
+        entry_point="accd_gym.env:InAirCaptureEnv",
+        vector_entry_point="accd_gym.vector:InAirCaptureVectorEnv",
+    )
+
+
+def reward_bounds(config: dict | None = None, **overrides) -> tuple[float, float]:
+    """Lowest and highest reward of one agent step under a configuration (keyword overrides)."""
+    from accd_gym.config import config_json
+
+    return _core_reward_bounds(config_json(env_config(config, **overrides)))
+
+
+def __getattr__(name: str):
+    """Imports :class:`AccdVecEnv` (and with it stable-baselines3) on first use."""
+    if name == "AccdVecEnv":
+        from accd_gym.sb3 import AccdVecEnv
+
+        return AccdVecEnv
+    raise AttributeError(f"module 'accd_gym' has no attribute {name!r}")
 
 __all__ = [
     "AccdError",
+    "AccdVecEnv",
+    "ENV_ID",
+    "HELD_OUT_WAKE_SEEDS",
+    "InAirCaptureEnv",
+    "InAirCaptureVectorEnv",
+    "TRAINING_WAKE_SEEDS",
+    "default_config",
+    "env_config",
+    "reward_bounds",
     "CaptureSim",
     "ConfigError",
     "SimulationError",

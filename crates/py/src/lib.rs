@@ -6,9 +6,10 @@
 //! (`Tether.step`, `Tether.advance`) takes the object mutably and releases the GIL while the Rust
 //! code runs, so other Python threads proceed, but a second call on the *same* object from another
 //! thread during that time raises `RuntimeError: Already borrowed`. Different objects step in
-//! parallel freely. Nothing here starts threads of its own.
+//! parallel freely. `BatchEnv` steps its envs on a thread pool of its own (rayon).
 
 mod arrays;
+mod batch;
 mod capture;
 mod errors;
 mod tether;
@@ -21,6 +22,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<tether::PyTether>()?;
     m.add_class::<capture::PyCaptureSim>()?;
+    batch::register(m)?;
     m.add_function(wrap_pyfunction!(capture::mix_flaps, m)?)?;
     m.add_function(wrap_pyfunction!(capture::default_aero_table_json, m)?)?;
     m.add_function(wrap_pyfunction!(tether::tether_config, m)?)?;

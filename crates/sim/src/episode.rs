@@ -300,7 +300,8 @@ impl Episode {
                     out.envelope_exit = !out.captured
                         && (s.capture.distance > limits.max_distance
                             || tilt(&s.attitude) > limits.max_tilt_deg.to_radians()
-                            || s.omega.norm() > limits.max_body_rate);
+                            || s.omega.y.hypot(s.omega.z) > limits.max_body_rate
+                            || s.omega.x.abs() > limits.max_roll_rate);
                 }
                 Ok(s) => {
                     self.diverge(SimError::Diverged {

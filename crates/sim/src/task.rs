@@ -35,7 +35,7 @@
 //! |---|---|---|
 //! | capture: capture point within `boom.capture_radius` of the boom tip at a relative speed under `boom.max_closing_speed` | terminated | every physics step |
 //! | overload: attachment tension above `limits.overload_fraction` times the tether's breaking tension | terminated | every physics step |
-//! | envelope exit: distance to the boom over `limits.max_distance`, the ACCD's nose more than `limits.max_tilt_deg` off the flight direction, or a body rate over `limits.max_body_rate` | terminated | every agent step |
+//! | envelope exit: distance to the boom over `limits.max_distance`, the ACCD's nose more than `limits.max_tilt_deg` off the flight direction, a pitch/yaw rate over `limits.max_body_rate` (tumbling) or a roll rate over `limits.max_roll_rate` | terminated | every agent step |
 //! | diverged: the simulation reported an error or a non-finite state (every physics step), or an implausible one: the ACCD faster than twice the airspeed relative to the aircraft or a body rate over 1000 rad/s (every agent step); the last good observation is kept | terminated | see left |
 //! | capture window (`capture_window`, 70 s) elapsed | truncated | every agent step |
 
@@ -302,8 +302,11 @@ pub struct LimitsConfig {
     pub max_distance: f64,
     /// Largest angle between the ACCD's nose and the flight direction, deg.
     pub max_tilt_deg: f64,
-    /// Largest body rate (magnitude), rad/s.
+    /// Largest pitch/yaw rate `sqrt(q^2 + r^2)` (tumbling), rad/s.
     pub max_body_rate: f64,
+    /// Largest roll rate `|p|`, rad/s. The tether attaches through a swivel, so roll is free;
+    /// a faster spin counts as loss of control.
+    pub max_roll_rate: f64,
 }
 
 impl Default for LimitsConfig {
@@ -313,6 +316,7 @@ impl Default for LimitsConfig {
             max_distance: 60.0,
             max_tilt_deg: 60.0,
             max_body_rate: 10.0,
+            max_roll_rate: 50.0,
         }
     }
 }
@@ -351,6 +355,16 @@ impl LimitsConfig {
             return Err(SimError::invalid_config(
                 "limits.max_body_rate",
                 self.max_body_rate,
+                "(0, 1000] rad/s",
+            ));
+        }
+        if !(self.max_roll_rate.is_finite()
+            && self.max_roll_rate > 0.0
+            && self.max_roll_rate <= 1e3)
+        {
+            return Err(SimError::invalid_config(
+                "limits.max_roll_rate",
+                self.max_roll_rate,
                 "(0, 1000] rad/s",
             ));
         }

@@ -1,0 +1,386 @@
+//! `accd_gym._core.BatchEnv`: the native batch of RL episodes behind the gymnasium and
+//! stable-baselines3 envs. Rust writes every step's outputs straight into numpy arrays that this
+//! object owns (two sets, used alternately), with the GIL released while the envs step.
+
+use accd_batch::{
+    info, Autoreset, BatchEnv, BatchError, ResetBuffers, SeedSpec, StepBuffers, WakeSchedule,
+    HELD_OUT_WAKE_SEEDS, TRAINING_WAKE_SEEDS,
+};
+use accd_sim::{EnvConfig, ACT_DIM, OBSERVATION, OBS_BOUND, OBS_DIM};
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::{PyBytes, PyDict, PyTuple};
+
+use crate::arrays::{vector_to_py, vectors_to_py};
+use crate::capture::sim_to_py;
+use crate::errors::{raise, Kind};
+
+/// Maps batch errors to the Python exception tree (bad actions and shapes are `StateError`, a
+/// `ValueError`).
+fn batch_to_py(error: BatchError) -> PyErr {
+    match error {
+        BatchError::Sim(e) => sim_to_py(e),
+        BatchError::Action { .. } | BatchError::Shape { .. } => {
+            raise(Kind::State, error.to_string())
+        }
+        BatchError::Env { .. } | BatchError::Threads(_) => {
+            raise(Kind::Simulation, error.to_string())
+        }
+    }
+}
+
+/// One set of output arrays.
+struct Buffers {
+    obs: Py<PyArray2<f32>>,
+    final_obs: Py<PyArray2<f32>>,
+    reward: Py<PyArray1<f64>>,
+    terminated: Py<PyArray1<bool>>,
+    truncated: Py<PyArray1<bool>>,
+    info: Py<PyArray2<f64>>,
+    wake_seed: Py<PyArray1<u64>>,
+    autoreset: Py<PyArray1<bool>>,
+}
+
+impl Buffers {
+    fn new(py: Python<'_>, n: usize) -> Buffers {
+        Buffers {
+            obs: PyArray2::zeros(py, [n, OBS_DIM], false).unbind(),
+            final_obs: PyArray2::zeros(py, [n, OBS_DIM], false).unbind(),
+            reward: PyArray1::zeros(py, n, false).unbind(),
+            terminated: PyArray1::from_vec(py, vec![false; n]).unbind(),
+            truncated: PyArray1::from_vec(py, vec![false; n]).unbind(),
+            info: PyArray2::zeros(py, [n, info::DIM], false).unbind(),
+            wake_seed: PyArray1::zeros(py, n, false).unbind(),
+            autoreset: PyArray1::from_vec(py, vec![false; n]).unbind(),
+        }
+    }
+}
+
+/// N In-Air Capturing episodes stepped by one call (internal; use ``accd_gym.AccdVecEnv`` or
+/// ``gymnasium.make_vec("accd_gym/InAirCapture-v0")``).
+///
+/// ``step`` and ``reset`` return numpy arrays owned by this object, written in place by Rust.
+/// Two sets are used alternately: an array returned by one call stays valid through the next
+/// call and is overwritten by the call after it. Copy what you keep longer.
+#[pyclass(name = "BatchEnv", module = "accd_gym._core")]
+pub struct PyBatchEnv {
+    inner: BatchEnv,
+    buffers: [Buffers; 2],
+    next: usize,
+}
+
+fn parse_autoreset(mode: &str) -> PyResult<Autoreset> {
+    match mode {
+        "same_step" => Ok(Autoreset::SameStep),
+        "next_step" => Ok(Autoreset::NextStep),
+        other => Err(raise(
+            Kind::Config,
+            format!("invalid config: `autoreset_mode` = {other:?} is outside the allowed range \"same_step\" or \"next_step\""),
+        )),
+    }
+}
+
+#[pymethods]
+impl PyBatchEnv {
+    /// ``num_envs`` episodes of the config ``config_json`` (an ``EnvConfig`` as JSON), env ``i``
+    /// seeded with base ``seed`` and index ``i``; autoreset ``"same_step"`` or ``"next_step"``;
+    /// ``num_threads`` threads of its own (0: one per core).
+    #[new]
+    #[pyo3(signature = (config_json, num_envs, seed, autoreset_mode = "same_step", num_threads = 0))]
+    fn new(
+        py: Python<'_>,
+        config_json: &str,
+        num_envs: usize,
+        seed: u64,
+        autoreset_mode: &str,
+        num_threads: usize,
+    ) -> PyResult<Self> {
+        let mode = parse_autoreset(autoreset_mode)?;
+        let config = EnvConfig::from_json(config_json).map_err(sim_to_py)?;
+        let inner = py
+            .detach(|| BatchEnv::new(config, num_envs, seed, mode, num_threads))
+            .map_err(batch_to_py)?;
+        let n = inner.num_envs();
+        Ok(PyBatchEnv {
+            inner,
+            buffers: [Buffers::new(py, n), Buffers::new(py, n)],
+            next: 0,
+        })
+    }
+
+    /// Number of envs.
+    #[getter]
+    fn num_envs(&self) -> usize {
+        self.inner.num_envs()
+    }
+
+    /// Threads stepping the envs.
+    #[getter]
+    fn num_threads(&self) -> usize {
+        self.inner.threads()
+    }
+
+    /// The full configuration (defaults filled in) as JSON.
+    fn config_json(&self) -> PyResult<String> {
+        serde_json::to_string(self.inner.config()).map_err(|e| raise(Kind::Config, e.to_string()))
+    }
+
+    /// Starts new episodes in every env and returns ``(obs, wake_seed)``: observations
+    /// (num_envs, OBS_DIM) float32 and the episodes' wake seeds (num_envs,) uint64.
+    /// ``seed``: None (each env's next episode), an int (env ``i``: base ``seed``, index ``i``) or
+    /// a list of num_envs ints (env ``i``: base ``seed[i]``, index 0: the same as a single env
+    /// seeded ``seed[i]``).
+    #[pyo3(signature = (seed = None))]
+    fn reset<'py>(
+        &mut self,
+        py: Python<'py>,
+        seed: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        let spec = match seed {
+            None => SeedSpec::Next,
+            Some(s) if s.is_none() => SeedSpec::Next,
+            Some(s) => match s.extract::<u64>() {
+                Ok(v) => SeedSpec::Base(v),
+                Err(_) => SeedSpec::PerEnv(s.extract::<Vec<u64>>().map_err(|_| {
+                    raise(
+                        Kind::Config,
+                        format!("invalid config: `seed` = {s} is outside the allowed range: None, an int in [0, 2^64) or a list of num_envs such ints"),
+                    )
+                })?),
+            },
+        };
+        let b = &self.buffers[self.next];
+        self.next = 1 - self.next;
+        let obs = b.obs.bind(py).clone();
+        let wake = b.wake_seed.bind(py).clone();
+        {
+            let mut o = obs.readwrite();
+            let mut w = wake.readwrite();
+            let (o, w) = (o.as_slice_mut()?, w.as_slice_mut()?);
+            let inner = &mut self.inner;
+            py.detach(|| {
+                inner.reset(
+                    spec,
+                    ResetBuffers {
+                        obs: o,
+                        wake_seed: w,
+                    },
+                )
+            })
+            .map_err(batch_to_py)?;
+        }
+        PyTuple::new(py, [obs.into_any(), wake.into_any()])
+    }
+
+    /// One agent step of every env with ``actions`` ((num_envs, 4) float32, C-contiguous; values
+    /// outside [-1, 1] are clipped, non-finite values raise StateError naming the env). Returns
+    /// ``(obs, reward, terminated, truncated, final_obs, info, wake_seed, autoreset)``; see the
+    /// Python envs for their meaning.
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        actions: PyReadonlyArray2<'py, f32>,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        let n = self.inner.num_envs();
+        let shape = actions.shape();
+        if shape != [n, ACT_DIM] {
+            return Err(raise(
+                Kind::State,
+                format!("actions have shape {shape:?}, expected ({n}, {ACT_DIM})"),
+            ));
+        }
+        let a = actions
+            .as_slice()
+            .map_err(|_| raise(Kind::State, "actions must be a C-contiguous float32 array"))?;
+        let b = &self.buffers[self.next];
+        let arrays = (
+            b.obs.bind(py).clone(),
+            b.reward.bind(py).clone(),
+            b.terminated.bind(py).clone(),
+            b.truncated.bind(py).clone(),
+            b.final_obs.bind(py).clone(),
+            b.info.bind(py).clone(),
+            b.wake_seed.bind(py).clone(),
+            b.autoreset.bind(py).clone(),
+        );
+        {
+            let mut obs = arrays.0.readwrite();
+            let mut reward = arrays.1.readwrite();
+            let mut terminated = arrays.2.readwrite();
+            let mut truncated = arrays.3.readwrite();
+            let mut final_obs = arrays.4.readwrite();
+            let mut info = arrays.5.readwrite();
+            let mut wake = arrays.6.readwrite();
+            let mut reset = arrays.7.readwrite();
+            let buffers = StepBuffers {
+                obs: obs.as_slice_mut()?,
+                reward: reward.as_slice_mut()?,
+                terminated: terminated.as_slice_mut()?,
+                truncated: truncated.as_slice_mut()?,
+                final_obs: final_obs.as_slice_mut()?,
+                info: info.as_slice_mut()?,
+                wake_seed: wake.as_slice_mut()?,
+                autoreset: reset.as_slice_mut()?,
+            };
+            let inner = &mut self.inner;
+            py.detach(|| inner.step(a, buffers)).map_err(batch_to_py)?;
+        }
+        self.next = 1 - self.next;
+        PyTuple::new(
+            py,
+            [
+                arrays.0.into_any(),
+                arrays.1.into_any(),
+                arrays.2.into_any(),
+                arrays.3.into_any(),
+                arrays.4.into_any(),
+                arrays.5.into_any(),
+                arrays.6.into_any(),
+                arrays.7.into_any(),
+            ],
+        )
+    }
+
+    /// Sets where the wake seeds of the episodes started from now on come from:
+    /// ``"training"`` (drawn from the training range), ``"fixed"`` (``seeds[0]`` for every
+    /// episode) or ``"list"`` (env ``i``'s episode ``e`` uses ``seeds[(i + e * num_envs) % len]``).
+    #[pyo3(signature = (kind, seeds = Vec::new()))]
+    fn set_wake_schedule(&mut self, kind: &str, seeds: Vec<u64>) -> PyResult<()> {
+        let schedule = match (kind, seeds.as_slice()) {
+            ("training", []) => WakeSchedule::Training,
+            ("fixed", [s]) => WakeSchedule::Fixed(*s),
+            ("list", list) if !list.is_empty() => WakeSchedule::List(list.to_vec()),
+            _ => {
+                return Err(raise(
+                    Kind::Config,
+                    format!("invalid config: wake schedule `{kind}` with {} seeds is outside the allowed range: \"training\" with none, \"fixed\" with one, \"list\" with at least one", seeds.len()),
+                ))
+            }
+        };
+        self.inner.set_wake_schedule(schedule).map_err(batch_to_py)
+    }
+
+    /// The current wake schedule as ``(kind, seeds)``.
+    fn wake_schedule(&self) -> (String, Vec<u64>) {
+        match self.inner.wake_schedule() {
+            WakeSchedule::Training => ("training".into(), vec![]),
+            WakeSchedule::Fixed(s) => ("fixed".into(), vec![*s]),
+            WakeSchedule::List(l) => ("list".into(), l.clone()),
+        }
+    }
+
+    /// Every env's exact state (episodes, seeds, counters, random streams, the config) as bytes.
+    fn get_state<'py>(&self, py: Python<'py>) -> Bound<'py, PyBytes> {
+        PyBytes::new(py, &self.inner.save())
+    }
+
+    /// Restores a state from ``get_state`` of a batch with the same config and size; raises
+    /// ConfigError otherwise (and changes nothing).
+    fn set_state(&mut self, py: Python<'_>, state: &[u8]) -> PyResult<()> {
+        let inner = &mut self.inner;
+        py.detach(|| inner.load(state)).map_err(batch_to_py)
+    }
+
+    /// The current observation of env ``i`` (a new array).
+    fn observation<'py>(&self, py: Python<'py>, i: usize) -> PyResult<Bound<'py, PyArray1<f32>>> {
+        let e = self.inner.episode(i).map_err(batch_to_py)?;
+        Ok(PyArray1::from_slice(py, e.observation()))
+    }
+
+    /// Seeds of env ``i``'s current episode: ``{"initial", "wake", "rlv"}``.
+    fn episode_seeds<'py>(&self, py: Python<'py>, i: usize) -> PyResult<Bound<'py, PyDict>> {
+        let s = self.inner.episode(i).map_err(batch_to_py)?.seeds();
+        let d = PyDict::new(py);
+        d.set_item("initial", s.initial)?;
+        d.set_item("wake", s.wake)?;
+        d.set_item("rlv", s.rlv)?;
+        Ok(d)
+    }
+
+    /// Why env ``i``'s episode diverged, or None.
+    fn divergence(&self, i: usize) -> PyResult<Option<String>> {
+        Ok(self
+            .inner
+            .episode(i)
+            .map_err(batch_to_py)?
+            .divergence()
+            .map(str::to_owned))
+    }
+
+    /// What a picture of env ``i`` needs (TA frame, m): ``joints`` (n+1, 3), ``accd_position``,
+    /// ``capture_point``, ``boom_tip``, ``equilibrium`` (3,), ``attitude`` (w, x, y, z),
+    /// ``deflection_deg`` (4,), ``time`` s, ``distance`` m, ``tension`` N.
+    fn render_data<'py>(&mut self, py: Python<'py>, i: usize) -> PyResult<Bound<'py, PyDict>> {
+        let e = self.inner.episode_mut(i).map_err(batch_to_py)?;
+        let equilibrium = e.equilibrium().position;
+        let sim = e.sim_mut();
+        let s = sim.snapshot().map_err(sim_to_py)?;
+        let mut joints = vec![nalgebra::Vector3::zeros(); sim.tether_state().segments() + 1];
+        sim.joint_positions(&mut joints).map_err(sim_to_py)?;
+        let d = PyDict::new(py);
+        d.set_item("joints", vectors_to_py(py, &joints))?;
+        d.set_item("accd_position", vector_to_py(py, &s.position))?;
+        d.set_item("capture_point", vector_to_py(py, &s.capture_point))?;
+        d.set_item("boom_tip", vector_to_py(py, &s.boom_tip))?;
+        d.set_item("equilibrium", vector_to_py(py, &equilibrium))?;
+        let q = s.attitude.quaternion();
+        d.set_item("attitude", PyArray1::from_slice(py, &[q.w, q.i, q.j, q.k]))?;
+        d.set_item("deflection_deg", s.deflection.map(f64::to_degrees).to_vec())?;
+        d.set_item("time", s.time)?;
+        d.set_item("distance", s.capture.distance)?;
+        d.set_item("tension", s.attachment_tension)?;
+        Ok(d)
+    }
+}
+
+/// The default environment configuration as JSON.
+#[pyfunction]
+pub fn default_env_config_json() -> PyResult<String> {
+    serde_json::to_string(&EnvConfig::default()).map_err(|e| raise(Kind::Config, e.to_string()))
+}
+
+/// Validates an environment configuration (JSON) and returns it with defaults filled in, as JSON;
+/// raises ConfigError naming the field, value and allowed range.
+#[pyfunction]
+pub fn env_config_json(config_json: &str) -> PyResult<String> {
+    let config = EnvConfig::from_json(config_json).map_err(sim_to_py)?;
+    serde_json::to_string(&config).map_err(|e| raise(Kind::Config, e.to_string()))
+}
+
+/// Lowest and highest reward of one agent step under a configuration (JSON).
+#[pyfunction]
+pub fn reward_bounds(config_json: &str) -> PyResult<(f64, f64)> {
+    let config = EnvConfig::from_json(config_json).map_err(sim_to_py)?;
+    Ok(config.reward.bounds(config.episode_steps()))
+}
+
+/// The observation table: a list of ``(name, unit, scale, description)``, in index order.
+#[pyfunction]
+pub fn observation_table() -> Vec<(&'static str, &'static str, f64, &'static str)> {
+    OBSERVATION
+        .iter()
+        .map(|f| (f.name, f.unit, f.scale, f.description))
+        .collect()
+}
+
+/// Registers the batch env and its constants.
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyBatchEnv>()?;
+    m.add_function(wrap_pyfunction!(default_env_config_json, m)?)?;
+    m.add_function(wrap_pyfunction!(env_config_json, m)?)?;
+    m.add_function(wrap_pyfunction!(reward_bounds, m)?)?;
+    m.add_function(wrap_pyfunction!(observation_table, m)?)?;
+    m.add("OBS_DIM", OBS_DIM)?;
+    m.add("ACT_DIM", ACT_DIM)?;
+    m.add("OBS_BOUND", OBS_BOUND)?;
+    m.add("INFO_NAMES", info::NAMES.to_vec())?;
+    m.add(
+        "TRAINING_WAKE_SEEDS",
+        (TRAINING_WAKE_SEEDS.start, TRAINING_WAKE_SEEDS.end),
+    )?;
+    m.add(
+        "HELD_OUT_WAKE_SEEDS",
+        (HELD_OUT_WAKE_SEEDS.start, HELD_OUT_WAKE_SEEDS.end),
+    )?;
+    Ok(())
+}

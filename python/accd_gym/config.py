@@ -1,0 +1,80 @@
+"""Environment configuration: keyword arguments in, a validated, complete configuration out.
+
+Every env of accd-gym takes its configuration as keyword arguments, e.g.
+``gymnasium.make("accd_gym/InAirCapture-v0", capture_window=60.0, wake={"enabled": False})``.
+Top-level keys (all optional; missing keys keep their defaults, nested dicts are merged with
+their defaults, unknown keys raise :class:`~accd_gym.ConfigError`):
+
+============== ==================================================================================
+key            meaning
+============== ==================================================================================
+tether         tether config dict, or a preset name (``"table3"``, ``"uhmwpe-300m-24mm"``, ...)
+accd           capturing device: mass, geometry, flap limit (``flap_limit_deg``), actuators
+aircraft       towing aircraft: ``airspeed`` (m/s), ``altitude`` (m), acceleration profile
+boom           RLV boom: formation offset, drift, perturbation, ``capture_radius`` (m),
+               ``max_closing_speed`` (m/s)
+wake           mean wake: ``enabled``, TA angle of attack, user tables
+turbulence     wake and ambient turbulence
+agent_step     how long one action is held, s (default 0.1 = 10 physics steps)
+capture_window episode length before truncation, s (default 70)
+initial        random initial conditions: ``settle_time`` s, ``offset`` [y, z] m, ``attitude_deg``
+reward         reward weights: ``proximity``, ``proximity_scale`` (m), ``effort``,
+               ``smoothness``, ``capture``, ``failure``
+limits         episode-ending limits: ``overload_fraction``, ``max_distance`` (m),
+               ``max_tilt_deg``, ``max_body_rate``, ``max_roll_rate`` (rad/s)
+wake_seed      fix the wake seed of every episode (int)
+wake_seeds     cycle through these wake seeds (list of int; evaluation)
+============== ==================================================================================
+
+:func:`default_config` returns every key with its default value.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any, Mapping, Optional
+
+import numpy as np
+
+from accd_gym import _core
+from accd_gym.errors import ConfigError
+
+
+def _plain(value: Any) -> Any:
+    """numpy scalars and arrays as plain Python values (for JSON)."""
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"{type(value).__name__} is not a configuration value")
+
+
+def default_config() -> dict[str, Any]:
+    """The default environment configuration, every key filled in (SI units unless named)."""
+    return json.loads(_core.default_env_config_json())
+
+
+def env_config(config: Optional[Mapping[str, Any]] = None, **overrides: Any) -> dict[str, Any]:
+    """A complete, validated environment configuration from ``config`` and keyword overrides.
+
+    A string ``tether`` is taken as a tether preset. Raises :class:`~accd_gym.ConfigError`
+    naming the field, the value and the allowed range (unknown keys included).
+    """
+    merged: dict[str, Any] = dict(config or {})
+    merged.update(overrides)
+    tether = merged.get("tether")
+    if isinstance(tether, str):
+        merged["tether"] = _core.tether_config(tether)
+    try:
+        text = json.dumps(merged, default=_plain, allow_nan=True)
+    except TypeError as e:
+        raise ConfigError(f"invalid config: {e}") from None
+    return json.loads(_core.env_config_json(text))
+
+
+def config_json(config: Mapping[str, Any]) -> str:
+    """A configuration as the JSON text the Rust core reads."""
+    return json.dumps(config, default=_plain)
+
+
+__all__ = ["default_config", "env_config", "config_json"]

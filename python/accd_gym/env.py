@@ -1,0 +1,232 @@
+"""The single gymnasium environment ``accd_gym/InAirCapture-v0``."""
+
+from __future__ import annotations
+
+import json
+from typing import Any, Optional
+
+import gymnasium as gym
+import numpy as np
+
+from accd_gym import _core
+from accd_gym.config import config_json, env_config
+from accd_gym.task import (
+    action_space,
+    check_actions,
+    info_dict,
+    observation_space,
+    random_seed,
+    wake_options,
+)
+
+
+class InAirCaptureEnv(gym.Env):
+    """Guide the capturing device (ACCD) at the end of a towed tether onto the RLV's boom.
+
+    ## Description
+
+    DLR's *In-Air Capturing*: an A340-600 towing aircraft (TA) flies at 185 m/s and 6000 m with a
+    250 m UHMWPE tether; the 1.5 m ACCD at its end steers with four flaps (+-15 deg) through the
+    TA's wake and its turbulence. A reusable launch vehicle (RLV) flies in formation behind and
+    below; its boom tip drifts and is perturbed. The agent must bring the ACCD's rear capture point
+    onto the boom tip within the capture window (70 s). Physics: a 30-segment multibody tether
+    (RK4, 0.01 s), the ACCD as a 6-DoF body, mean wake and frozen turbulence, ISA atmosphere.
+    Frames: TA frame, origin at the tether attachment, x forward, y starboard, z down; SI units.
+
+    ## Action Space
+
+    ``Box(-1, 1, (4,), float32)``: flap commands, scaled by ``accd.flap_limit_deg`` (15 deg),
+    held for one agent step (``agent_step``, 0.1 s). Values outside [-1, 1] are clipped;
+    non-finite values raise ``ValueError``. Pitch moves both horizontal flaps together, yaw both
+    vertical flaps, roll all four differentially (``accd_gym.mix_flaps`` does the mixing).
+
+    | index | flap | unit | positive deflection |
+    |---|---|---|---|
+    | 0 | right (horizontal) | flap_limit_deg | with left: nose up (pitch) |
+    | 1 | left (horizontal) | flap_limit_deg | with right: nose up (pitch) |
+    | 2 | top (vertical) | flap_limit_deg | with bottom: nose right (yaw) |
+    | 3 | bottom (vertical) | flap_limit_deg | with top: nose right (yaw) |
+
+    ## Observation Space
+
+    ``Box(-10, 10, (25,), float32)``. Each value is a physical quantity times the scale below,
+    clipped to [-10, 10]; vectors in the TA frame. ``accd_gym.task.OBSERVATION_TABLE`` holds this
+    table in code.
+
+    | index | name | unit | scale | quantity |
+    |---|---|---|---|---|
+    | 0-2 | ``boom_rel_x/y/z`` | m | 0.05 | boom tip minus capture point |
+    | 3-5 | ``boom_rel_vx/vy/vz`` | m/s | 0.1 | boom-tip velocity minus capture-point velocity |
+    | 6-8 | ``accd_dx/dy/dz`` | m | 0.05 | ACCD position minus its open-loop equilibrium |
+    | 9-11 | ``accd_vx/vy/vz`` | m/s | 0.1 | ACCD velocity relative to the aircraft |
+    | 12-15 | ``quat_w/x/y/z`` | - | 1 | attitude quaternion body -> TA frame (w >= 0) |
+    | 16-18 | ``rate_p/q/r`` | rad/s | 0.5 | body rates (roll, pitch, yaw) |
+    | 19-22 | ``flap_right/left/top/bottom`` | - | 1 | flap deflections / ``accd.flap_limit_deg`` |
+    | 23 | ``tension`` | N | 1e-4 | tension at the attachment |
+    | 24 | ``time_left`` | - | 1 | time left in the capture window / ``capture_window`` |
+
+    ## Rewards
+
+    Per agent step, with ``d`` the distance from the capture point to the boom tip (m) at the end
+    of the step, ``a`` the action and ``a'`` the previous one (zero at the start)::
+
+        r = w_p exp(-d / lambda) - w_e sum(a^2)/4 - w_s sum(((a - a')/2)^2)/4
+            + [captured] (w_c + w_p * steps_left) - [overload or envelope exit or diverged] w_f
+
+    Defaults (``reward`` config): ``w_p = 1``, ``lambda = 10 m``, ``w_e = 0.05``,
+    ``w_s = 0.05``, ``w_c = 100``, ``w_f = 50``. ``steps_left`` counts the agent steps left in the
+    window, so capturing always beats hovering next to the boom. Bounds per step:
+    ``[-(w_e + w_s + w_f), w_p * 700 + w_c]`` with the defaults (``accd_gym.reward_bounds``).
+
+    ## Starting State
+
+    The open-loop equilibrium (neutral flaps, mean wake, no turbulence, settled for
+    ``initial.settle_time`` = 40 s from the straight trailing tether), with the whole tether
+    rotated about the attachment to move the ACCD by up to +-5 m laterally and vertically
+    (``initial.offset``) and the ACCD tilted by up to +-3 deg about each axis
+    (``initial.attitude_deg``), drawn from the episode's *initial* seed. The boom tip starts at
+    its formation offset (-241, 3, 62) m plus up to +-(2, 3, 3) m; wake turbulence starts from its
+    stationary distribution, drawn from the episode's *wake seed*.
+
+    ## Episode End
+
+    | condition | kind | ``info`` flag |
+    |---|---|---|
+    | capture point within ``boom.capture_radius`` (0.5 m) of the boom tip at a relative speed under ``boom.max_closing_speed`` (2 m/s), checked every physics step | terminated | ``captured`` |
+    | attachment tension above ``limits.overload_fraction`` (0.5) x the tether's breaking tension, checked every physics step | terminated | ``overload`` |
+    | distance to the boom over ``limits.max_distance`` (60 m), nose more than ``limits.max_tilt_deg`` (60 deg) off the flight direction, a pitch/yaw rate over ``limits.max_body_rate`` (10 rad/s, tumbling) or a roll rate over ``limits.max_roll_rate`` (50 rad/s; the tether's swivel leaves roll free) | terminated | ``envelope_exit`` |
+    | the simulation diverged (non-finite or implausible state); the observation is the last good one | terminated | ``diverged`` |
+    | ``capture_window`` (70 s, 700 agent steps) elapsed | truncated | - |
+
+    ## Info
+
+    ``time`` (s), ``distance`` (m), ``relative_speed`` (m/s), ``peak_tension`` (N, highest
+    attachment tension during the step), ``captured``, ``overload``, ``envelope_exit``,
+    ``diverged`` (bool), ``episode_steps``, ``wake_seed``.
+
+    ## Seeds
+
+    ``reset(seed=s)`` seeds the env: episode ``e`` after it draws its initial-condition, wake and
+    RLV seeds from ``(s, env index 0, e)`` (see ``accd_gym.task``). Training wake seeds come from
+    ``TRAINING_WAKE_SEEDS`` = [0, 10^9); ``HELD_OUT_WAKE_SEEDS`` = [10^9, 10^9 + 1000) are never
+    drawn. ``reset(options={"wake_seed": w})`` fixes the wake seed, ``{"wake_seeds": [...]}``
+    cycles through a list, ``{"wake_seed": None}`` returns to training draws; options persist over
+    later resets. The config keys ``wake_seed``/``wake_seeds`` do the same from the start.
+
+    ## Arguments
+
+    ``render_mode``: ``"rgb_array"`` (side and top views, off-screen) or ``"human"`` (a window);
+    ``**config``: see :mod:`accd_gym.config` (e.g. ``capture_window=60.0``,
+    ``tether="uhmwpe-300m-24mm"``, ``wake={"enabled": False}``).
+
+    ## State
+
+    ``get_state()``/``set_state()`` snapshot and restore the env exactly (random streams
+    included); the env pickles.
+
+    ## Version History
+
+    * v0: first release.
+    """
+
+    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 10}
+
+    def __init__(self, render_mode: Optional[str] = None, **config: Any) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            from accd_gym.errors import ConfigError
+
+            raise ConfigError(
+                f"invalid config: `render_mode` = {render_mode!r} is outside the allowed range {self.metadata['render_modes']} or None"
+            )
+        self.render_mode = render_mode
+        self._config = env_config(config)
+        self.metadata = dict(self.metadata, render_fps=1.0 / self._config["agent_step"])
+        self._core = _core.BatchEnv(config_json(self._config), 1, random_seed(), "next_step", 1)
+        self.observation_space = observation_space()
+        self.action_space = action_space()
+        self._needs_reset = True
+        self._seeded = False
+        self._viewer = None
+
+    @property
+    def config(self) -> dict[str, Any]:
+        """The full configuration (defaults filled in)."""
+        return json.loads(json.dumps(self._config))
+
+    def reset(
+        self, *, seed: Optional[int] = None, options: Optional[dict[str, Any]] = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Starts a new episode; returns ``(observation, info)`` (info: ``wake_seed``, seeds)."""
+        super().reset(seed=seed)
+        wake_options(self._core, options)
+        if seed is None and not self._seeded:
+            seed = random_seed()
+        obs, wake = self._core.reset(seed)
+        self._seeded = True
+        self._needs_reset = False
+        info = {"wake_seed": int(wake[0]), "seeds": self._core.episode_seeds(0)}
+        if self.render_mode == "human":
+            self.render()
+        return obs[0].copy(), info
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """One agent step; returns ``(observation, reward, terminated, truncated, info)``."""
+        if self._needs_reset:
+            raise gym.error.ResetNeeded("call reset() before step() (at the start and after an episode ends)")
+        a = check_actions(action, 1)
+        obs, reward, terminated, truncated, _final, info, wake, _reset = self._core.step(a)
+        term, trunc = bool(terminated[0]), bool(truncated[0])
+        self._needs_reset = term or trunc
+        out_info = info_dict(info[0], int(wake[0]))
+        if out_info["diverged"]:
+            out_info["divergence"] = self._core.divergence(0)
+        if self.render_mode == "human":
+            self.render()
+        return obs[0].copy(), float(reward[0]), term, trunc, out_info
+
+    def render(self) -> Optional[np.ndarray]:
+        """The current state as an RGB array (``rgb_array``) or in a window (``human``)."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
+            return None
+        from accd_gym.render import HumanViewer, render_frame
+
+        frame = render_frame(self._core.render_data(0))
+        if self.render_mode == "rgb_array":
+            return frame
+        if self._viewer is None:
+            self._viewer = HumanViewer()
+        self._viewer.show(frame, self.metadata["render_fps"])
+        return None
+
+    def close(self) -> None:
+        """Closes the window of ``human`` rendering, if any."""
+        if self._viewer is not None:
+            self._viewer.close()
+            self._viewer = None
+
+    def get_state(self) -> bytes:
+        """The env's exact state (physics, random streams, episode bookkeeping) as bytes."""
+        return bytes([self._needs_reset, self._seeded]) + self._core.get_state()
+
+    def set_state(self, state: bytes) -> None:
+        """Restores a state from :meth:`get_state` of an env with the same configuration."""
+        from accd_gym.errors import StateError
+
+        if len(state) < 2 or state[0] > 1 or state[1] > 1:
+            raise StateError("not a state from InAirCaptureEnv.get_state()")
+        self._core.set_state(state[2:])
+        self._needs_reset, self._seeded = bool(state[0]), bool(state[1])
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {
+            "render_mode": self.render_mode,
+            "config": self._config,
+            "state": self.get_state(),
+            "np_random": self._np_random,
+        }
+
+    def __setstate__(self, d: dict[str, Any]) -> None:
+        self.__init__(render_mode=d["render_mode"], **d["config"])
+        self.set_state(d["state"])
+        self._np_random = d["np_random"]

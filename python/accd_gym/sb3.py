@@ -1,0 +1,176 @@
+"""The native stable-baselines3 VecEnv: ``accd_gym.AccdVecEnv(num_envs=N, **config)``."""
+
+from __future__ import annotations
+
+import json
+from typing import Any, Optional, Sequence, Union
+
+import numpy as np
+from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
+
+from accd_gym import _core
+from accd_gym.config import config_json, env_config
+from accd_gym.errors import ConfigError
+from accd_gym.task import (
+    action_space,
+    check_actions,
+    info_dict,
+    observation_space,
+    random_seed,
+    wake_options,
+)
+
+
+class AccdVecEnv(VecEnv):
+    """``num_envs`` In-Air Capturing episodes as a stable-baselines3 ``VecEnv``, stepped by Rust.
+
+    The task is that of :class:`accd_gym.env.InAirCaptureEnv` (see its docstring for the
+    observation, action, reward and episode-end tables). SB3 conventions:
+
+    * same-step autoreset: when an episode ends, ``step_wait`` returns the next episode's first
+      observation, ``done=True``, and ``infos[i]["terminal_observation"]`` (a copy of the ended
+      episode's last observation) and ``infos[i]["TimeLimit.truncated"]`` (True when the capture
+      window ran out without a termination);
+    * ``seed(s)`` and ``set_options(...)`` apply at the next ``reset()``; env ``i`` then draws its
+      episodes from ``(s, i, episode)``, automatic resets included; wake options (``wake_seed``,
+      ``wake_seeds``) persist over later resets;
+    * rewards are float32, dones bool, infos a list of dicts (``time``, ``distance``,
+      ``relative_speed``, ``peak_tension``, ``captured``, ``overload``, ``envelope_exit``,
+      ``diverged``, ``episode_steps``, ``wake_seed``).
+
+    Observations are written by Rust into numpy arrays in place (two sets, used alternately: an
+    array stays valid through the next step, as SB3's rollout collection needs); the GIL is
+    released while the envs step on ``num_threads`` threads (0: one per core). Works under
+    ``VecMonitor`` and ``VecNormalize``.
+    """
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        *,
+        seed: Optional[int] = None,
+        num_threads: int = 0,
+        render_mode: Optional[str] = None,
+        **config: Any,
+    ) -> None:
+        if render_mode not in (None, "rgb_array"):
+            raise ConfigError(
+                f"invalid config: `render_mode` = {render_mode!r} is outside the allowed range 'rgb_array' or None"
+            )
+        self.render_mode = render_mode
+        self._config = env_config(config)
+        base = random_seed() if seed is None else int(seed)
+        self._core = _core.BatchEnv(config_json(self._config), int(num_envs), base, "same_step", int(num_threads))
+        self._actions: Optional[np.ndarray] = None
+        self._base_seed: Optional[int] = None if seed is None else base
+        self._pending_options: dict[str, Any] = {}
+        super().__init__(self._core.num_envs, observation_space(), action_space())
+        self.metadata["render_fps"] = 1.0 / self._config["agent_step"]
+
+    @property
+    def config(self) -> dict[str, Any]:
+        """The full configuration (defaults filled in)."""
+        return json.loads(json.dumps(self._config))
+
+    @property
+    def num_threads(self) -> int:
+        """Threads stepping the envs."""
+        return self._core.num_threads
+
+    def seed(self, seed: Optional[int] = None) -> Sequence[Optional[int]]:
+        """Seeds the envs at the next ``reset()``: env ``i`` gets base ``seed`` and index ``i``."""
+        self._base_seed = random_seed() if seed is None else int(seed)
+        return [self._base_seed] * self.num_envs
+
+    def set_options(self, options: Optional[Union[list[dict], dict]] = None) -> None:
+        """Wake options (``wake_seed``, ``wake_seeds``) applied at the next ``reset()``."""
+        if isinstance(options, list):
+            if any(o != options[0] for o in options):
+                raise ConfigError("invalid config: per-env options differ; AccdVecEnv takes one options dict for all envs")
+            options = options[0] if options else None
+        self._pending_options = dict(options or {})
+
+    def reset(self) -> np.ndarray:
+        """Starts new episodes in every env (with the pending seed and options)."""
+        wake_options(self._core, self._pending_options)
+        self._pending_options = {}
+        obs, wake = self._core.reset(self._base_seed)
+        self._base_seed = None
+        self.reset_infos = [{"wake_seed": int(w)} for w in wake]
+        return obs
+
+    def step_async(self, actions: np.ndarray) -> None:
+        """Stores the actions ((num_envs, 4); checked: finite, right shape)."""
+        self._actions = check_actions(actions, self.num_envs)
+
+    def step_wait(self) -> VecEnvStepReturn:
+        """Steps every env with the stored actions; see the class docs for the returns."""
+        if self._actions is None:
+            raise RuntimeError("step_wait() without step_async()")
+        obs, reward, terminated, truncated, final_obs, info, wake, _ = self._core.step(self._actions)
+        self._actions = None
+        dones = terminated | truncated
+        infos = [info_dict(info[i], int(wake[i])) for i in range(self.num_envs)]
+        for i in np.flatnonzero(dones):
+            infos[i]["terminal_observation"] = final_obs[i].copy()
+            infos[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
+            if infos[i]["diverged"]:
+                infos[i]["divergence"] = self._core.divergence(int(i))
+        return obs, reward.astype(np.float32), dones.copy(), infos
+
+    def close(self) -> None:
+        """Nothing to release: the Rust core frees its memory and threads when dropped."""
+
+    def _indices(self, indices: VecEnvIndices) -> list[int]:
+        if indices is None:
+            return list(range(self.num_envs))
+        if isinstance(indices, int):
+            return [indices]
+        return list(indices)
+
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        """The attribute of this env (the same for every index), e.g. ``render_mode``."""
+        return [getattr(self, attr_name) for _ in self._indices(indices)]
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        """Sets an attribute of this env (shared by every index)."""
+        setattr(self, attr_name, value)
+
+    def env_method(self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **method_kwargs: Any) -> list[Any]:
+        """Calls a method of this env once per index."""
+        return [getattr(self, method_name)(*method_args, **method_kwargs) for _ in self._indices(indices)]
+
+    def env_is_wrapped(self, wrapper_class: type, indices: VecEnvIndices = None) -> list[bool]:
+        """False: the native envs are never wrapped by gymnasium wrappers."""
+        return [False for _ in self._indices(indices)]
+
+    def get_images(self) -> Sequence[Optional[np.ndarray]]:
+        """An RGB picture of every env (``render_mode="rgb_array"``)."""
+        if self.render_mode != "rgb_array":
+            return [None for _ in range(self.num_envs)]
+        from accd_gym.render import render_frame
+
+        return [render_frame(self._core.render_data(i)) for i in range(self.num_envs)]
+
+    def get_state(self) -> bytes:
+        """Every env's exact state (physics, random streams, seeds, counters) as bytes."""
+        return self._core.get_state()
+
+    def set_state(self, state: bytes) -> None:
+        """Restores a state from :meth:`get_state` of an env with the same config and size."""
+        self._core.set_state(state)
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {
+            "num_envs": self.num_envs,
+            "num_threads": self._core.num_threads,
+            "render_mode": self.render_mode,
+            "config": self._config,
+            "state": self.get_state(),
+        }
+
+    def __setstate__(self, d: dict[str, Any]) -> None:
+        self.__init__(d["num_envs"], num_threads=d["num_threads"], render_mode=d["render_mode"], **d["config"])
+        self.set_state(d["state"])
+
+
