@@ -105,9 +105,9 @@ def test_wake_seed_can_be_fixed_alone_and_persists():
     env = gym.make(ENV_ID, **QUICK).unwrapped
     _, info = env.reset(seed=1, options={"wake_seed": 1_000_000_007})
     assert info["wake_seed"] == 1_000_000_007
-    seeds = info["seeds"]
+    seeds = env.episode_seeds()
     _, info = env.reset()
-    assert info["wake_seed"] == 1_000_000_007 and info["seeds"]["initial"] != seeds["initial"]
+    assert info["wake_seed"] == 1_000_000_007 and env.episode_seeds()["initial"] != seeds["initial"]
     _, info = env.reset(options={"wake_seed": None})
     assert info["wake_seed"] in accd_gym.TRAINING_WAKE_SEEDS
     with pytest.raises(accd_gym.ConfigError, match="wake_sed"):

@@ -156,7 +156,7 @@ class InAirCaptureEnv(gym.Env):
     def reset(
         self, *, seed: Optional[int] = None, options: Optional[dict[str, Any]] = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
-        """Starts a new episode; returns ``(observation, info)`` (info: ``wake_seed``, seeds)."""
+        """Starts a new episode; returns ``(observation, info)`` (info: ``wake_seed``)."""
         super().reset(seed=seed)
         wake_options(self._core, options)
         if seed is None and not self._seeded:
@@ -164,7 +164,7 @@ class InAirCaptureEnv(gym.Env):
         obs, wake = self._core.reset(seed)
         self._seeded = True
         self._needs_reset = False
-        info = {"wake_seed": int(wake[0]), "seeds": self._core.episode_seeds(0)}
+        info = {"wake_seed": int(wake[0])}
         if self.render_mode == "human":
             self.render()
         return obs[0].copy(), info
@@ -183,6 +183,10 @@ class InAirCaptureEnv(gym.Env):
         if self.render_mode == "human":
             self.render()
         return obs[0].copy(), float(reward[0]), term, trunc, out_info
+
+    def episode_seeds(self) -> dict[str, int]:
+        """The current episode's seeds: ``{"initial", "wake", "rlv"}`` (64-bit)."""
+        return self._core.episode_seeds(0)
 
     def render(self) -> Optional[np.ndarray]:
         """The current state as an RGB array (``rgb_array``) or in a window (``human``)."""

@@ -1,13 +1,15 @@
-//! Prints an episode's outcomes step by step (for looking at the task's behaviour).
+//! Times agent steps of one episode under several air models (for profiling the task's hot path):
+//! `cargo run --release -p accd-sim --example episode_probe [steps]`.
 use std::sync::Arc;
 
-use accd_sim::{EnvConfig, Episode, Equilibrium, Seeds};
+use accd_sim::{Episode, EnvConfig, Equilibrium, Seeds};
 
-fn main() {
-    let config = Arc::new(EnvConfig::default());
-    let t = std::time::Instant::now();
+fn time(label: &str, config: EnvConfig, steps: usize) {
+    let mut config = config;
+    config.boom.capture_radius = 1e-6;
+    config.capture_window = 1000.0;
+    let config = Arc::new(config);
     let eq = Arc::new(Equilibrium::settle(&config).unwrap());
-    eprintln!("settle {:?}: position {:?}", t.elapsed(), eq.position);
     let mut ep = Episode::new(
         config,
         eq,
@@ -18,17 +20,27 @@ fn main() {
         },
     )
     .unwrap();
-    eprintln!("obs0 {:?}", ep.observation());
     let t = std::time::Instant::now();
-    for k in 0..700 {
-        let o = ep.step(&[0.0; 4]).unwrap();
-        if k % 50 == 0 || o.terminated || o.truncated {
-            eprintln!("{k}: {o:?}");
-        }
-        if o.terminated || o.truncated {
-            eprintln!("obs {:?} div {:?}", ep.observation(), ep.divergence());
-            break;
-        }
+    for k in 0..steps {
+        let a = [0.1 * ((k % 7) as f32 - 3.0); 4];
+        let o = ep.step(&a).unwrap();
+        assert!(!o.terminated, "{o:?}");
     }
-    eprintln!("episode {:?}", t.elapsed());
+    let per = t.elapsed().as_secs_f64() / (steps * 10) as f64;
+    println!("{label:<28} {:.2} us per physics step", per * 1e6);
+}
+
+fn main() {
+    let steps: usize = std::env::args()
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(2000);
+    let mut calm = EnvConfig::default();
+    calm.wake.enabled = false;
+    calm.turbulence.wake_turbulence = false;
+    time("no wake, no turbulence", calm, steps);
+    let mut mean = EnvConfig::default();
+    mean.turbulence.wake_turbulence = false;
+    time("mean wake", mean, steps);
+    time("mean wake + turbulence", EnvConfig::default(), steps);
 }

@@ -1,0 +1,110 @@
+"""Steps per second of the Python envs: the single gymnasium env, gymnasium's SyncVectorEnv of
+single envs, the native gymnasium VectorEnv and the native stable-baselines3 VecEnv, for
+N = 1, 16, 256 envs. One agent step is ``agent_step / tether.time_step`` physics steps (10 by
+default). Random actions are drawn before timing; episodes autoreset (their resets are timed too).
+
+Usage: python scripts/bench_envs.py [--seconds S] [--threads T] [--json OUT]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+
+import gymnasium as gym
+import numpy as np
+
+import accd_gym
+
+ENV_ID = "accd_gym/InAirCapture-v0"
+
+
+def timed(step, actions, seconds: float) -> tuple[float, int]:
+    """Agent steps per env per second: runs ``step`` over ``actions`` (cycled) for ``seconds``."""
+    step(actions[0])
+    n, t0 = 0, time.perf_counter()
+    while True:
+        step(actions[n % len(actions)])
+        n += 1
+        elapsed = time.perf_counter() - t0
+        if elapsed >= seconds:
+            return n / elapsed, n
+
+
+def bench_single(seconds: float) -> float:
+    """The single env through ``gymnasium.make`` (with its checker wrappers), manual resets."""
+    env = gym.make(ENV_ID)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-1, 1, (256, 4)).astype(np.float32)
+
+    def step(a):
+        _, _, term, trunc, _ = env.step(a)
+        if term or trunc:
+            env.reset()
+
+    return timed(step, actions, seconds)[0]
+
+
+def bench_sync(n: int, seconds: float) -> float:
+    """gymnasium's SyncVectorEnv of ``n`` single envs (Python loop over envs)."""
+    env = gym.make_vec(ENV_ID, num_envs=n, vectorization_mode="sync")
+    env.reset(seed=0)
+    actions = np.random.default_rng(0).uniform(-1, 1, (64, n, 4)).astype(np.float32)
+    return timed(env.step, actions, seconds)[0] * n
+
+
+def bench_native(n: int, seconds: float, threads: int) -> float:
+    """The native gymnasium VectorEnv (``gymnasium.make_vec``)."""
+    env = gym.make_vec(ENV_ID, num_envs=n, num_threads=threads)
+    env.reset(seed=0)
+    actions = np.random.default_rng(0).uniform(-1, 1, (64, n, 4)).astype(np.float32)
+    return timed(env.step, actions, seconds)[0] * n
+
+
+def bench_sb3(n: int, seconds: float, threads: int) -> float:
+    """The native stable-baselines3 VecEnv (builds an info dict per env per step)."""
+    env = accd_gym.AccdVecEnv(num_envs=n, seed=0, num_threads=threads)
+    env.reset()
+    actions = np.random.default_rng(0).uniform(-1, 1, (64, n, 4)).astype(np.float32)
+
+    def step(a):
+        env.step_async(a)
+        env.step_wait()
+
+    return timed(step, actions, seconds)[0] * n
+
+
+def main() -> None:
+    """Runs every case and prints a markdown table (and writes JSON with ``--json``)."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=5.0, help="time per case, s (default 5)")
+    parser.add_argument("--threads", type=int, default=0, help="threads of the native envs (0: one per core)")
+    parser.add_argument("--json", default=None, help="write the results to this JSON file")
+    args = parser.parse_args()
+    substeps = round(accd_gym.default_config()["agent_step"] / accd_gym.default_config()["tether"]["time_step"])
+    rows = []
+
+    def record(name: str, n: int, rate: float) -> None:
+        rows.append({"env": name, "num_envs": n, "agent_steps_per_s": rate, "physics_steps_per_s": rate * substeps})
+        print(f"| {name} | {n} | {rate:,.0f} | {rate * substeps:,.0f} |", flush=True)
+
+    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, python {platform.python_version()}")
+    print("| env | N | agent steps/s | physics steps/s |\n|---|---|---|---|")
+    record("single env, gymnasium.make", 1, bench_single(args.seconds))
+    for n in (1, 16, 256):
+        record("native VectorEnv (gymnasium.make_vec)", n, bench_native(n, args.seconds, args.threads))
+    for n in (16,):
+        record("SyncVectorEnv of single envs", n, bench_sync(n, args.seconds))
+    for n in (1, 16, 256):
+        record("native SB3 AccdVecEnv", n, bench_sb3(n, args.seconds, args.threads))
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump({"substeps": substeps, "rows": rows}, f, indent=2)
+
+
+if __name__ == "__main__":
+    main()
