@@ -2,7 +2,7 @@
 //! `cargo run --release -p accd-sim --example episode_probe [steps]`.
 use std::sync::Arc;
 
-use accd_sim::{Episode, EnvConfig, Equilibrium, Seeds};
+use accd_sim::{EnvConfig, Episode, Equilibrium, Seeds};
 
 fn time(label: &str, config: EnvConfig, steps: usize) {
     let mut config = config;

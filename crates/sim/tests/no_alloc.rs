@@ -109,3 +109,39 @@ fn capture_episode_steps_without_allocating() {
         after - before
     );
 }
+
+#[test]
+fn rl_episodes_step_and_reset_without_allocating() {
+    use std::sync::Arc;
+    let config = Arc::new(accd_sim::EnvConfig {
+        capture_window: 1.0,
+        initial: accd_sim::task::InitialConfig {
+            settle_time: 10.0,
+            ..Default::default()
+        },
+        ..Default::default()
+    });
+    let eq = Arc::new(accd_sim::Equilibrium::settle(&config).unwrap());
+    let seeds = |k: u64| accd_sim::Seeds {
+        initial: k,
+        wake: k + 1,
+        rlv: k + 2,
+    };
+    let mut episode = accd_sim::Episode::new(config, eq, seeds(0)).unwrap();
+    episode.step(&[0.0; 4]).unwrap();
+    let before = allocations();
+    for k in 0..100u64 {
+        let a = (k as f32 * 0.3).sin();
+        let o = episode.step(&[a, a, -a, 0.2]).unwrap();
+        if o.terminated || o.truncated {
+            episode.reset(seeds(k)).unwrap();
+        }
+    }
+    let after = allocations();
+    assert_eq!(
+        after - before,
+        0,
+        "{} allocations in 100 agent steps",
+        after - before
+    );
+}

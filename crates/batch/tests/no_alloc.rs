@@ -1,0 +1,85 @@
+//! Stepping a batch allocates nothing on the heap, on any thread (autoresets included).
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use accd_batch::{info, Autoreset, BatchEnv, StepBuffers};
+use accd_sim::{EnvConfig, ACT_DIM, OBS_DIM};
+
+struct Counting;
+
+/// Allocations by every thread (the pool's workers included); this binary has one test only.
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn batch_steps_allocate_nothing() {
+    for mode in [Autoreset::SameStep, Autoreset::NextStep] {
+        let config = EnvConfig {
+            capture_window: 0.5,
+            initial: accd_sim::task::InitialConfig {
+                settle_time: 10.0,
+                ..Default::default()
+            },
+            ..EnvConfig::default()
+        };
+        let n = 6;
+        let mut env = BatchEnv::new(config, n, 3, mode, 2).unwrap();
+        let actions: Vec<f32> = (0..n * ACT_DIM)
+            .map(|k| ((k % 5) as f32 - 2.0) / 3.0)
+            .collect();
+        let mut obs = vec![0.0; n * OBS_DIM];
+        let mut final_obs = vec![0.0; n * OBS_DIM];
+        let mut reward = vec![0.0; n];
+        let mut terminated = vec![false; n];
+        let mut truncated = vec![false; n];
+        let mut infos = vec![0.0; n * info::DIM];
+        let mut wake = vec![0; n];
+        let mut reset = vec![false; n];
+        let mut step = |env: &mut BatchEnv| {
+            env.step(
+                &actions,
+                StepBuffers {
+                    obs: &mut obs,
+                    reward: &mut reward,
+                    terminated: &mut terminated,
+                    truncated: &mut truncated,
+                    final_obs: &mut final_obs,
+                    info: &mut infos,
+                    wake_seed: &mut wake,
+                    autoreset: &mut reset,
+                },
+            )
+            .unwrap()
+        };
+        step(&mut env);
+        let before = ALLOCATIONS.load(Ordering::SeqCst);
+        // 30 steps of 5-step episodes: every env resets several times.
+        for _ in 0..30 {
+            step(&mut env);
+        }
+        let after = ALLOCATIONS.load(Ordering::SeqCst);
+        assert_eq!(
+            after - before,
+            0,
+            "{mode:?}: {} allocations",
+            after - before
+        );
+    }
+}
