@@ -291,3 +291,12 @@ def test_a_diverging_episode_ends_with_a_flag_not_nan():
         if term:
             break
     assert info["diverged"] and "diverged" in info["divergence"] or "beyond" in info["divergence"]
+
+
+def test_environment_doc_carries_the_cores_observation_table():
+    from pathlib import Path
+
+    from accd_gym.task import observation_table_markdown
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "environment.md").read_text()
+    assert observation_table_markdown() in doc
