@@ -248,8 +248,11 @@ def test_rgb_array_renders_without_a_display(monkeypatch):
 def test_bad_input_gets_clear_errors():
     env = gym.make(ENV_ID, **QUICK).unwrapped
     env.reset(seed=0)
-    with pytest.raises(ValueError, match="env 0"):
+    with pytest.raises(ValueError, match="env 0") as e:
         env.step(np.array([0, np.nan, 0, 0], np.float32))
+    assert isinstance(e.value, accd_gym.AccdError)
+    with pytest.raises(accd_gym.StateError, match="numbers"):
+        env.step(["a", "b", "c", "d"])
     with pytest.raises(ValueError, match="shape"):
         env.step(np.zeros(3, np.float32))
     vec = gym.make_vec(ENV_ID, num_envs=3, **QUICK)

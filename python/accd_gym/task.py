@@ -53,17 +53,23 @@ def info_dict(info_row: np.ndarray, wake_seed: int) -> dict[str, Any]:
 def check_actions(actions: Any, num_envs: int) -> np.ndarray:
     """Actions as a C-contiguous float32 array of shape (num_envs, ACT_DIM).
 
-    Raises ValueError for a wrong shape or non-finite values (naming the env index).
+    Raises :class:`~accd_gym.StateError` (a ValueError) for a wrong shape or non-finite values
+    (naming the env index).
     """
-    a = np.ascontiguousarray(actions, dtype=np.float32)
+    from accd_gym.errors import StateError
+
+    try:
+        a = np.ascontiguousarray(actions, dtype=np.float32)
+    except (TypeError, ValueError) as e:
+        raise StateError(f"actions must be numbers, shape ({num_envs}, {ACT_DIM}): {e}") from None
     if a.shape == (ACT_DIM,) and num_envs == 1:
         a = a.reshape(1, ACT_DIM)
     if a.shape != (num_envs, ACT_DIM):
-        raise ValueError(f"actions have shape {np.shape(actions)}, expected ({num_envs}, {ACT_DIM})")
+        raise StateError(f"actions have shape {np.shape(actions)}, expected ({num_envs}, {ACT_DIM})")
     bad = ~np.isfinite(a)
     if bad.any():
         env, component = map(int, np.argwhere(bad)[0])
-        raise ValueError(
+        raise StateError(
             f"non-finite action {a[env, component]} for env {env} (component {component}): "
             "actions must be finite (values outside [-1, 1] are clipped)"
         )
