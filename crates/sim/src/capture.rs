@@ -132,12 +132,7 @@ impl CaptureConfig {
 
     /// Parses JSON (unknown keys are errors) and validates.
     pub fn from_json(text: &str) -> Result<Self> {
-        let config: CaptureConfig =
-            serde_json::from_str(text).map_err(|e| SimError::InvalidConfig {
-                field: "(document)".into(),
-                value: String::new(),
-                allowed: e.to_string(),
-            })?;
+        let config: CaptureConfig = parse_json(text, "(document)")?;
         config.validate()?;
         Ok(config)
     }
@@ -149,6 +144,16 @@ impl CaptureConfig {
             ..self.tether.clone()
         }
     }
+}
+
+/// Parses a JSON config document; serde's message (unknown field, wrong type, with the line and
+/// column) becomes an [`SimError::InvalidConfig`] for `what`.
+pub(crate) fn parse_json<T: serde::de::DeserializeOwned>(text: &str, what: &str) -> Result<T> {
+    serde_json::from_str(text).map_err(|e| SimError::InvalidConfig {
+        field: what.into(),
+        value: String::new(),
+        allowed: e.to_string(),
+    })
 }
 
 /// The seeds of an episode's independent random streams.

@@ -277,17 +277,12 @@ impl RewardConfig {
         ] {
             check(name, v, 0.0, 1e6, "[0, 1e6]")?;
         }
-        if !(self.proximity_scale.is_finite()
-            && self.proximity_scale > 0.0
-            && self.proximity_scale <= 1e4)
-        {
-            return Err(SimError::invalid_config(
-                "reward.proximity_scale",
-                self.proximity_scale,
-                "(0, 1e4] m",
-            ));
-        }
-        Ok(())
+        check_positive(
+            "reward.proximity_scale",
+            self.proximity_scale,
+            1e4,
+            "(0, 1e4] m",
+        )
     }
 }
 
@@ -323,50 +318,34 @@ impl Default for LimitsConfig {
 
 impl LimitsConfig {
     fn validate(&self) -> Result<()> {
-        if !(self.overload_fraction.is_finite()
-            && self.overload_fraction > 0.0
-            && self.overload_fraction <= 1.0)
-        {
-            return Err(SimError::invalid_config(
+        for (name, v, hi, allowed) in [
+            (
                 "limits.overload_fraction",
                 self.overload_fraction,
+                1.0,
                 "(0, 1]",
-            ));
-        }
-        if !(self.max_distance.is_finite() && self.max_distance > 0.0 && self.max_distance <= 1e4) {
-            return Err(SimError::invalid_config(
-                "limits.max_distance",
-                self.max_distance,
-                "(0, 1e4] m",
-            ));
-        }
-        if !(self.max_tilt_deg.is_finite() && self.max_tilt_deg > 0.0 && self.max_tilt_deg <= 180.0)
-        {
-            return Err(SimError::invalid_config(
+            ),
+            ("limits.max_distance", self.max_distance, 1e4, "(0, 1e4] m"),
+            (
                 "limits.max_tilt_deg",
                 self.max_tilt_deg,
+                180.0,
                 "(0, 180] deg",
-            ));
-        }
-        if !(self.max_body_rate.is_finite()
-            && self.max_body_rate > 0.0
-            && self.max_body_rate <= 1e3)
-        {
-            return Err(SimError::invalid_config(
+            ),
+            (
                 "limits.max_body_rate",
                 self.max_body_rate,
+                1e3,
                 "(0, 1000] rad/s",
-            ));
-        }
-        if !(self.max_roll_rate.is_finite()
-            && self.max_roll_rate > 0.0
-            && self.max_roll_rate <= 1e3)
-        {
-            return Err(SimError::invalid_config(
+            ),
+            (
                 "limits.max_roll_rate",
                 self.max_roll_rate,
+                1e3,
                 "(0, 1000] rad/s",
-            ));
+            ),
+        ] {
+            check_positive(name, v, hi, allowed)?;
         }
         Ok(())
     }
@@ -531,6 +510,15 @@ impl EnvConfig {
     }
 }
 
+/// `v` in (0, hi].
+fn check_positive(name: &str, v: f64, hi: f64, allowed: &str) -> Result<()> {
+    if !(v.is_finite() && v > 0.0 && v <= hi) {
+        return Err(SimError::invalid_config(name, v, allowed));
+    }
+    Ok(())
+}
+
+/// `v` in [lo, hi].
 fn check(name: &str, v: f64, lo: f64, hi: f64, allowed: &str) -> Result<()> {
     if !(v.is_finite() && v >= lo && v <= hi) {
         return Err(SimError::invalid_config(name, v, allowed));
