@@ -54,8 +54,9 @@ def render_frame(data: Mapping[str, Any], width: int = 640, height: int = 480) -
             ax.set_ylabel(label, fontsize=7)
             ax.tick_params(labelsize=6)
             ax.grid(True, lw=0.3)
-    axes[0][0].legend(fontsize=5, loc="lower left")
-    fig.tight_layout()
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=6, fontsize=6, frameon=False)
+    fig.tight_layout(rect=(0.0, 0.04, 1.0, 1.0))
     canvas.draw()
     image = np.asarray(canvas.buffer_rgba())[..., :3].copy()
     return image
