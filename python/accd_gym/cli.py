@@ -85,7 +85,7 @@ def _env_overrides(text: Optional[str]) -> dict:
 def _evaluate(args: argparse.Namespace) -> int:
     from accd_gym import evaluation
 
-    results = evaluation.evaluate(args.policy, args.episodes, args.out, num_envs=args.num_envs,
+    results = evaluation.evaluate(args.policy, args.episodes, args.out, num_envs=args.num_envs, num_threads=args.num_threads,
                                   config=_env_overrides(args.env), progress=not args.quiet)
     print((Path(args.out) / "summary.md").read_text())
     print(f"wrote {Path(args.out) / 'results.json'}, summary.md, trajectories.png, miss_distance_cdf.png")
@@ -96,7 +96,7 @@ def _rollout(args: argparse.Namespace) -> int:
     from accd_gym import evaluation
 
     policy = evaluation.load_policy(args.policy, seed=args.seed)
-    eps = evaluation.run_episodes(policy, args.episodes, seed=args.seed, num_envs=args.num_envs,
+    eps = evaluation.run_episodes(policy, args.episodes, seed=args.seed, num_envs=args.num_envs, num_threads=args.num_threads,
                                   config=_env_overrides(args.env), progress=not args.quiet, desc=args.policy)
     s = evaluation.summarize(eps)
     lo, hi = s["capture_rate_ci95"]
@@ -143,6 +143,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--episodes", type=_positive("--episodes"), default=100, help="episodes per policy (default 100)")
     p.add_argument("--out", default="runs/eval", help="output folder (default: runs/eval)")
     p.add_argument("--num-envs", type=_positive("--num-envs"), default=16, help="parallel episodes (default 16)")
+    p.add_argument("--num-threads", type=int, default=0, help="threads stepping the envs (default 0: one per core)")
     p.add_argument("--env", help="environment config overrides as JSON, e.g. '{\"capture_window\": 30}'")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_evaluate)
@@ -151,6 +152,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--episodes", type=_positive("--episodes"), default=8, help="episodes (default 8)")
     p.add_argument("--seed", type=int, default=0, help="base seed (training wake seeds are drawn from it)")
     p.add_argument("--num-envs", type=_positive("--num-envs"), default=8, help="parallel episodes (default 8)")
+    p.add_argument("--num-threads", type=int, default=0, help="threads stepping the envs (default 0: one per core)")
     p.add_argument("--env", help="environment config overrides as JSON")
     p.add_argument("--json", action="store_true", help="also print every episode's metrics as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
