@@ -69,7 +69,7 @@ def test_wilson_interval_matches_the_closed_form():
     assert wilson_interval(0, 10) == pytest.approx((0.0, 0.27753), abs=1e-4)
     assert wilson_interval(5, 10) == pytest.approx((0.23659, 0.76341), abs=1e-4)
     lo, hi = wilson_interval(10, 10)
-    assert hi == 1.0 and lo == pytest.approx(0.72247, abs=1e-4)
+    assert hi == pytest.approx(1.0) and lo == pytest.approx(0.72247, abs=1e-4)
 
 
 def test_run_episodes_on_held_out_seeds_records_every_episode():
@@ -105,7 +105,7 @@ def test_rollout_command_with_each_baseline(name, capsys):
     assert rc == 0
     out = capsys.readouterr().out
     assert f"{name}: " in out and "captured" in out
-    doc = json.loads(out[out.index("{"):])
+    doc = json.loads(out[out.index("\n{") + 1:])
     assert len(doc["episodes"]) == 3 and all(1 <= e["steps"] <= 50 for e in doc["episodes"])
 
 
