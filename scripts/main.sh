@@ -5,7 +5,7 @@
 #
 #   bash scripts/main.sh [OUT] [--full]      OUT defaults to runs/main
 #   ACCD_FULL=1 / --full   the full-length run: training/ppo.json's total_timesteps, 1000 episodes
-#   ACCD_TIMESTEPS=N       training steps of the short run (default 400000)
+#   ACCD_TIMESTEPS=N       training steps of the short run (default 1000000)
 #   ACCD_EPISODES=K        evaluation episodes per policy of the short run (default 200)
 #   ACCD_VENV=/path        the virtual environment to use (default .venv)
 #
@@ -30,7 +30,7 @@ if [ "$FULL" = "1" ]; then
   TRAIN_ARGS=()
   EPISODES=1000
 else
-  TRAIN_ARGS=(--timesteps "${ACCD_TIMESTEPS:-400000}")
+  TRAIN_ARGS=(--timesteps "${ACCD_TIMESTEPS:-1000000}")
   EPISODES="${ACCD_EPISODES:-200}"
 fi
 echo "main: training PPO (training/ppo.json ${TRAIN_ARGS[*]:-full length}) into $OUT/ppo"
