@@ -41,6 +41,73 @@ def _export_aero(args: argparse.Namespace) -> int:
     return 0
 
 
+def _train(args: argparse.Namespace) -> int:
+    from accd_gym import training
+
+    cfg = training.load_config(args.config, seed=args.seed)
+    meta = training.train(cfg, args.out, timesteps=args.timesteps, progress=not args.quiet)
+    print(f"trained {meta['algo'].upper()} for {meta['timesteps']} steps in {meta['wall_time_s']} s "
+          f"({meta['steps_per_s']} steps/s); wrote {Path(args.out) / 'final_model.zip'}, "
+          f"{Path(args.out) / 'vecnormalize.pkl'}, TensorBoard logs in {Path(args.out) / 'tb'}")
+    return 0
+
+
+def _positive(name: str):
+    """An argparse type: an integer >= 1, with an error naming the option."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} = {text!r} is not an integer") from None
+        if value < 1:
+            raise argparse.ArgumentTypeError(f"{name} = {value} is outside the allowed range >= 1")
+        return value
+
+    return parse
+
+
+def _env_overrides(text: Optional[str]) -> dict:
+    """The --env JSON object (environment config overrides)."""
+    from accd_gym.errors import ConfigError
+
+    if not text:
+        return {}
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise ConfigError(f"invalid config: --env {text!r} is not a JSON object ({e})") from None
+    if not isinstance(value, dict):
+        raise ConfigError(f"invalid config: --env {text!r} is not a JSON object")
+    return value
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    from accd_gym import evaluation
+
+    results = evaluation.evaluate(args.policy, args.episodes, args.out, num_envs=args.num_envs, num_threads=args.num_threads,
+                                  config=_env_overrides(args.env), progress=not args.quiet)
+    print((Path(args.out) / "summary.md").read_text())
+    print(f"wrote {Path(args.out) / 'results.json'}, summary.md, trajectories.png, miss_distance_cdf.png")
+    return 0 if results["policies"] else 1
+
+
+def _rollout(args: argparse.Namespace) -> int:
+    from accd_gym import evaluation
+
+    policy = evaluation.load_policy(args.policy, seed=args.seed)
+    eps = evaluation.run_episodes(policy, args.episodes, seed=args.seed, num_envs=args.num_envs, num_threads=args.num_threads,
+                                  config=_env_overrides(args.env), progress=not args.quiet, desc=args.policy)
+    s = evaluation.summarize(eps)
+    lo, hi = s["capture_rate_ci95"]
+    print(f"{args.policy}: {s['captures']}/{s['episodes']} captured ({s['capture_rate']:.1%}, 95% CI {lo:.1%}-{hi:.1%}); "
+          f"outcomes {s['outcomes']}; median miss distance {s['miss_distance_m']['median']:.2f} m; "
+          f"mean return {s['mean_return']:.1f}")
+    if args.json:
+        print(json.dumps({"summary": s, "episodes": [e.metrics() for e in eps]}, indent=1))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``accd-gym`` and its subcommands."""
     parser = argparse.ArgumentParser(prog="accd-gym", description="accd-gym: In-Air Capturing simulation tools.")
@@ -63,6 +130,33 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("export-aero", help="write the default ACCD aerodynamic tables (JSON) to start your own")
     p.add_argument("--out", default="accd-aero.json", help="output file (default: accd-aero.json)")
     p.set_defaults(func=_export_aero)
+    p = sub.add_parser("train", help="train PPO or SAC on the capture task (stable-baselines3)")
+    p.add_argument("--config", default="training/ppo.json", help="training config, JSON (default: training/ppo.json)")
+    p.add_argument("--out", required=True, help="run folder: model, VecNormalize statistics, checkpoints, TensorBoard logs")
+    p.add_argument("--timesteps", type=_positive("--timesteps"), help="override the config's total_timesteps")
+    p.add_argument("--seed", type=int, help="override the config's seed")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_train)
+    p = sub.add_parser("evaluate", help="evaluate policies on held-out wake seeds: JSON, plots, markdown")
+    p.add_argument("--policy", action="append", required=True,
+                   help="a baseline (zero, random, guidance) or a trained model (run folder or .zip); repeatable")
+    p.add_argument("--episodes", type=_positive("--episodes"), default=100, help="episodes per policy (default 100)")
+    p.add_argument("--out", default="runs/eval", help="output folder (default: runs/eval)")
+    p.add_argument("--num-envs", type=_positive("--num-envs"), default=16, help="parallel episodes (default 16)")
+    p.add_argument("--num-threads", type=int, default=0, help="threads stepping the envs (default 0: one per core)")
+    p.add_argument("--env", help="environment config overrides as JSON, e.g. '{\"capture_window\": 30}'")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_evaluate)
+    p = sub.add_parser("rollout", help="run a policy for a few episodes headless and print a summary")
+    p.add_argument("--policy", required=True, help="a baseline (zero, random, guidance) or a trained model")
+    p.add_argument("--episodes", type=_positive("--episodes"), default=8, help="episodes (default 8)")
+    p.add_argument("--seed", type=int, default=0, help="base seed (training wake seeds are drawn from it)")
+    p.add_argument("--num-envs", type=_positive("--num-envs"), default=8, help="parallel episodes (default 8)")
+    p.add_argument("--num-threads", type=int, default=0, help="threads stepping the envs (default 0: one per core)")
+    p.add_argument("--env", help="environment config overrides as JSON")
+    p.add_argument("--json", action="store_true", help="also print every episode's metrics as JSON")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_rollout)
     return parser
 
 

@@ -1,0 +1,201 @@
+"""Built-in baseline policies: zero flaps, random flaps and a classical guidance controller.
+
+Every policy here (and :class:`accd_gym.evaluation.SB3Policy`) has the same interface:
+``predict(obs_batch) -> actions`` with ``obs_batch`` of shape (N, 25) (the observation of
+:class:`accd_gym.InAirCaptureEnv`) and actions of shape (N, 4) in [-1, 1] (flaps right, left,
+top, bottom); ``reset(mask)`` clears the internal state of the envs whose episode just ended
+(the guidance controller's integrators; the others ignore it).
+
+Signs, checked empirically on the env (``scripts/flap_signs.py``, no wake, neutral start; see
+``training/guidance_tuning.json``): a positive pitch command (both horizontal flaps +) pitches the
+nose up and the ACCD *rises* (-z in the TA frame, about 9 m in 3 s at pitch 0.3); a positive yaw
+command (both vertical flaps +) turns the nose right and the ACCD moves to starboard (+y); a
+positive roll command (``mix_flaps`` roll +) gives a positive roll rate p (right side down). The
+ACCD hangs from a swivel at its centre of gravity, so roll has almost no aerodynamic stiffness:
+a small roll command spins it up to several rad/s, which is why roll is actively stabilised.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any, Callable, Optional
+
+import numpy as np
+
+from accd_gym.errors import ConfigError
+from accd_gym.task import ACT_DIM, OBS_DIM
+
+#: Observation scales (see the observation table of :class:`accd_gym.InAirCaptureEnv`).
+_POS_SCALE = 0.05  # 1/m
+_VEL_SCALE = 0.1  # s/m
+_RATE_SCALE = 0.5  # s/rad
+
+
+def _check_obs(obs: Any) -> np.ndarray:
+    """Observations as a float64 array of shape (N, OBS_DIM); raises ValueError otherwise."""
+    o = np.asarray(obs, dtype=np.float64)
+    if o.ndim == 1:
+        o = o.reshape(1, -1)
+    if o.ndim != 2 or o.shape[1] != OBS_DIM:
+        raise ValueError(f"observations have shape {np.shape(obs)}, expected (N, {OBS_DIM})")
+    return o
+
+
+class ZeroPolicy:
+    """Neutral flaps throughout: the open-loop ACCD drifting in the wake (the 'do nothing' floor)."""
+
+    name = "zero"
+
+    def predict(self, obs: Any) -> np.ndarray:
+        """Zero flap commands for every row of ``obs`` (shape (N, 4))."""
+        return np.zeros((_check_obs(obs).shape[0], ACT_DIM), dtype=np.float32)
+
+    def reset(self, mask: Optional[np.ndarray] = None) -> None:
+        """Stateless: nothing to reset."""
+
+
+class RandomPolicy:
+    """Uniform random flap commands in [-1, 1], drawn from a seeded numpy generator."""
+
+    name = "random"
+
+    def __init__(self, seed: int = 0) -> None:
+        self.seed = int(seed)
+        self._rng = np.random.default_rng(self.seed)
+
+    def predict(self, obs: Any) -> np.ndarray:
+        """Independent uniform commands per env and flap (shape (N, 4))."""
+        n = _check_obs(obs).shape[0]
+        return self._rng.uniform(-1.0, 1.0, size=(n, ACT_DIM)).astype(np.float32)
+
+    def reset(self, mask: Optional[np.ndarray] = None) -> None:
+        """Stateless apart from the generator, which keeps running."""
+
+
+def quaternion_to_euler(q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Roll, pitch, yaw (rad; ZYX Euler angles) of body->TA quaternions ``q`` (N, 4) as w, x, y, z."""
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    roll = np.arctan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    pitch = np.arcsin(np.clip(2.0 * (w * y - z * x), -1.0, 1.0))
+    yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return roll, pitch, yaw
+
+
+@dataclass
+class GuidanceGains:
+    """Gains of :class:`GuidancePolicy` (flap commands are in units of the flap limit, 15 deg).
+
+    ``kp`` (1/m), ``kd`` (s/m), ``ki`` (1/(m s)): position, velocity and integral gains from the
+    boom-minus-capture-point error to the lateral/vertical command; ``kq`` (s/rad): pitch/yaw
+    rate damping; ``k_roll`` (1/rad), ``k_p`` (s/rad): roll attitude and roll-rate gains;
+    ``i_limit``: bound of each integrator's contribution (flap-limit units); ``dt`` (s): the
+    agent step the integrator assumes.
+    """
+
+    kp: float = 0.15
+    kd: float = 0.05
+    ki: float = 0.02
+    kq: float = 0.05
+    k_roll: float = 0.08
+    k_p: float = 0.015
+    i_limit: float = 0.5
+    dt: float = 0.1
+
+
+class GuidancePolicy:
+    """Cascaded PID guidance of the capture point onto the boom, through the flap mixing.
+
+    From the observation alone (per env):
+
+    * ``e = obs[0:3] / 0.05`` (m): boom tip minus capture point; ``ev = obs[3:6] / 0.1`` (m/s):
+      its rate; roll ``phi`` from the quaternion ``obs[12:16]``; body rates
+      ``p, q, r = obs[16:19] / 0.5`` (rad/s).
+    * Outer loop (TA frame, lateral y and vertical z only; the along-track x follows from the
+      tether geometry): a demanded force direction ``F = kp e + kd ev + ki \\int e dt`` (the
+      integral, clamped to ``i_limit / ki``, rejects the mean wake's steady push and the
+      formation offset, the role a disturbance observer plays in gain-scheduled LQR designs).
+    * Mixing into body axes (the "+" flaps roll with the body): a pitch-up command lifts along
+      ``-z_body = (0, sin phi, -cos phi)`` and a yaw-right command pushes along
+      ``y_body = (0, cos phi, sin phi)``, so
+      ``pitch = F_y sin(phi) - F_z cos(phi) - kq q`` and
+      ``yaw = F_y cos(phi) + F_z sin(phi) - kq r``.
+    * Roll stabilisation: ``roll = -k_roll phi - k_p p``.
+    * Flaps: ``mix_flaps``: [pitch + roll, pitch - roll, yaw - roll, yaw + roll], clipped to [-1, 1].
+
+    Signs (checked on the env): pitch + moves the ACCD up (-z), yaw + to starboard (+y), roll +
+    gives p > 0.
+
+    Tuning (``scripts/tune_guidance.py``, *training* wake seeds 1000..1031, base seed 7, 32
+    episodes per gain set): stage 1 (``training/guidance_tuning.json``, 27 sets of kp x kd x ki)
+    showed the velocity gain is what hurts (kd = 0.4: 19-53 % captured, flaps near saturation from
+    the turbulent relative velocity; kd = 0.15: 59-72 %); stage 2
+    (``training/guidance_tuning_stage2.json``, kp in {0.15, 0.25, 0.4} x kd in {0.05, 0.1, 0.15},
+    ki = 0.02) picked kp = 0.15, kd = 0.05, ki = 0.02, kq = 0.05: 24/32 = 75 % captured at a mean
+    |action| of 0.19. Most gain sets score 69-75 %, inside one another's confidence intervals: the
+    misses are along-track. The capture point is then within a few decimetres laterally and
+    vertically but 0.5-2 m fore/aft of the boom tip; x follows from the tether geometry (a
+    full "drag brake" flap mode moves the ACCD only about 0.1 m aft), so this law cannot remove it.
+    Roll gains (k_roll, k_p) come from a model of the measured roll response (about 95 rad/s of
+    steady roll rate per unit roll command, 0.3 s lag) placed at 5 rad/s, damping 0.8; not searched.
+    """
+
+    name = "guidance"
+
+    def __init__(self, gains: Optional[GuidanceGains] = None, **overrides: float) -> None:
+        g = asdict(gains or GuidanceGains())
+        unknown = set(overrides) - set(g)
+        if unknown:
+            raise ConfigError(f"invalid config: guidance gain(s) {sorted(unknown)} outside the allowed set {sorted(g)}")
+        g.update({k: float(v) for k, v in overrides.items()})
+        self.gains = GuidanceGains(**g)
+        self._integral: Optional[np.ndarray] = None
+
+    def reset(self, mask: Optional[np.ndarray] = None) -> None:
+        """Clears the integrators of the envs in ``mask`` (all envs when None)."""
+        if self._integral is None:
+            return
+        if mask is None:
+            self._integral[:] = 0.0
+        else:
+            self._integral[np.asarray(mask, dtype=bool)] = 0.0
+
+    def predict(self, obs: Any) -> np.ndarray:
+        """Flap commands (N, 4) in [-1, 1] for observations (N, 25); advances the integrators."""
+        o = _check_obs(obs)
+        g = self.gains
+        n = o.shape[0]
+        if self._integral is None or self._integral.shape[0] != n:
+            self._integral = np.zeros((n, 2))
+        e = o[:, 1:3] / _POS_SCALE  # y, z errors (m)
+        ev = o[:, 4:6] / _VEL_SCALE  # their rates (m/s)
+        if g.ki > 0.0:
+            bound = g.i_limit / g.ki
+            self._integral = np.clip(self._integral + e * g.dt, -bound, bound)
+        f = g.kp * e + g.kd * ev + g.ki * self._integral
+        fy, fz = f[:, 0], f[:, 1]
+        roll, _, _ = quaternion_to_euler(o[:, 12:16])
+        p, q, r = (o[:, 16:19] / _RATE_SCALE).T
+        s, c = np.sin(roll), np.cos(roll)
+        pitch = fy * s - fz * c - g.kq * q
+        yaw = fy * c + fz * s - g.kq * r
+        roll_cmd = -g.k_roll * roll - g.k_p * p
+        flaps = np.stack([pitch + roll_cmd, pitch - roll_cmd, yaw - roll_cmd, yaw + roll_cmd], axis=1)
+        return np.clip(flaps, -1.0, 1.0).astype(np.float32)
+
+
+#: Built-in baselines by name: factories taking a seed.
+BASELINES: dict[str, Callable[[int], Any]] = {
+    "zero": lambda seed: ZeroPolicy(),
+    "random": lambda seed: RandomPolicy(seed),
+    "guidance": lambda seed: GuidancePolicy(),
+}
+
+
+def make_baseline(name: str, seed: int = 0) -> Any:
+    """The built-in baseline ``name`` (one of :data:`BASELINES`); ConfigError for other names."""
+    if name not in BASELINES:
+        raise ConfigError(f"invalid config: policy {name!r} is neither a built-in baseline {sorted(BASELINES)} nor a model path")
+    return BASELINES[name](seed)
+
+
+__all__ = ["BASELINES", "GuidanceGains", "GuidancePolicy", "RandomPolicy", "ZeroPolicy", "make_baseline", "quaternion_to_euler"]

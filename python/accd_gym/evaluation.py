@@ -1,0 +1,408 @@
+"""Held-out evaluation of policies: episodes on fixed wake and initial-condition seeds, metrics, plots.
+
+Every policy sees the same episodes: one :class:`accd_gym.AccdVecEnv` per policy with the same
+``num_envs`` and base seed (so env ``i``'s episode ``e`` has the same initial-condition and RLV
+seeds for every policy) and the wake-seed list ``wake_seeds`` (episode ``k = i + e * num_envs``
+uses ``wake_seeds[k]``). By default the wake seeds are the first ``K`` of
+:data:`accd_gym.HELD_OUT_WAKE_SEEDS`, which training never draws.
+
+A *policy* is any object with ``predict(obs_batch) -> actions`` ((N, 25) -> (N, 4)) and
+optionally ``reset(mask)``: the baselines of :mod:`accd_gym.baselines` and :class:`SB3Policy`
+(a stable-baselines3 model with its VecNormalize statistics).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import pickle
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Optional, Sequence
+
+import numpy as np
+
+from accd_gym.errors import ConfigError
+from accd_gym.task import EVENT_NAMES, HELD_OUT_WAKE_SEEDS
+
+#: Base seed of evaluation episodes (initial conditions and RLV motion); fixed so runs compare.
+EVAL_BASE_SEED: int = 20_240_607
+_POS_SCALE = 0.05  # observation scale of the boom-relative position, 1/m
+
+
+def wilson_interval(successes: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
+    """Wilson score interval of a binomial proportion (95 % for the default ``z``); (0, 1) for n = 0."""
+    if n <= 0:
+        return 0.0, 1.0
+    p = successes / n
+    denom = 1.0 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+class SB3Policy:
+    """A trained stable-baselines3 model (PPO or SAC) with its VecNormalize statistics, deterministic.
+
+    ``path``: a run folder (``final_model.zip`` and ``vecnormalize.pkl`` in it), a model ``.zip``
+    (its statistics: ``vecnormalize.pkl`` beside it, or for a checkpoint
+    ``<prefix>_vecnormalize_<steps>_steps.pkl``). The algorithm is read from the run's
+    ``run.json`` when there is one, else from the zip's stored policy class.
+    """
+
+    def __init__(self, path: str | Path, device: str = "cpu") -> None:
+        p = Path(path)
+        if p.is_dir():
+            model_path, stats_path = p / "final_model.zip", p / "vecnormalize.pkl"
+        else:
+            model_path = p
+            stats_path = p.with_name("vecnormalize.pkl")
+            if "_steps" in p.stem:  # CheckpointCallback: <prefix>_<steps>_steps.zip
+                prefix, steps = p.stem.rsplit("_", 2)[0], p.stem.rsplit("_", 2)[1]
+                stats_path = p.with_name(f"{prefix}_vecnormalize_{steps}_steps.pkl")
+        if not model_path.is_file():
+            raise ConfigError(f"invalid config: policy path {str(path)!r}: no model file {str(model_path)!r}")
+        self.name = str(path)
+        self.algo = _algo_of(model_path)
+        from stable_baselines3 import PPO, SAC
+
+        cls = {"ppo": PPO, "sac": SAC}[self.algo]
+        self.model = cls.load(str(model_path), device=device)
+        self.normalizer = None
+        if stats_path.is_file():
+            with open(stats_path, "rb") as f:
+                self.normalizer = pickle.load(f)
+            self.normalizer.training = False
+
+    def predict(self, obs: Any) -> np.ndarray:
+        """Deterministic actions (N, 4) for raw observations (N, 25), normalised as in training."""
+        o = np.asarray(obs, dtype=np.float32)
+        if self.normalizer is not None and self.normalizer.norm_obs:
+            o = self.normalizer.normalize_obs(o)
+        actions, _ = self.model.predict(o, deterministic=True)
+        return np.clip(np.asarray(actions, dtype=np.float32), -1.0, 1.0)
+
+    def reset(self, mask: Optional[np.ndarray] = None) -> None:
+        """Feed-forward policies keep no state."""
+
+
+def _algo_of(model_path: Path) -> str:
+    """'ppo' or 'sac' for a saved model: from run.json beside or above it, else the zip's data."""
+    for folder in (model_path.parent, model_path.parent.parent):
+        meta = folder / "run.json"
+        if meta.is_file():
+            return json.loads(meta.read_text())["algo"]
+    try:
+        with zipfile.ZipFile(model_path) as z:
+            data = z.read("data").decode()
+    except (zipfile.BadZipFile, KeyError) as e:
+        raise ConfigError(f"invalid config: {str(model_path)!r} is not a stable-baselines3 model ({e})") from None
+    if "sac.policies" in data:
+        return "sac"
+    if "policies.ActorCriticPolicy" in data or "ppo" in data.lower():
+        return "ppo"
+    raise ConfigError(f"invalid config: cannot tell the algorithm of {str(model_path)!r} (allowed: PPO, SAC)")
+
+
+def load_policy(spec: str, seed: int = 0) -> Any:
+    """A policy from a baseline name (``zero``, ``random``, ``guidance``) or a model path."""
+    from accd_gym.baselines import BASELINES, make_baseline
+
+    if spec in BASELINES:
+        return make_baseline(spec, seed)
+    if Path(spec).exists():
+        return SB3Policy(spec)
+    return make_baseline(spec, seed)  # raises ConfigError naming the allowed names
+
+
+@dataclass
+class Episode:
+    """One evaluated episode: outcome, metrics and the capture-point-minus-boom trajectory (m)."""
+
+    index: int
+    wake_seed: int
+    outcome: str
+    captured: bool
+    steps: int
+    time: float
+    capture_time: Optional[float]
+    min_distance: float
+    final_distance: float
+    peak_tension: float
+    mean_abs_action: float
+    mean_abs_delta_action: float
+    episode_return: float
+    trajectory: np.ndarray
+
+    def metrics(self) -> dict[str, Any]:
+        """The episode's numbers as plain JSON values (no trajectory)."""
+        return {k: v for k, v in self.__dict__.items() if k != "trajectory"}
+
+
+def run_episodes(
+    policy: Any,
+    episodes: int,
+    *,
+    seed: int = EVAL_BASE_SEED,
+    wake_seeds: Optional[Sequence[int]] = None,
+    num_envs: int = 16,
+    num_threads: int = 0,
+    config: Optional[dict[str, Any]] = None,
+    progress: bool = False,
+    desc: str = "episodes",
+) -> list[Episode]:
+    """Runs ``episodes`` episodes of ``policy``; episode ``k`` uses ``wake_seeds[k]`` when given.
+
+    ``wake_seeds=None`` draws training wake seeds (for tuning on training data). Returns the
+    episodes in index order.
+    """
+    from accd_gym.sb3 import AccdVecEnv
+
+    if episodes < 1:
+        raise ConfigError(f"invalid config: `episodes` = {episodes} is outside the allowed range >= 1")
+    if wake_seeds is not None and len(wake_seeds) < episodes:
+        raise ConfigError(f"invalid config: {len(wake_seeds)} wake seeds for {episodes} episodes; need at least as many")
+    n = max(1, min(int(num_envs), episodes))
+    env = AccdVecEnv(num_envs=n, seed=seed, num_threads=num_threads, **(config or {}))
+    if wake_seeds is not None:
+        env.set_options({"wake_seeds": [int(s) for s in wake_seeds[:episodes]]})
+    obs = env.reset()
+    if hasattr(policy, "reset"):
+        policy.reset(None)
+    ep_of = np.arange(n)  # index of the episode each env is running
+    traj: list[list[np.ndarray]] = [[-obs[i, 0:3] / _POS_SCALE] for i in range(n)]
+    acts: list[list[np.ndarray]] = [[] for _ in range(n)]
+    mind = np.linalg.norm(obs[:, 0:3], axis=1) / _POS_SCALE
+    peak = np.zeros(n)
+    ret = np.zeros(n)
+    done_eps: dict[int, Episode] = {}
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=episodes, desc=desc, unit="ep")
+    while len(done_eps) < episodes:
+        actions = np.asarray(policy.predict(obs), dtype=np.float32)
+        obs, reward, dones, infos = env.step(actions)
+        for i in range(n):
+            if ep_of[i] >= episodes:
+                continue
+            info = infos[i]
+            last = info["terminal_observation"] if dones[i] else obs[i]
+            traj[i].append(-last[0:3] / _POS_SCALE)
+            acts[i].append(np.clip(actions[i], -1, 1))
+            mind[i] = min(mind[i], info["distance"])
+            peak[i] = max(peak[i], info["peak_tension"])
+            ret[i] += float(reward[i])
+            if not dones[i]:
+                continue
+            a = np.asarray(acts[i])
+            da = np.diff(np.vstack([np.zeros((1, a.shape[1])), a]), axis=0)
+            outcome = next((e for e in EVENT_NAMES if info[e]), "truncated")
+            k = int(ep_of[i])
+            done_eps[k] = Episode(
+                index=k,
+                wake_seed=int(info["wake_seed"]),
+                outcome=outcome,
+                captured=bool(info["captured"]),
+                steps=int(info["episode_steps"]),
+                time=float(info["time"]),
+                capture_time=float(info["time"]) if info["captured"] else None,
+                min_distance=float(mind[i]),
+                final_distance=float(info["distance"]),
+                peak_tension=float(peak[i]),
+                mean_abs_action=float(np.abs(a).mean()),
+                mean_abs_delta_action=float(np.abs(da).mean()),
+                episode_return=float(ret[i]),
+                trajectory=np.asarray(traj[i], dtype=np.float32),
+            )
+            if bar is not None:
+                bar.update(1)
+            ep_of[i] += n
+            traj[i] = [-obs[i, 0:3] / _POS_SCALE]
+            acts[i] = []
+            mind[i] = np.linalg.norm(obs[i, 0:3]) / _POS_SCALE
+            peak[i] = 0.0
+            ret[i] = 0.0
+        if hasattr(policy, "reset"):
+            policy.reset(dones)
+    if bar is not None:
+        bar.close()
+    env.close()
+    return [done_eps[k] for k in range(episodes)]
+
+
+def summarize(episodes: Sequence[Episode]) -> dict[str, Any]:
+    """Capture rate with its Wilson 95 % interval, miss distance, capture time, tension, flap usage."""
+    n = len(episodes)
+    caught = [e for e in episodes if e.captured]
+    lo, hi = wilson_interval(len(caught), n)
+    miss = np.array([e.min_distance for e in episodes])
+    times = np.array([e.capture_time for e in caught]) if caught else np.array([])
+    peak = np.array([e.peak_tension for e in episodes])
+    return {
+        "episodes": n,
+        "captures": len(caught),
+        "capture_rate": len(caught) / n,
+        "capture_rate_ci95": [lo, hi],
+        "outcomes": {o: sum(e.outcome == o for e in episodes) for o in (*EVENT_NAMES, "truncated")},
+        "miss_distance_m": {
+            "mean": float(miss.mean()),
+            "median": float(np.median(miss)),
+            "p90": float(np.percentile(miss, 90)),
+            "max": float(miss.max()),
+        },
+        "capture_time_s": {
+            "mean": float(times.mean()) if caught else None,
+            "median": float(np.median(times)) if caught else None,
+        },
+        "peak_tension_N": {"median": float(np.median(peak)), "max": float(peak.max())},
+        "mean_abs_action": float(np.mean([e.mean_abs_action for e in episodes])),
+        "mean_abs_delta_action": float(np.mean([e.mean_abs_delta_action for e in episodes])),
+        "mean_return": float(np.mean([e.episode_return for e in episodes])),
+    }
+
+
+def evaluate(
+    policies: Sequence[str],
+    episodes: int,
+    out: str | Path,
+    *,
+    wake_seeds: Optional[Sequence[int]] = None,
+    seed: int = EVAL_BASE_SEED,
+    num_envs: int = 16,
+    num_threads: int = 0,
+    config: Optional[dict[str, Any]] = None,
+    progress: bool = True,
+    dpi: int = 90,
+) -> dict[str, Any]:
+    """Evaluates each policy spec on the same episodes; writes results.json, summary.md and plots.
+
+    ``wake_seeds`` defaults to the first ``episodes`` held-out wake seeds. Returns the results
+    document (also in ``out/results.json``).
+    """
+    if not policies:
+        raise ConfigError("invalid config: `policy` is empty; give at least one baseline name or model path")
+    if episodes > len(HELD_OUT_WAKE_SEEDS) and wake_seeds is None:
+        raise ConfigError(
+            f"invalid config: `episodes` = {episodes} is outside the allowed range 1..{len(HELD_OUT_WAKE_SEEDS)} (held-out wake seeds)"
+        )
+    seeds = list(wake_seeds) if wake_seeds is not None else list(HELD_OUT_WAKE_SEEDS[:episodes])
+    loaded = [(spec, load_policy(spec)) for spec in policies]  # fail early on a bad spec
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    results: dict[str, Any] = {
+        "episodes": episodes,
+        "base_seed": seed,
+        "wake_seeds": [seeds[0], seeds[episodes - 1]] if episodes else [],
+        "wake_seeds_held_out": all(s in HELD_OUT_WAKE_SEEDS for s in seeds[:episodes]),
+        "num_envs": min(num_envs, episodes),
+        "config": config or {},
+        "policies": {},
+    }
+    runs: dict[str, list[Episode]] = {}
+    for spec, policy in loaded:
+        eps = run_episodes(policy, episodes, seed=seed, wake_seeds=seeds, num_envs=num_envs,
+                           num_threads=num_threads, config=config, progress=progress, desc=_label(spec))
+        runs[spec] = eps
+        results["policies"][spec] = {"summary": summarize(eps), "episodes": [e.metrics() for e in eps]}
+    (out / "results.json").write_text(json.dumps(results, indent=1))
+    np.savez_compressed(out / "trajectories.npz", **{f"{_label(s)}__{e.index}": e.trajectory for s, eps in runs.items() for e in eps})
+    plot_trajectories(runs, out / "trajectories.png", dpi=dpi)
+    plot_miss_cdf(runs, out / "miss_distance_cdf.png", dpi=dpi)
+    (out / "summary.md").write_text(summary_markdown(results))
+    return results
+
+
+def _label(spec: str) -> str:
+    """A short name for a policy spec (a path's run folder or file stem)."""
+    p = Path(spec)
+    if spec in ("zero", "random", "guidance") or not p.exists():
+        return spec
+    return p.name if p.is_dir() else f"{p.parent.name}/{p.stem}"
+
+
+def summary_markdown(results: dict[str, Any]) -> str:
+    """The markdown table comparing the policies of an :func:`evaluate` results document."""
+    lines = [
+        f"# Held-out evaluation: {results['episodes']} episodes",
+        "",
+        f"Wake seeds {results['wake_seeds'][0]}..{results['wake_seeds'][1]} "
+        f"({'held out' if results['wake_seeds_held_out'] else 'NOT held out'}), base seed {results['base_seed']}; "
+        "every policy sees the same episodes.",
+        "",
+        "| policy | capture rate | 95 % CI (Wilson) | miss distance median / p90 (m) | time to capture median (s) "
+        "| peak tension median / max (kN) | mean abs action | mean abs delta action | outcomes |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for spec, doc in results["policies"].items():
+        s = doc["summary"]
+        lo, hi = s["capture_rate_ci95"]
+        ct = s["capture_time_s"]["median"]
+        outcomes = ", ".join(f"{k} {v}" for k, v in s["outcomes"].items() if v)
+        lines.append(
+            f"| {_label(spec)} | {s['captures']}/{s['episodes']} = {s['capture_rate']:.1%} | {lo:.1%} - {hi:.1%} "
+            f"| {s['miss_distance_m']['median']:.2f} / {s['miss_distance_m']['p90']:.2f} "
+            f"| {'-' if ct is None else f'{ct:.1f}'} "
+            f"| {s['peak_tension_N']['median'] / 1e3:.2f} / {s['peak_tension_N']['max'] / 1e3:.2f} "
+            f"| {s['mean_abs_action']:.3f} | {s['mean_abs_delta_action']:.3f} | {outcomes} |"
+        )
+    lines += ["", "Plots: `trajectories.png` (capture point minus boom tip, side and top views), "
+              "`miss_distance_cdf.png` (minimum distance over each episode)."]
+    return "\n".join(lines) + "\n"
+
+
+def plot_trajectories(runs: dict[str, list[Episode]], path: Path, max_episodes: int = 20, dpi: int = 90) -> None:
+    """Side (x, height) and top (x, y) views of capture point minus boom tip, one row per policy."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = len(runs)
+    fig, axes = plt.subplots(rows, 2, figsize=(11, 3.2 * rows), squeeze=False)
+    for r, (spec, eps) in enumerate(runs.items()):
+        side, top = axes[r]
+        for e in eps[:max_episodes]:
+            t = e.trajectory
+            colour = "tab:green" if e.captured else "tab:red"
+            side.plot(t[:, 0], -t[:, 2], color=colour, lw=0.7, alpha=0.7)
+            top.plot(t[:, 0], t[:, 1], color=colour, lw=0.7, alpha=0.7)
+            side.plot(t[0, 0], -t[0, 2], "o", color=colour, ms=2)
+            top.plot(t[0, 0], t[0, 1], "o", color=colour, ms=2)
+        for ax, ylabel in ((side, "height above boom tip, -z (m)"), (top, "starboard of boom tip, y (m)")):
+            ax.plot(0, 0, "k+", ms=12, mew=2)
+            ax.set_xlabel("ahead of boom tip, x (m)")
+            ax.set_ylabel(ylabel)
+            ax.grid(alpha=0.3)
+        side.set_title(f"{_label(spec)}: side view (green captured, red not)", fontsize=9)
+        top.set_title(f"{_label(spec)}: top view", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+
+
+def plot_miss_cdf(runs: dict[str, list[Episode]], path: Path, dpi: int = 90) -> None:
+    """Empirical CDF of the minimum capture-point-to-boom distance per episode, per policy."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.5, 4))
+    for spec, eps in runs.items():
+        d = np.sort([e.min_distance for e in eps])
+        ax.step(d, np.arange(1, len(d) + 1) / len(d), where="post", label=_label(spec))
+    ax.axvline(0.5, color="k", ls=":", lw=1, label="capture radius (default 0.5 m)")
+    ax.set_xscale("log")
+    ax.set_xlabel("miss distance: minimum distance to the boom tip (m)")
+    ax.set_ylabel("fraction of episodes")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+
+
+__all__ = ["EVAL_BASE_SEED", "Episode", "SB3Policy", "evaluate", "load_policy", "run_episodes", "summarize", "wilson_interval"]

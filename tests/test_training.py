@@ -1,0 +1,172 @@
+"""Training, held-out evaluation, baselines and rollouts (issue 7): short runs, sane results, files written."""
+
+import json
+
+import numpy as np
+import pytest
+
+import accd_gym
+from accd_gym import training
+from accd_gym.baselines import BASELINES, GuidancePolicy, RandomPolicy, ZeroPolicy, quaternion_to_euler
+from accd_gym.cli import main
+from accd_gym.evaluation import run_episodes, summarize, wilson_interval
+
+SHORT = {"capture_window": 5.0}  # 50 agent steps per episode
+
+
+def _obs(n=3, rel=(0.0, 0.0, 0.0)):
+    """Observations of an ACCD level and at rest with the boom tip at ``rel`` (m) from the capture point."""
+    o = np.zeros((n, 25), dtype=np.float32)
+    o[:, 0:3] = np.asarray(rel) * 0.05
+    o[:, 12] = 1.0
+    o[:, 24] = 1.0
+    return o
+
+
+@pytest.mark.parametrize("name", sorted(BASELINES))
+def test_baselines_give_bounded_actions_of_the_right_shape(name):
+    policy = accd_gym.baselines.make_baseline(name, seed=3)
+    obs = np.random.default_rng(0).uniform(-1, 1, (5, 25)).astype(np.float32)
+    obs[:, 12:16] /= np.linalg.norm(obs[:, 12:16], axis=1, keepdims=True)
+    a = policy.predict(obs)
+    assert a.shape == (5, 4) and a.dtype == np.float32
+    assert np.all(np.isfinite(a)) and np.all(np.abs(a) <= 1.0)
+    with pytest.raises(ValueError, match="expected"):
+        policy.predict(np.zeros((2, 24)))
+
+
+def test_guidance_signs_follow_the_flap_conventions():
+    g = GuidancePolicy(ki=0.0, kd=0.0)
+    below = g.predict(_obs(rel=(0.0, 0.0, 2.0)))[0]  # boom below: go down = nose down = pitch < 0
+    assert below[0] < 0 and below[1] < 0 and below[0] == pytest.approx(below[1])
+    starboard = g.predict(_obs(rel=(0.0, 2.0, 0.0)))[0]  # boom to starboard: nose right = yaw > 0
+    assert starboard[2] > 0 and starboard[3] > 0
+    assert np.allclose(g.predict(_obs())[0], 0.0)
+
+
+def test_guidance_integrator_resets_per_env():
+    g = GuidancePolicy(kp=0.0, kd=0.0, ki=0.1)
+    for _ in range(5):
+        a = g.predict(_obs(n=2, rel=(0.0, 0.0, 1.0)))
+    assert np.all(a[:, 0] < 0)
+    g.reset(np.array([True, False]))
+    a = g.predict(_obs(n=2, rel=(0.0, 0.0, 0.0)))
+    assert a[0, 0] == pytest.approx(0.0) and a[1, 0] < 0
+
+
+def test_random_policy_is_seeded():
+    assert np.array_equal(RandomPolicy(5).predict(_obs(4)), RandomPolicy(5).predict(_obs(4)))
+    assert not np.array_equal(RandomPolicy(5).predict(_obs(4)), RandomPolicy(6).predict(_obs(4)))
+
+
+def test_quaternion_to_euler_of_a_pure_roll():
+    half = np.radians(30.0) / 2
+    roll, pitch, yaw = quaternion_to_euler(np.array([[np.cos(half), np.sin(half), 0.0, 0.0]]))
+    assert np.degrees(roll[0]) == pytest.approx(30.0) and abs(pitch[0]) < 1e-12 and abs(yaw[0]) < 1e-12
+
+
+def test_wilson_interval_matches_the_closed_form():
+    assert wilson_interval(0, 10) == pytest.approx((0.0, 0.27753), abs=1e-4)
+    assert wilson_interval(5, 10) == pytest.approx((0.23659, 0.76341), abs=1e-4)
+    lo, hi = wilson_interval(10, 10)
+    assert hi == pytest.approx(1.0) and lo == pytest.approx(0.72247, abs=1e-4)
+
+
+def test_run_episodes_on_held_out_seeds_records_every_episode():
+    seeds = list(accd_gym.HELD_OUT_WAKE_SEEDS[:5])
+    eps = run_episodes(ZeroPolicy(), 5, wake_seeds=seeds, num_envs=2, num_threads=1, config=SHORT)
+    assert [e.index for e in eps] == list(range(5))
+    assert [e.wake_seed for e in eps] == seeds
+    for e in eps:
+        assert e.outcome in ("captured", "overload", "envelope_exit", "diverged", "truncated")
+        assert 1 <= e.steps <= 50 and e.trajectory.shape == (e.steps + 1, 3)
+        assert np.all(np.isfinite(e.trajectory)) and 0 <= e.min_distance <= e.trajectory.__len__() * 100
+        assert e.min_distance <= np.linalg.norm(e.trajectory[0]) + 1e-3
+        assert e.peak_tension > 0 and e.mean_abs_action == 0.0
+    s = summarize(eps)
+    assert s["episodes"] == 5 and 0.0 <= s["capture_rate"] <= 1.0
+    assert s["capture_rate_ci95"][0] <= s["capture_rate"] <= s["capture_rate_ci95"][1]
+
+
+def test_guidance_closes_in_on_the_boom_better_than_zero_flaps():
+    """The tuned controller's miss distance beats neutral flaps on the same 8 training-seed episodes."""
+    seeds = list(range(500, 508))
+    cfg = {"capture_window": 20.0}
+    zero = summarize(run_episodes(ZeroPolicy(), 8, seed=11, wake_seeds=seeds, num_envs=8, num_threads=1, config=cfg))
+    guid = summarize(run_episodes(GuidancePolicy(), 8, seed=11, wake_seeds=seeds, num_envs=8, num_threads=1, config=cfg))
+    assert guid["miss_distance_m"]["median"] < 0.5 * zero["miss_distance_m"]["median"]
+    assert guid["captures"] > zero["captures"]
+
+
+@pytest.mark.parametrize("name", sorted(BASELINES))
+def test_rollout_command_with_each_baseline(name, capsys):
+    rc = main(["rollout", "--policy", name, "--episodes", "3", "--num-envs", "3", "--num-threads", "1",
+               "--env", json.dumps(SHORT), "--quiet", "--json"])
+    assert rc == 0
+    out = capsys.readouterr().out
+    assert f"{name}: " in out and "captured" in out
+    doc = json.loads(out[out.index("\n{") + 1:])
+    assert len(doc["episodes"]) == 3 and all(1 <= e["steps"] <= 50 for e in doc["episodes"])
+
+
+def test_bad_cli_input_names_the_value(capsys, tmp_path):
+    assert main(["rollout", "--policy", "autopilot", "--episodes", "1", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "autopilot" in err and "guidance" in err
+    with pytest.raises(SystemExit):
+        main(["rollout", "--policy", "zero", "--episodes", "0"])
+    assert "--episodes = 0 is outside the allowed range" in capsys.readouterr().err
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"algo": "dqn"}))
+    assert main(["train", "--config", str(bad), "--out", str(tmp_path / "run")]) == 2
+    assert "`algo` = 'dqn'" in capsys.readouterr().err
+
+
+def test_training_config_validation_names_the_field(tmp_path):
+    with pytest.raises(accd_gym.ConfigError, match="learning_rat"):
+        training.validate_config({"learning_rat": 1e-3})
+    with pytest.raises(accd_gym.ConfigError, match="num_envs"):
+        training.validate_config({"num_envs": 0})
+    with pytest.raises(accd_gym.ConfigError, match="capture_windw"):
+        training.validate_config({"env": {"capture_windw": 3}})
+    for name in ("ppo", "sac"):
+        cfg = training.load_config(f"training/{name}.json")
+        assert cfg["algo"] == name
+    assert training.load_config("training/sac.json")["vec_normalize"]["norm_reward"] is False
+
+
+def test_short_ppo_training_then_held_out_evaluation(tmp_path):
+    cfg = training.validate_config({
+        "algo": "ppo", "total_timesteps": 256, "num_envs": 4, "num_threads": 1, "seed": 1, "env": SHORT,
+        "algo_kwargs": {"n_steps": 32, "batch_size": 64, "n_epochs": 2},
+        "policy_kwargs": {"net_arch": [16, 16]}, "checkpoint_every": 128,
+    })
+    run = tmp_path / "ppo"
+    meta = training.train(cfg, run, progress=False)
+    assert meta["timesteps"] >= 256 and meta["steps_per_s"] > 0
+    for f in ("final_model.zip", "vecnormalize.pkl", "run.json"):
+        assert (run / f).is_file()
+    ckpt = run / "checkpoints" / "ppo_accd_128_steps.zip"
+    assert ckpt.is_file() and (run / "checkpoints" / "ppo_accd_vecnormalize_128_steps.pkl").is_file()
+    assert list((run / "tb").rglob("events.out.tfevents.*"))
+
+    out = tmp_path / "eval"
+    rc = main(["evaluate", "--policy", str(run), "--policy", str(ckpt), "--policy", "guidance", "--episodes", "3",
+               "--num-envs", "3", "--num-threads", "1", "--env", json.dumps(SHORT), "--out", str(out), "--quiet"])
+    assert rc == 0
+    res = json.loads((out / "results.json").read_text())
+    assert res["wake_seeds_held_out"] and res["wake_seeds"] == [10**9, 10**9 + 2]
+    assert len(res["policies"]) == 3
+    for doc in res["policies"].values():
+        s = doc["summary"]
+        assert s["episodes"] == 3 and np.isfinite(s["miss_distance_m"]["median"])
+        assert [e["wake_seed"] for e in doc["episodes"]] == [10**9, 10**9 + 1, 10**9 + 2]
+    # every policy starts from the same initial conditions (first trajectory point, per episode)
+    traj = np.load(out / "trajectories.npz")
+    for k in range(3):
+        firsts = [traj[name][0] for name in traj.files if name.endswith(f"__{k}")]
+        assert len(firsts) == 3 and all(np.array_equal(firsts[0], f) for f in firsts)
+    md = (out / "summary.md").read_text()
+    assert "| ppo |" in md and "| guidance |" in md and "Wilson" in md
+    for png in ("trajectories.png", "miss_distance_cdf.png"):
+        assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
