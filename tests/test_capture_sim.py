@@ -107,7 +107,9 @@ def test_wake_pushes_down_and_wake_seed_changes_only_the_gusts():
     other = accd_gym.CaptureSim(seed=1, wake_seed=6).settle(40.0)
     np.testing.assert_array_equal(wake["position"], same["position"])
     assert not np.array_equal(wake["position"], other["position"])
-    np.testing.assert_array_equal(wake["boom_tip"], other["boom_tip"])  # RLV stream unchanged
+    # RLV stream unchanged: the same lateral and vertical motion (along track the RLV keeps
+    # station with the capture point, which the gusts move).
+    np.testing.assert_array_equal(wake["boom_tip"][1:], other["boom_tip"][1:])
     with pytest.raises(ConfigError, match="alpha_deg"):
         accd_gym.CaptureSim({"wake": {"alpha_deg": 12.0}})
     moderate = accd_gym.CaptureSim({"turbulence": {"ambient": "moderate"}}).settle(5.0)

@@ -1,15 +1,26 @@
 //! The RLV's capture boom: where its tip is relative to the towing aircraft, how it moves, and
 //! when the ACCD has captured it.
 //!
-//! The RLV flies in formation behind and below the TA. Its boom tip sits at a formation offset
-//! (randomised at the start of an episode), drifts slowly (a sinusoid per axis of period about a
-//! minute, random phases: formation-keeping wander) and is perturbed by gusts on the RLV (a
-//! first-order Gauss-Markov process per axis). Defaults, all assumptions: offset (-241, 3, 62) m,
-//! i.e. 8 m below and 3 m to starboard of the open-loop ACCD and within reach of the 250 m tether
-//! (|offset| = 249 m); initial spread +-(2, 3, 3) m; drift amplitude (1, 2, 2) m over 50 s;
-//! perturbations 0.2 m RMS with a 1.5 s time constant. Capture: the ACCD's capture point within
-//! 0.5 m of the boom tip at a relative speed under 2 m/s (a lock-in mechanism tolerates a
-//! decimetre-scale miss; more closing speed would load the lock and the tether abruptly).
+//! The RLV flies in formation behind and below the TA. Laterally and vertically its boom tip sits
+//! at a formation offset (randomised at the start of an episode), drifts slowly (a sinusoid per
+//! axis of period about a minute, random phases: formation-keeping wander) and is perturbed by
+//! gusts on the RLV (a first-order Gauss-Markov process per axis).
+//!
+//! **Along track** the RLV approaches: its boom tip starts `approach_distance` behind the ACCD's
+//! capture point and closes on it at no more than `approach_speed`, then keeps station with it
+//! (the RLV's autopilot flies the along-track channel; the ACCD has almost no authority over its
+//! own along-track position, which the tether's length fixes once its depth and lateral offset are
+//! chosen). Each step the tip's along-track position moves towards the capture point's by at most
+//! `approach_speed * dt`. With `approach_speed = 0` the tip holds `offset[0]` instead (a fixed
+//! formation, which the tether can reach only for some offsets).
+//!
+//! Defaults, all assumptions: offset (-, 3, 62) m laterally and vertically, i.e. 3 m to starboard of
+//! and 4 m above the ACCD's open-loop equilibrium in the 8 deg wake (65.8 m); initial spread
+//! +-(2, 3, 3) m; drift amplitude (1, 2, 2) m over 50 s; perturbations 0.2 m RMS with a 1.5 s time
+//! constant; approach from 10 m behind at 0.5 m/s (20 s to close). Capture: the ACCD's capture
+//! point within 0.5 m of the boom tip at a relative speed under 2 m/s (a lock-in mechanism
+//! tolerates a decimetre-scale miss; more closing speed would load the lock and the tether
+//! abruptly).
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -24,7 +35,7 @@ type V3 = Vector3<f64>;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct BoomConfig {
-    /// Nominal boom-tip position in the TA frame, m.
+    /// Nominal boom-tip position in the TA frame, m (x only used with `approach_speed = 0`).
     pub offset: [f64; 3],
     /// Half-width of the uniform random initial offset per axis, m.
     pub initial_spread: [f64; 3],
@@ -40,6 +51,11 @@ pub struct BoomConfig {
     pub capture_radius: f64,
     /// Largest relative speed at which a capture holds, m/s.
     pub max_closing_speed: f64,
+    /// Along-track distance of the boom tip behind the capture point at the start, m.
+    pub approach_distance: f64,
+    /// Largest along-track closing speed of the boom tip on the capture point, m/s (0: a fixed
+    /// formation at `offset[0]`).
+    pub approach_speed: f64,
 }
 
 impl Default for BoomConfig {
@@ -53,6 +69,8 @@ impl Default for BoomConfig {
             perturbation_time_constant: 1.5,
             capture_radius: 0.5,
             max_closing_speed: 2.0,
+            approach_distance: 10.0,
+            approach_speed: 0.5,
         }
     }
 }
@@ -108,6 +126,23 @@ impl BoomConfig {
                 ));
             }
         }
+        for (name, v, hi, unit) in [
+            (
+                "boom.approach_distance",
+                self.approach_distance,
+                1000.0,
+                "m",
+            ),
+            ("boom.approach_speed", self.approach_speed, 50.0, "m/s"),
+        ] {
+            if !(v.is_finite() && (0.0..=hi).contains(&v)) {
+                return Err(SimError::invalid_config(
+                    name,
+                    v,
+                    &format!("[0, {hi}] {unit}"),
+                ));
+            }
+        }
         if !(self.perturbation_sigma.is_finite()
             && (0.0..=100.0).contains(&self.perturbation_sigma))
         {
@@ -128,14 +163,17 @@ pub struct Boom {
     base: V3,
     phase: V3,
     perturbation: V3,
+    /// Along-track position of the tip before the perturbation (approach mode), m.
+    along: f64,
     previous_tip: V3,
     velocity: V3,
     stream: Stream,
 }
 
 impl Boom {
-    /// The boom of an episode whose RLV stream is drawn from `seed`, at t = 0.
-    pub fn new(config: &BoomConfig, seed: u64) -> Self {
+    /// The boom of an episode whose RLV stream is drawn from `seed`, at t = 0, with the capture
+    /// point at along-track position `capture_x` (m).
+    pub fn new(config: &BoomConfig, seed: u64, capture_x: f64) -> Self {
         let mut stream = Stream::new(seed, RLV_STREAM);
         let base = V3::from_fn(|i, _| {
             config.offset[i] + stream.range(-1.0, 1.0) * config.initial_spread[i]
@@ -147,12 +185,16 @@ impl Boom {
             base,
             phase,
             perturbation,
+            along: capture_x - config.approach_distance,
             previous_tip: V3::zeros(),
             velocity: V3::zeros(),
             stream,
         };
         boom.previous_tip = boom.tip(0.0);
         boom.velocity = boom.drift_rate(0.0);
+        if boom.approaching() {
+            boom.velocity.x = config.approach_speed.min(config.approach_distance.max(0.0));
+        }
         boom
     }
 
@@ -166,9 +208,18 @@ impl Boom {
         V3::from_fn(|i, _| self.config.drift_amplitude[i] * w * (w * t + self.phase[i]).cos())
     }
 
-    /// Boom-tip position in the TA frame at time `t` (with the perturbation of the last step), m.
+    fn approaching(&self) -> bool {
+        self.config.approach_speed > 0.0
+    }
+
+    /// Boom-tip position in the TA frame at time `t` (with the perturbation and the along-track
+    /// position of the last step), m.
     pub fn tip(&self, t: f64) -> V3 {
-        self.base + self.drift(t) + self.perturbation
+        let mut tip = self.base + self.drift(t) + self.perturbation;
+        if self.approaching() {
+            tip.x = self.along + self.perturbation.x;
+        }
+        tip
     }
 
     /// Boom-tip velocity over the last step, m/s.
@@ -176,9 +227,12 @@ impl Boom {
         self.velocity
     }
 
-    /// Advances the perturbation from `t` to `t + dt` (exact Gauss-Markov update) and updates
-    /// the velocity estimate.
-    pub fn advance(&mut self, t: f64, dt: f64) {
+    /// Advances the perturbation from `t` to `t + dt` (exact Gauss-Markov update), moves the tip
+    /// along track towards the capture point at `capture_x` (m) by at most `approach_speed * dt`,
+    /// and updates the velocity estimate.
+    pub fn advance(&mut self, t: f64, dt: f64, capture_x: f64) {
+        let step = self.config.approach_speed * dt;
+        self.along += (capture_x - self.along).clamp(-step, step);
         let a = (-dt / self.config.perturbation_time_constant).exp();
         let kick = self.config.perturbation_sigma * (1.0 - a * a).sqrt();
         for i in 0..3 {
@@ -200,6 +254,7 @@ impl Boom {
         ] {
             w.f64s(v.as_slice());
         }
+        w.f64(self.along);
         self.stream.save(w);
     }
 
@@ -214,6 +269,7 @@ impl Boom {
         ] {
             r.f64s_into(what, v.as_mut_slice())?;
         }
+        self.along = r.f64("boom along-track position")?;
         self.stream = Stream::load(r)?;
         Ok(())
     }
@@ -261,12 +317,15 @@ mod tests {
 
     #[test]
     fn seeded_boom_is_reproducible_and_stays_near_its_offset() {
-        let cfg = BoomConfig::default();
+        let cfg = BoomConfig {
+            approach_speed: 0.0,
+            ..BoomConfig::default()
+        };
         let run = |seed| {
-            let mut b = Boom::new(&cfg, seed);
+            let mut b = Boom::new(&cfg, seed, -240.0);
             let mut out = vec![];
             for k in 0..7000 {
-                b.advance(k as f64 * 0.01, 0.01);
+                b.advance(k as f64 * 0.01, 0.01, -240.0);
                 out.push(b.tip((k + 1) as f64 * 0.01));
             }
             out
@@ -281,6 +340,31 @@ mod tests {
                 assert!((p[i] - cfg.offset[i]).abs() < bound);
             }
         }
+    }
+
+    #[test]
+    fn the_boom_approaches_at_its_speed_then_keeps_station() {
+        let cfg = BoomConfig {
+            perturbation_sigma: 0.0,
+            ..BoomConfig::default()
+        };
+        let mut b = Boom::new(&cfg, 1, -242.0);
+        assert!((b.tip(0.0).x - (-252.0)).abs() < 1e-12);
+        let dt = 0.01;
+        for k in 0..2100 {
+            b.advance(k as f64 * dt, dt, -242.0);
+            let x = b.tip((k + 1) as f64 * dt).x;
+            let expected = (-252.0 + 0.5 * (k + 1) as f64 * dt).min(-242.0);
+            assert!((x - expected).abs() < 1e-9, "step {k}: {x} vs {expected}");
+            if k < 1990 && x < -242.0 {
+                assert!((b.velocity().x - 0.5).abs() < 1e-6);
+            }
+        }
+        // Station-keeping: it follows the capture point back and forth at up to 0.5 m/s.
+        for k in 2100..2200 {
+            b.advance(k as f64 * dt, dt, -241.8);
+        }
+        assert!((b.tip(22.0).x - (-241.8)).abs() < 1e-9);
     }
 
     #[test]

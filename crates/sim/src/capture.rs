@@ -328,10 +328,10 @@ impl CaptureSim {
         let tether = TetherState::straight(tether_config.segments, V3::new(-1.0, 0.0, 0.0), 0.0)?;
         let dofs = model.dofs();
         let z = || vec![0.0; dofs];
-        Ok(CaptureSim {
+        CaptureSim {
             inertia: config.accd.principal_inertia(),
             capture_offset: config.accd.capture_point(),
-            boom: Boom::new(&config.boom, seeds.rlv),
+            boom: Boom::new(&config.boom, seeds.rlv, 0.0),
             config: config.clone(),
             model,
             aero,
@@ -347,7 +347,21 @@ impl CaptureSim {
             },
             time_origin: 0.0,
             steps: 0,
-        })
+        }
+        .with_boom_at_start(seeds.rlv)
+    }
+
+    /// Restarts the boom (RLV stream `seed`) relative to the current capture point.
+    fn with_boom_at_start(mut self, seed: u64) -> Result<Self> {
+        let x = self.capture_point_x()?;
+        self.boom = Boom::new(&self.config.boom, seed, x);
+        Ok(self)
+    }
+
+    /// Along-track position of the capture point, m.
+    fn capture_point_x(&mut self) -> Result<f64> {
+        let (position, _) = self.model.tip_state(&self.tether.q, &self.tether.qd)?;
+        Ok(position.x + self.accd.attitude.transform_vector(&self.capture_offset).x)
     }
 
     /// The configuration.
@@ -422,7 +436,8 @@ impl CaptureSim {
         self.time_origin = 0.0;
         self.steps = 0;
         self.actuators = Actuators::default();
-        self.boom = Boom::new(&self.config.boom, seeds.rlv);
+        let x = self.capture_point_x()?;
+        self.boom = Boom::new(&self.config.boom, seeds.rlv, x);
         self.disturbance.reset(seeds.wake);
         Ok(())
     }
@@ -535,7 +550,8 @@ impl CaptureSim {
         let t = self.tether.time;
         self.actuators.set_command(&self.config.accd, command)?;
         self.actuators.advance(&self.config.accd, dt);
-        self.boom.advance(t, dt);
+        let capture_x = self.capture_point_x()?;
+        self.boom.advance(t, dt, capture_x);
         self.disturbance.advance(t, dt)?;
         // The state is read while the stage buffers are written: lend it out for the step.
         let q0 = std::mem::take(&mut self.tether.q);
