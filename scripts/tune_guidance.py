@@ -30,19 +30,21 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=32)
     ap.add_argument("--out", default="training/guidance_tuning.json")
     ap.add_argument("--grid", help="the grid as JSON (gain name -> list of values), default: GRID")
+    ap.add_argument("--env", default="{}", help="environment config overrides as JSON")
     args = ap.parse_args()
     grid = json.loads(args.grid) if args.grid else GRID
+    env = json.loads(args.env)
     seeds = list(range(1000, 1000 + args.episodes))
     assert all(s in TRAINING_WAKE_SEEDS for s in seeds)
     rows = []
     t0 = time.time()
     for values in tqdm(list(itertools.product(*grid.values())), desc="gain sets"):
         gains = dict(zip(grid, values))
-        s = summarize(run_episodes(GuidancePolicy(**gains), args.episodes, seed=7, wake_seeds=seeds, num_envs=args.episodes))
+        s = summarize(run_episodes(GuidancePolicy(**gains), args.episodes, seed=7, wake_seeds=seeds, num_envs=args.episodes, config=env))
         rows.append({"gains": gains, "capture_rate": s["capture_rate"], "median_miss_m": s["miss_distance_m"]["median"],
                      "mean_abs_action": s["mean_abs_action"], "outcomes": s["outcomes"]})
     best = max(rows, key=lambda r: (r["capture_rate"], -r["median_miss_m"]))
-    doc = {"wake_seeds": [seeds[0], seeds[-1]], "base_seed": 7, "episodes": args.episodes, "grid": grid,
+    doc = {"env": env, "wake_seeds": [seeds[0], seeds[-1]], "base_seed": 7, "episodes": args.episodes, "grid": grid,
            "wall_time_s": round(time.time() - t0, 1), "best": best, "results": rows}
     Path(args.out).write_text(json.dumps(doc, indent=1))
     print(json.dumps(best, indent=1))

@@ -170,3 +170,18 @@ def test_short_ppo_training_then_held_out_evaluation(tmp_path):
     assert "| ppo |" in md and "| guidance |" in md and "Wilson" in md
     for png in ("trajectories.png", "miss_distance_cdf.png"):
         assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_guidance_tuning_file_is_a_policy_with_its_winning_gains(tmp_path):
+    from accd_gym.evaluation import _label, load_policy
+
+    path = tmp_path / "tuning_x.json"
+    path.write_text(json.dumps({"best": {"gains": {"kp": 0.3, "kd": 0.1, "ki": 0.0, "kq": 0.2}}}))
+    policy = load_policy(str(path))
+    assert isinstance(policy, GuidancePolicy)
+    assert (policy.gains.kp, policy.gains.kd, policy.gains.kq) == (0.3, 0.1, 0.2)
+    assert _label(str(path)) == "guidance (tuning_x)"
+    bad = tmp_path / "not_tuning.json"
+    bad.write_text("{}")
+    with pytest.raises(accd_gym.ConfigError, match="not a guidance tuning file"):
+        load_policy(str(bad))

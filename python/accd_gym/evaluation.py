@@ -106,11 +106,14 @@ def _algo_of(model_path: Path) -> str:
 
 
 def load_policy(spec: str, seed: int = 0) -> Any:
-    """A policy from a baseline name (``zero``, ``random``, ``guidance``) or a model path."""
-    from accd_gym.baselines import BASELINES, make_baseline
+    """A policy from a baseline name (``zero``, ``random``, ``guidance``), a guidance tuning file
+    (``training/guidance_tuning*.json``: the controller with its winning gains) or a model path."""
+    from accd_gym.baselines import BASELINES, guidance_from_tuning, make_baseline
 
     if spec in BASELINES:
         return make_baseline(spec, seed)
+    if spec.endswith(".json") and Path(spec).is_file():
+        return guidance_from_tuning(spec)
     if Path(spec).exists():
         return SB3Policy(spec)
     return make_baseline(spec, seed)  # raises ConfigError naming the allowed names
@@ -318,8 +321,12 @@ def evaluate(
 def _label(spec: str) -> str:
     """A short name for a policy spec (a path's run folder or file stem)."""
     p = Path(spec)
-    if spec in ("zero", "random", "guidance") or not p.exists():
+    from accd_gym.baselines import BASELINES
+
+    if spec in BASELINES or not p.exists():
         return spec
+    if p.suffix == ".json":
+        return f"guidance ({p.stem})"
     return p.name if p.is_dir() else f"{p.parent.name}/{p.stem}"
 
 
