@@ -84,9 +84,12 @@ class InAirCaptureEnv(gym.Env):
     ``initial.settle_time`` = 40 s from the straight trailing tether), with the whole tether
     rotated about the attachment to move the ACCD by up to +-5 m laterally and vertically
     (``initial.offset``) and the ACCD tilted by up to +-3 deg about each axis
-    (``initial.attitude_deg``), drawn from the episode's *initial* seed. The boom tip starts at
-    its formation offset (-241, 3, 62) m plus up to +-(2, 3, 3) m; wake turbulence starts from its
-    stationary distribution, drawn from the episode's *wake seed*.
+    (``initial.attitude_deg``), drawn from the episode's *initial* seed. The boom tip starts
+    laterally and vertically at its formation offset (y, z) = (3, 62) m plus up to +-(3, 3) m and
+    10 m behind the capture point; the RLV then closes along track at up to 0.5 m/s and keeps
+    station with the capture point (``boom.approach_distance``, ``boom.approach_speed``); the ACCD
+    must meet it laterally and vertically. Wake turbulence starts from its stationary
+    distribution, drawn from the episode's *wake seed*.
 
     ## Episode End
 
