@@ -6,9 +6,9 @@ Every policy here (and :class:`accd_gym.evaluation.SB3Policy`) has the same inte
 top, bottom); ``reset(mask)`` clears the internal state of the envs whose episode just ended
 (the guidance controller's integrators; the others ignore it).
 
-Signs, checked empirically on the env (``scripts/flap_signs.py``, no wake, neutral start; see
-``training/guidance_tuning.json``): a positive pitch command (both horizontal flaps +) pitches the
-nose up and the ACCD *rises* (-z in the TA frame, about 9 m in 3 s at pitch 0.3); a positive yaw
+Signs, checked on the physics (``crates/sim/tests/behaviour.rs``, no wake, from the settled state)
+and on the controller (``tests/test_training.py``): a positive pitch command (both horizontal
+flaps +) pitches the nose up and the ACCD *rises* (-z in the TA frame, about 9 m in 3 s at pitch 0.3); a positive yaw
 command (both vertical flaps +) turns the nose right and the ACCD moves to starboard (+y); a
 positive roll command (``mix_flaps`` roll +) gives a positive roll rate p (right side down). The
 ACCD hangs from a swivel at its centre of gravity, so roll has almost no aerodynamic stiffness:
