@@ -313,7 +313,10 @@ def evaluate(
     (out / "results.json").write_text(json.dumps(results, indent=1))
     np.savez_compressed(out / "trajectories.npz", **{f"{_label(s)}__{e.index}": e.trajectory for s, eps in runs.items() for e in eps})
     plot_trajectories(runs, out / "trajectories.png", dpi=dpi)
-    plot_miss_cdf(runs, out / "miss_distance_cdf.png", dpi=dpi)
+    from accd_gym.config import env_config
+
+    radius = env_config(config or {})["boom"]["capture_radius"]
+    plot_miss_cdf(runs, out / "miss_distance_cdf.png", dpi=dpi, capture_radius=radius)
     (out / "summary.md").write_text(summary_markdown(results))
     return results
 
@@ -390,8 +393,9 @@ def plot_trajectories(runs: dict[str, list[Episode]], path: Path, max_episodes: 
     plt.close(fig)
 
 
-def plot_miss_cdf(runs: dict[str, list[Episode]], path: Path, dpi: int = 90) -> None:
-    """Empirical CDF of the minimum capture-point-to-boom distance per episode, per policy."""
+def plot_miss_cdf(runs: dict[str, list[Episode]], path: Path, dpi: int = 90, capture_radius: float = 0.5) -> None:
+    """Empirical CDF of the minimum capture-point-to-boom distance per episode, per policy, with the
+    capture radius (m) of the evaluated config marked."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -401,7 +405,7 @@ def plot_miss_cdf(runs: dict[str, list[Episode]], path: Path, dpi: int = 90) -> 
     for spec, eps in runs.items():
         d = np.sort([e.min_distance for e in eps])
         ax.step(d, np.arange(1, len(d) + 1) / len(d), where="post", label=_label(spec))
-    ax.axvline(0.5, color="k", ls=":", lw=1, label="capture radius (default 0.5 m)")
+    ax.axvline(capture_radius, color="k", ls=":", lw=1, label=f"capture radius ({capture_radius:g} m)")
     ax.set_xscale("log")
     ax.set_xlabel("miss distance: minimum distance to the boom tip (m)")
     ax.set_ylabel("fraction of episodes")
