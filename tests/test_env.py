@@ -303,3 +303,8 @@ def test_environment_doc_carries_the_cores_observation_table():
 
     doc = (Path(__file__).resolve().parents[1] / "docs" / "environment.md").read_text()
     assert observation_table_markdown() in doc
+
+
+def test_the_id_loads_through_gymnasiums_module_syntax():
+    env = gym.make("accd_gym:accd_gym/InAirCapture-v0", **QUICK)
+    assert isinstance(env.unwrapped, accd_gym.InAirCaptureEnv)
