@@ -185,3 +185,10 @@ def test_a_guidance_tuning_file_is_a_policy_with_its_winning_gains(tmp_path):
     bad.write_text("{}")
     with pytest.raises(accd_gym.ConfigError, match="not a guidance tuning file"):
         load_policy(str(bad))
+
+
+def test_training_refuses_held_out_wake_seeds():
+    for env in ({"wake_seed": 1_000_000_005}, {"wake_seeds": [3, 1_000_000_999]}):
+        with pytest.raises(accd_gym.ConfigError, match="held-out"):
+            training.validate_config({"env": env})
+    training.validate_config({"env": {"wake_seed": 999_999_999}})

@@ -99,7 +99,16 @@ def validate_config(raw: dict[str, Any]) -> dict[str, Any]:
         raise ConfigError(f"invalid config: `policy_kwargs.activation_fn` = {act!r} is outside the allowed range {list(_ACTIVATIONS)}")
     from accd_gym.config import env_config
 
-    env_config(cfg["env"])  # raises ConfigError naming the bad env field
+    full = env_config(cfg["env"])  # raises ConfigError naming the bad env field
+    from accd_gym.task import HELD_OUT_WAKE_SEEDS
+
+    fixed = ([full["wake_seed"]] if full["wake_seed"] is not None else []) + list(full["wake_seeds"] or [])
+    leaked = sorted({s for s in fixed if s in HELD_OUT_WAKE_SEEDS})
+    if leaked:
+        raise ConfigError(
+            f"invalid config: `env.wake_seed(s)` = {leaked[:5]} is outside the allowed range: training may not use "
+            f"held-out wake seeds [{HELD_OUT_WAKE_SEEDS.start}, {HELD_OUT_WAKE_SEEDS.stop})"
+        )
     return cfg
 
 
