@@ -146,3 +146,11 @@ def test_every_public_name_has_a_docstring():
             for attr, member in vars(obj).items():
                 if not attr.startswith("_"):
                     assert inspect.getdoc(member), f"{name}.{attr}"
+
+
+def test_array_arguments_accept_lists():
+    t = accd_gym.Tether()
+    t.set_surroundings(air_velocity=[-185, 0, 0], tip_force=[0.0, 0.0, 10.0])
+    assert list(t.surroundings()["air_velocity"]) == [-185.0, 0.0, 0.0]
+    t.set_angles(phi=[0.1] * 30, psi=[0] * 30)
+    assert abs(t.q[1] - 0.1) < 1e-15

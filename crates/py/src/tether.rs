@@ -4,7 +4,7 @@ use accd_tether::reference::{self, StandInBody};
 use accd_tether::{Atmosphere, Tether, TetherConfig, TetherState, UniformFlow};
 use nalgebra::Vector3;
 use numpy::ndarray::Array2;
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLike1, PyArrayLike2};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyFloat};
 
@@ -315,8 +315,8 @@ impl PyTether {
     #[pyo3(signature = (directions, direction_rates = None, elongation = 0.0, elongation_rate = 0.0, time = 0.0))]
     fn set_state(
         &mut self,
-        directions: PyReadonlyArray2<'_, f64>,
-        direction_rates: Option<PyReadonlyArray2<'_, f64>>,
+        directions: PyArrayLike2<'_, f64, AllowTypeChange>,
+        direction_rates: Option<PyArrayLike2<'_, f64, AllowTypeChange>>,
         elongation: f64,
         elongation_rate: f64,
         time: f64,
@@ -339,10 +339,10 @@ impl PyTether {
     #[allow(clippy::too_many_arguments)]
     fn set_angles(
         &mut self,
-        phi: PyReadonlyArray1<'_, f64>,
-        psi: PyReadonlyArray1<'_, f64>,
-        phi_rate: Option<PyReadonlyArray1<'_, f64>>,
-        psi_rate: Option<PyReadonlyArray1<'_, f64>>,
+        phi: PyArrayLike1<'_, f64, AllowTypeChange>,
+        psi: PyArrayLike1<'_, f64, AllowTypeChange>,
+        phi_rate: Option<PyArrayLike1<'_, f64, AllowTypeChange>>,
+        psi_rate: Option<PyArrayLike1<'_, f64, AllowTypeChange>>,
         elongation: f64,
         elongation_rate: f64,
         time: f64,
@@ -375,8 +375,8 @@ impl PyTether {
     #[pyo3(signature = (q, qd, time = 0.0))]
     fn set_coordinates(
         &mut self,
-        q: PyReadonlyArray1<'_, f64>,
-        qd: PyReadonlyArray1<'_, f64>,
+        q: PyArrayLike1<'_, f64, AllowTypeChange>,
+        qd: PyArrayLike1<'_, f64, AllowTypeChange>,
         time: f64,
     ) -> PyResult<()> {
         let dofs = self.inner.config().dofs();
@@ -399,10 +399,10 @@ impl PyTether {
     #[pyo3(signature = (*, air_velocity = None, air_density = None, frame_acceleration = None, tip_force = None, tip_drag_area = None))]
     fn set_surroundings(
         &mut self,
-        air_velocity: Option<PyReadonlyArray1<'_, f64>>,
+        air_velocity: Option<PyArrayLike1<'_, f64, AllowTypeChange>>,
         air_density: Option<f64>,
-        frame_acceleration: Option<PyReadonlyArray1<'_, f64>>,
-        tip_force: Option<PyReadonlyArray1<'_, f64>>,
+        frame_acceleration: Option<PyArrayLike1<'_, f64, AllowTypeChange>>,
+        tip_force: Option<PyArrayLike1<'_, f64, AllowTypeChange>>,
         tip_drag_area: Option<f64>,
     ) -> PyResult<()> {
         let mut flow = self.flow;
