@@ -83,6 +83,58 @@ pub struct StepBuffers<'a> {
     pub autoreset: &'a mut [bool],
 }
 
+/// Owned output buffers for `N` envs (for Rust callers; the Python bindings lend numpy arrays
+/// instead). [`StepOutputs::buffers`] lends them to [`BatchEnv::step`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepOutputs {
+    /// `N * OBS_DIM` observations.
+    pub obs: Vec<f32>,
+    /// `N * OBS_DIM` last observations of ended episodes.
+    pub final_obs: Vec<f32>,
+    /// `N` rewards.
+    pub reward: Vec<f64>,
+    /// `N` terminated flags.
+    pub terminated: Vec<bool>,
+    /// `N` truncated flags.
+    pub truncated: Vec<bool>,
+    /// `N * info::DIM` info values.
+    pub info: Vec<f64>,
+    /// `N` wake seeds.
+    pub wake_seed: Vec<u64>,
+    /// `N` next-step autoreset flags.
+    pub autoreset: Vec<bool>,
+}
+
+impl StepOutputs {
+    /// Zeroed buffers for `n` envs.
+    pub fn new(n: usize) -> StepOutputs {
+        StepOutputs {
+            obs: vec![0.0; n * OBS_DIM],
+            final_obs: vec![0.0; n * OBS_DIM],
+            reward: vec![0.0; n],
+            terminated: vec![false; n],
+            truncated: vec![false; n],
+            info: vec![0.0; n * info::DIM],
+            wake_seed: vec![0; n],
+            autoreset: vec![false; n],
+        }
+    }
+
+    /// The buffers, lent for one step.
+    pub fn buffers(&mut self) -> StepBuffers<'_> {
+        StepBuffers {
+            obs: &mut self.obs,
+            reward: &mut self.reward,
+            terminated: &mut self.terminated,
+            truncated: &mut self.truncated,
+            final_obs: &mut self.final_obs,
+            info: &mut self.info,
+            wake_seed: &mut self.wake_seed,
+            autoreset: &mut self.autoreset,
+        }
+    }
+}
+
 /// Output buffers of a reset.
 pub struct ResetBuffers<'a> {
     /// `N * OBS_DIM` first observations.

@@ -10,6 +10,6 @@ pub mod batch;
 pub mod error;
 pub mod seeds;
 
-pub use batch::{info, Autoreset, BatchEnv, ResetBuffers, SeedSpec, StepBuffers};
+pub use batch::{info, Autoreset, BatchEnv, ResetBuffers, SeedSpec, StepBuffers, StepOutputs};
 pub use error::{BatchError, Result};
 pub use seeds::{episode_seeds, WakeSchedule, HELD_OUT_WAKE_SEEDS, TRAINING_WAKE_SEEDS};

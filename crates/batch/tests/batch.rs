@@ -1,7 +1,7 @@
 //! The batch env: bitwise-identical results whatever the thread count and batch size, both
 //! autoreset modes as documented, per-env seeding, bad input named, saved states restored.
 
-use accd_batch::{info, Autoreset, BatchEnv, ResetBuffers, SeedSpec, StepBuffers, WakeSchedule};
+use accd_batch::{info, Autoreset, BatchEnv, ResetBuffers, SeedSpec, StepOutputs, WakeSchedule};
 use accd_sim::{EnvConfig, ACT_DIM, OBS_DIM};
 
 /// Short episodes (2 s) so that autoresets happen within a test.
@@ -16,17 +16,7 @@ fn config() -> EnvConfig {
     }
 }
 
-#[derive(Debug, Clone, PartialEq)]
-struct Step {
-    obs: Vec<f32>,
-    final_obs: Vec<f32>,
-    reward: Vec<f64>,
-    terminated: Vec<bool>,
-    truncated: Vec<bool>,
-    info: Vec<f64>,
-    wake: Vec<u64>,
-    reset: Vec<bool>,
-}
+type Step = StepOutputs;
 
 struct Runner {
     env: BatchEnv,
@@ -38,35 +28,13 @@ impl Runner {
         let env = BatchEnv::new(config(), n, 11, mode, threads).unwrap();
         Runner {
             env,
-            s: Step {
-                obs: vec![0.0; n * OBS_DIM],
-                final_obs: vec![0.0; n * OBS_DIM],
-                reward: vec![0.0; n],
-                terminated: vec![false; n],
-                truncated: vec![false; n],
-                info: vec![0.0; n * info::DIM],
-                wake: vec![0; n],
-                reset: vec![false; n],
-            },
+            s: StepOutputs::new(n),
         }
     }
 
     fn step(&mut self, actions: &[f32]) -> accd_batch::Result<Step> {
-        let s = &mut self.s;
-        self.env.step(
-            actions,
-            StepBuffers {
-                obs: &mut s.obs,
-                reward: &mut s.reward,
-                terminated: &mut s.terminated,
-                truncated: &mut s.truncated,
-                final_obs: &mut s.final_obs,
-                info: &mut s.info,
-                wake_seed: &mut s.wake,
-                autoreset: &mut s.reset,
-            },
-        )?;
-        Ok(s.clone())
+        self.env.step(actions, self.s.buffers())?;
+        Ok(self.s.clone())
     }
 
     fn reset(&mut self, seeds: SeedSpec) -> Vec<f32> {
@@ -115,7 +83,7 @@ fn env_history(steps: &[Step], i: usize) -> String {
                 s.terminated[i],
                 s.truncated[i],
                 row(&s.info, i, info::DIM),
-                s.wake[i],
+                s.wake_seed[i],
                 if s.terminated[i] || s.truncated[i] {
                     row(&s.final_obs, i, OBS_DIM)
                 } else {
@@ -150,7 +118,7 @@ fn results_are_bitwise_identical_whatever_threads_and_batch_size() {
 #[test]
 fn same_step_autoreset_returns_the_new_episode_and_keeps_the_final_observation() {
     let mut r = Runner::new(2, 1, Autoreset::SameStep);
-    let mut wakes = vec![r.s.wake.clone()];
+    let mut wakes = vec![r.s.wake_seed.clone()];
     let mut last = Vec::new();
     for k in 0..20 {
         let s = r.step(&actions(2, k)).unwrap();
@@ -166,10 +134,13 @@ fn same_step_autoreset_returns_the_new_episode_and_keeps_the_final_observation()
             assert!((final0[OBS_DIM - 1] - 0.0).abs() < 1e-6);
             assert_eq!(s.info[info::EPISODE_STEPS], 20.0);
         }
-        wakes.push(s.wake.clone());
+        wakes.push(s.wake_seed.clone());
     }
     let s = r.step(&actions(2, 20)).unwrap();
-    assert_ne!(s.wake, wakes[1], "the next episode draws new wake seeds");
+    assert_ne!(
+        s.wake_seed, wakes[1],
+        "the next episode draws new wake seeds"
+    );
 }
 
 #[test]
@@ -178,14 +149,14 @@ fn next_step_autoreset_resets_in_the_following_step() {
     for k in 0..20 {
         let s = r.step(&actions(1, k)).unwrap();
         assert_eq!(s.truncated[0], k == 19);
-        assert!(!s.reset[0]);
+        assert!(!s.autoreset[0]);
     }
     let s = r.step(&[9.0; 4]).unwrap();
-    assert!(s.reset[0] && !s.truncated[0] && !s.terminated[0]);
+    assert!(s.autoreset[0] && !s.truncated[0] && !s.terminated[0]);
     assert_eq!(s.reward[0], 0.0);
     assert_eq!(s.obs[OBS_DIM - 1], 1.0);
     let s = r.step(&actions(1, 0)).unwrap();
-    assert!(!s.reset[0]);
+    assert!(!s.autoreset[0]);
     assert_eq!(s.info[info::EPISODE_STEPS], 1.0);
 }
 
@@ -230,7 +201,7 @@ fn wake_schedules_fix_or_cycle_the_wake_seed() {
     let mut seen = vec![];
     for k in 0..21 {
         let s = r.step(&actions(2, k)).unwrap();
-        seen.push(s.wake.clone());
+        seen.push(s.wake_seed.clone());
     }
     assert_eq!(seen[20], vec![1_000_000_002, 1_000_000_000]);
     r.env.set_wake_schedule(WakeSchedule::Fixed(9)).unwrap();

@@ -3,8 +3,8 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use accd_batch::{info, Autoreset, BatchEnv, StepBuffers};
-use accd_sim::{EnvConfig, ACT_DIM, OBS_DIM};
+use accd_batch::{Autoreset, BatchEnv, StepOutputs};
+use accd_sim::{EnvConfig, ACT_DIM};
 
 struct Counting;
 
@@ -44,30 +44,8 @@ fn batch_steps_allocate_nothing() {
         let actions: Vec<f32> = (0..n * ACT_DIM)
             .map(|k| ((k % 5) as f32 - 2.0) / 3.0)
             .collect();
-        let mut obs = vec![0.0; n * OBS_DIM];
-        let mut final_obs = vec![0.0; n * OBS_DIM];
-        let mut reward = vec![0.0; n];
-        let mut terminated = vec![false; n];
-        let mut truncated = vec![false; n];
-        let mut infos = vec![0.0; n * info::DIM];
-        let mut wake = vec![0; n];
-        let mut reset = vec![false; n];
-        let mut step = |env: &mut BatchEnv| {
-            env.step(
-                &actions,
-                StepBuffers {
-                    obs: &mut obs,
-                    reward: &mut reward,
-                    terminated: &mut terminated,
-                    truncated: &mut truncated,
-                    final_obs: &mut final_obs,
-                    info: &mut infos,
-                    wake_seed: &mut wake,
-                    autoreset: &mut reset,
-                },
-            )
-            .unwrap()
-        };
+        let mut out = StepOutputs::new(n);
+        let mut step = |env: &mut BatchEnv| env.step(&actions, out.buffers()).unwrap();
         step(&mut env);
         let before = ALLOCATIONS.load(Ordering::SeqCst);
         // 30 steps of 5-step episodes: every env resets several times.

@@ -192,8 +192,8 @@ impl Boom {
         };
         boom.previous_tip = boom.tip(0.0);
         boom.velocity = boom.drift_rate(0.0);
-        if boom.approaching() {
-            boom.velocity.x = config.approach_speed.min(config.approach_distance.max(0.0));
+        if boom.approaching() && config.approach_distance > 0.0 {
+            boom.velocity.x = config.approach_speed;
         }
         boom
     }
@@ -208,7 +208,9 @@ impl Boom {
         V3::from_fn(|i, _| self.config.drift_amplitude[i] * w * (w * t + self.phase[i]).cos())
     }
 
-    fn approaching(&self) -> bool {
+    /// True when the RLV approaches along track (`approach_speed > 0`), false for a fixed
+    /// formation.
+    pub fn approaching(&self) -> bool {
         self.config.approach_speed > 0.0
     }
 
@@ -227,12 +229,14 @@ impl Boom {
         self.velocity
     }
 
-    /// Advances the perturbation from `t` to `t + dt` (exact Gauss-Markov update), moves the tip
-    /// along track towards the capture point at `capture_x` (m) by at most `approach_speed * dt`,
-    /// and updates the velocity estimate.
-    pub fn advance(&mut self, t: f64, dt: f64, capture_x: f64) {
-        let step = self.config.approach_speed * dt;
-        self.along += (capture_x - self.along).clamp(-step, step);
+    /// Advances the perturbation from `t` to `t + dt` (exact Gauss-Markov update), moves an
+    /// approaching tip along track towards the capture point at `capture_x` (m; `None` for a fixed
+    /// formation) by at most `approach_speed * dt`, and updates the velocity estimate.
+    pub fn advance(&mut self, t: f64, dt: f64, capture_x: Option<f64>) {
+        if let Some(x) = capture_x {
+            let step = self.config.approach_speed * dt;
+            self.along += (x - self.along).clamp(-step, step);
+        }
         let a = (-dt / self.config.perturbation_time_constant).exp();
         let kick = self.config.perturbation_sigma * (1.0 - a * a).sqrt();
         for i in 0..3 {
@@ -325,7 +329,7 @@ mod tests {
             let mut b = Boom::new(&cfg, seed, -240.0);
             let mut out = vec![];
             for k in 0..7000 {
-                b.advance(k as f64 * 0.01, 0.01, -240.0);
+                b.advance(k as f64 * 0.01, 0.01, None);
                 out.push(b.tip((k + 1) as f64 * 0.01));
             }
             out
@@ -352,7 +356,7 @@ mod tests {
         assert!((b.tip(0.0).x - (-252.0)).abs() < 1e-12);
         let dt = 0.01;
         for k in 0..2100 {
-            b.advance(k as f64 * dt, dt, -242.0);
+            b.advance(k as f64 * dt, dt, Some(-242.0));
             let x = b.tip((k + 1) as f64 * dt).x;
             let expected = (-252.0 + 0.5 * (k + 1) as f64 * dt).min(-242.0);
             assert!((x - expected).abs() < 1e-9, "step {k}: {x} vs {expected}");
@@ -362,7 +366,7 @@ mod tests {
         }
         // Station-keeping: it follows the capture point back and forth at up to 0.5 m/s.
         for k in 2100..2200 {
-            b.advance(k as f64 * dt, dt, -241.8);
+            b.advance(k as f64 * dt, dt, Some(-241.8));
         }
         assert!((b.tip(22.0).x - (-241.8)).abs() < 1e-9);
     }

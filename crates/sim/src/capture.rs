@@ -146,6 +146,17 @@ impl CaptureConfig {
     }
 }
 
+/// The capture point (the ACCD's tail, `offset` from its centre of gravity in body axes) and its
+/// velocity, from the tether tip's (the centre of gravity's) position and velocity and the ACCD's
+/// attitude and body rates. TA frame, m and m/s.
+fn capture_point(position: &V3, velocity: &V3, accd: &AccdState, offset: &V3) -> (V3, V3) {
+    let attitude = accd.attitude;
+    (
+        position + attitude.transform_vector(offset),
+        velocity + attitude.transform_vector(&accd.omega.cross(offset)),
+    )
+}
+
 /// Parses a JSON config document; serde's message (unknown field, wrong type, with the line and
 /// column) becomes an [`SimError::InvalidConfig`] for `what`.
 pub(crate) fn parse_json<T: serde::de::DeserializeOwned>(text: &str, what: &str) -> Result<T> {
@@ -324,19 +335,23 @@ impl CaptureSim {
     ) -> Result<Self> {
         config.validate()?;
         let tether_config = config.tether_with_tip();
-        let model = TetherModel::new(&tether_config)?;
+        let mut model = TetherModel::new(&tether_config)?;
         let tether = TetherState::straight(tether_config.segments, V3::new(-1.0, 0.0, 0.0), 0.0)?;
+        let accd = AccdState::default();
+        let capture_offset = config.accd.capture_point();
+        let (tip, tip_velocity) = model.tip_state(&tether.q, &tether.qd)?;
+        let (capture, _) = capture_point(&tip, &tip_velocity, &accd, &capture_offset);
         let dofs = model.dofs();
         let z = || vec![0.0; dofs];
-        CaptureSim {
+        Ok(CaptureSim {
             inertia: config.accd.principal_inertia(),
-            capture_offset: config.accd.capture_point(),
-            boom: Boom::new(&config.boom, seeds.rlv, 0.0),
+            capture_offset,
+            boom: Boom::new(&config.boom, seeds.rlv, capture.x),
             config: config.clone(),
             model,
             aero,
             tether,
-            accd: AccdState::default(),
+            accd,
             actuators: Actuators::default(),
             disturbance,
             buffers: Buffers {
@@ -347,21 +362,18 @@ impl CaptureSim {
             },
             time_origin: 0.0,
             steps: 0,
-        }
-        .with_boom_at_start(seeds.rlv)
+        })
     }
 
-    /// Restarts the boom (RLV stream `seed`) relative to the current capture point.
-    fn with_boom_at_start(mut self, seed: u64) -> Result<Self> {
-        let x = self.capture_point_x()?;
-        self.boom = Boom::new(&self.config.boom, seed, x);
-        Ok(self)
-    }
-
-    /// Along-track position of the capture point, m.
-    fn capture_point_x(&mut self) -> Result<f64> {
-        let (position, _) = self.model.tip_state(&self.tether.q, &self.tether.qd)?;
-        Ok(position.x + self.accd.attitude.transform_vector(&self.capture_offset).x)
+    /// The capture point and its velocity at the current state (TA frame, m and m/s).
+    fn capture_point_state(&mut self) -> Result<(V3, V3)> {
+        let (position, velocity) = self.model.tip_state(&self.tether.q, &self.tether.qd)?;
+        Ok(capture_point(
+            &position,
+            &velocity,
+            &self.accd,
+            &self.capture_offset,
+        ))
     }
 
     /// The configuration.
@@ -436,7 +448,7 @@ impl CaptureSim {
         self.time_origin = 0.0;
         self.steps = 0;
         self.actuators = Actuators::default();
-        let x = self.capture_point_x()?;
+        let x = self.capture_point_state()?.0.x;
         self.boom = Boom::new(&self.config.boom, seeds.rlv, x);
         self.disturbance.reset(seeds.wake);
         Ok(())
@@ -550,7 +562,12 @@ impl CaptureSim {
         let t = self.tether.time;
         self.actuators.set_command(&self.config.accd, command)?;
         self.actuators.advance(&self.config.accd, dt);
-        let capture_x = self.capture_point_x()?;
+        // Only an approaching RLV needs to know where the capture point is.
+        let capture_x = if self.boom.approaching() {
+            Some(self.capture_point_state()?.0.x)
+        } else {
+            None
+        };
         self.boom.advance(t, dt, capture_x);
         self.disturbance.advance(t, dt)?;
         // The state is read while the stage buffers are written: lend it out for the step.
@@ -691,11 +708,7 @@ impl CaptureSim {
     /// The capture criteria at the current state (cheaper than a [`CaptureSim::snapshot`]: no
     /// aerodynamics).
     pub fn capture_status(&mut self) -> Result<CaptureStatus> {
-        let (position, velocity) = self.model.tip_state(&self.tether.q, &self.tether.qd)?;
-        let attitude = self.accd.attitude;
-        let point = position + attitude.transform_vector(&self.capture_offset);
-        let point_velocity =
-            velocity + attitude.transform_vector(&self.accd.omega.cross(&self.capture_offset));
+        let (point, point_velocity) = self.capture_point_state()?;
         Ok(CaptureStatus::evaluate(
             &self.config.boom,
             &point,
@@ -713,10 +726,8 @@ impl CaptureSim {
         stage.tip_force(t, &position, &velocity);
         let loads = stage.loads.get();
         let attitude = self.accd.attitude;
-        let arm = attitude.transform_vector(&self.capture_offset);
-        let capture_point = position + arm;
-        let capture_point_velocity =
-            velocity + attitude.transform_vector(&self.accd.omega.cross(&self.capture_offset));
+        let (capture_point, capture_point_velocity) =
+            capture_point(&position, &velocity, &self.accd, &self.capture_offset);
         let boom_tip = self.boom.tip(t);
         let boom_velocity = self.boom.velocity();
         Ok(Snapshot {
