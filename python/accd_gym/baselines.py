@@ -23,12 +23,12 @@ from typing import Any, Callable, Optional
 import numpy as np
 
 from accd_gym.errors import ConfigError
-from accd_gym.task import ACT_DIM, OBS_DIM
+from accd_gym.task import ACT_DIM, OBS_DIM, OBSERVATION_SCALE
 
-#: Observation scales (see the observation table of :class:`accd_gym.InAirCaptureEnv`).
-_POS_SCALE = 0.05  # 1/m
-_VEL_SCALE = 0.1  # s/m
-_RATE_SCALE = 0.5  # s/rad
+#: Observation scales, from the core's observation table.
+_POS_SCALE = OBSERVATION_SCALE["boom_rel_y"]  # 1/m
+_VEL_SCALE = OBSERVATION_SCALE["boom_rel_vy"]  # s/m
+_RATE_SCALE = OBSERVATION_SCALE["rate_p"]  # s/rad
 
 
 def _check_obs(obs: Any) -> np.ndarray:
@@ -129,15 +129,16 @@ class GuidancePolicy:
     result in ``training/guidance_tuning*.json``). The first tuning (``guidance_tuning.json``,
     ``guidance_tuning_stage2.json``) was done on the fixed-formation boom of an earlier version,
     where about a third of the episodes were out of the tether's reach along track; with the
-    approaching RLV (``boom.approach_speed``) every gain set tried captures nearly every episode of
-    the default task, so the gains were retuned on harder settings: severe ambient turbulence
+    approaching RLV (``boom.approach_speed``) the default task leaves nothing to tune (the earlier
+    winner captured 100/100 episodes of it, the final gains 64/64), so the gains were retuned on
+    harder settings: severe ambient turbulence
     (``guidance_tuning_severe.json``: kp 0.25, kd 0.1 capture 31/32) and severe turbulence with a
     0.3 m capture radius (``guidance_tuning_hard.json``, then ``guidance_tuning_hard_stage2.json``
     with 48 episodes per set: kp in {0.4, 0.55, 0.7} x kd in {0.15, 0.2, 0.3} x kq in {0.1, 0.15},
     ki = 0). The defaults are that winner, kp = 0.7, kd = 0.2, ki = 0, kq = 0.15: 47/48 captured
     there, and 64/64 on the default task and on severe turbulence (training seeds 1000-1063).
-    The integrator is off: with the approaching RLV there is no steady formation offset left for it
-    to remove, and it only slowed the response. ``training/guidance_tuning_precision.json`` holds
+    The integrator is off: in the first hard search ki = 0 and ki = 0.03 tied at the top (28/32
+    each; ki = 0 won on miss distance), so the second stage kept ki = 0. ``training/guidance_tuning_precision.json`` holds
     the same search for the precision scenario (a 1 m/s closing-speed limit on top): the same
     gains win with 20/48; a tuning file can be evaluated as a policy of its own
     (``accd-gym evaluate --policy training/guidance_tuning_precision.json``).

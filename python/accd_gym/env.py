@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from typing import Any, Optional
 
 import gymnasium as gym
@@ -10,17 +9,17 @@ import numpy as np
 
 from accd_gym import _core
 from accd_gym.config import config_json, env_config
+from accd_gym.core_env import CoreEnvMixin
 from accd_gym.task import (
     action_space,
     check_actions,
     info_dict,
     observation_space,
     random_seed,
-    wake_options,
 )
 
 
-class InAirCaptureEnv(gym.Env):
+class InAirCaptureEnv(CoreEnvMixin, gym.Env):
     """Guide the capturing device (ACCD) at the end of a towed tether onto the RLV's boom.
 
     ## Description
@@ -147,26 +146,14 @@ class InAirCaptureEnv(gym.Env):
         self._core = _core.BatchEnv(config_json(self._config), 1, random_seed(), "next_step", 1)
         self.observation_space = observation_space()
         self.action_space = action_space()
-        self._needs_reset = True
-        self._seeded = False
         self._viewer = None
-
-    @property
-    def config(self) -> dict[str, Any]:
-        """The full configuration (defaults filled in)."""
-        return json.loads(json.dumps(self._config))
 
     def reset(
         self, *, seed: Optional[int] = None, options: Optional[dict[str, Any]] = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Starts a new episode; returns ``(observation, info)`` (info: ``wake_seed``)."""
         super().reset(seed=seed)
-        wake_options(self._core, options)
-        if seed is None and not self._seeded:
-            seed = random_seed()
-        obs, wake = self._core.reset(seed)
-        self._seeded = True
-        self._needs_reset = False
+        obs, wake = self._reset_core(seed, options)
         info = {"wake_seed": int(wake[0])}
         if self.render_mode == "human":
             self.render()
@@ -211,19 +198,6 @@ class InAirCaptureEnv(gym.Env):
         if self._viewer is not None:
             self._viewer.close()
             self._viewer = None
-
-    def get_state(self) -> bytes:
-        """The env's exact state (physics, random streams, episode bookkeeping) as bytes."""
-        return bytes([self._needs_reset, self._seeded]) + self._core.get_state()
-
-    def set_state(self, state: bytes) -> None:
-        """Restores a state from :meth:`get_state` of an env with the same configuration."""
-        from accd_gym.errors import StateError
-
-        if len(state) < 2 or state[0] > 1 or state[1] > 1:
-            raise StateError("not a state from InAirCaptureEnv.get_state()")
-        self._core.set_state(state[2:])
-        self._needs_reset, self._seeded = bool(state[0]), bool(state[1])
 
     def __getstate__(self) -> dict[str, Any]:
         return {

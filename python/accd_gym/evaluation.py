@@ -24,11 +24,11 @@ from typing import Any, Optional, Sequence
 import numpy as np
 
 from accd_gym.errors import ConfigError
-from accd_gym.task import EVENT_NAMES, HELD_OUT_WAKE_SEEDS
+from accd_gym.task import EVENT_NAMES, HELD_OUT_WAKE_SEEDS, OBSERVATION_SCALE
 
 #: Base seed of evaluation episodes (initial conditions and RLV motion); fixed so runs compare.
 EVAL_BASE_SEED: int = 20_240_607
-_POS_SCALE = 0.05  # observation scale of the boom-relative position, 1/m
+_POS_SCALE = OBSERVATION_SCALE["boom_rel_x"]  # observation scale of the boom-relative position, 1/m
 
 
 def wilson_interval(successes: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:

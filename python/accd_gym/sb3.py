@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from typing import Any, Optional, Sequence, Union
 
 import numpy as np
@@ -10,6 +9,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices,
 
 from accd_gym import _core
 from accd_gym.config import config_json, env_config
+from accd_gym.core_env import CoreEnvMixin
 from accd_gym.errors import ConfigError
 from accd_gym.task import (
     action_space,
@@ -17,11 +17,10 @@ from accd_gym.task import (
     info_dict,
     observation_space,
     random_seed,
-    wake_options,
 )
 
 
-class AccdVecEnv(VecEnv):
+class AccdVecEnv(CoreEnvMixin, VecEnv):
     """``num_envs`` In-Air Capturing episodes as a stable-baselines3 ``VecEnv``, stepped by Rust.
 
     The task is that of :class:`accd_gym.env.InAirCaptureEnv` (see its docstring for the
@@ -67,16 +66,6 @@ class AccdVecEnv(VecEnv):
         super().__init__(self._core.num_envs, observation_space(), action_space())
         self.metadata["render_fps"] = 1.0 / self._config["agent_step"]
 
-    @property
-    def config(self) -> dict[str, Any]:
-        """The full configuration (defaults filled in)."""
-        return json.loads(json.dumps(self._config))
-
-    @property
-    def num_threads(self) -> int:
-        """Threads stepping the envs."""
-        return self._core.num_threads
-
     def seed(self, seed: Optional[int] = None) -> Sequence[Optional[int]]:
         """Seeds the envs at the next ``reset()``: env ``i`` gets base ``seed`` and index ``i``."""
         self._base_seed = random_seed() if seed is None else int(seed)
@@ -92,15 +81,14 @@ class AccdVecEnv(VecEnv):
 
     def reset(self) -> np.ndarray:
         """Starts new episodes in every env (with the pending seed and options)."""
-        wake_options(self._core, self._pending_options)
+        obs, wake = self._reset_core(self._base_seed, self._pending_options)
         self._pending_options = {}
-        obs, wake = self._core.reset(self._base_seed)
         self._base_seed = None
         self.reset_infos = [{"wake_seed": int(w)} for w in wake]
         return obs
 
     def step_async(self, actions: np.ndarray) -> None:
-        """Stores the actions ((num_envs, 4); checked: finite, right shape)."""
+        """Stores the actions ((num_envs, 4); the shape is checked here, finiteness by the step)."""
         self._actions = check_actions(actions, self.num_envs)
 
     def step_wait(self) -> VecEnvStepReturn:
@@ -151,14 +139,6 @@ class AccdVecEnv(VecEnv):
         from accd_gym.render import render_frame
 
         return [render_frame(self._core.render_data(i)) for i in range(self.num_envs)]
-
-    def get_state(self) -> bytes:
-        """Every env's exact state (physics, random streams, seeds, counters) as bytes."""
-        return self._core.get_state()
-
-    def set_state(self, state: bytes) -> None:
-        """Restores a state from :meth:`get_state` of an env with the same config and size."""
-        self._core.set_state(state)
 
     def __getstate__(self) -> dict[str, Any]:
         return {

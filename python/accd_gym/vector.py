@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from typing import Any, Optional, Sequence, Union
 
 import gymnasium as gym
@@ -12,6 +11,7 @@ from gymnasium.vector.utils import batch_space
 
 from accd_gym import _core
 from accd_gym.config import config_json, env_config
+from accd_gym.core_env import CoreEnvMixin
 from accd_gym.errors import ConfigError
 from accd_gym.task import (
     EVENT_NAMES,
@@ -20,13 +20,12 @@ from accd_gym.task import (
     check_actions,
     observation_space,
     random_seed,
-    wake_options,
 )
 
 _MODES = {AutoresetMode.NEXT_STEP: "next_step", AutoresetMode.SAME_STEP: "same_step"}
 
 
-class InAirCaptureVectorEnv(VectorEnv):
+class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
     """``num_envs`` In-Air Capturing episodes stepped together by the Rust core, on threads.
 
     The task (actions, observations, reward, episode end, seeds) is that of
@@ -88,18 +87,6 @@ class InAirCaptureVectorEnv(VectorEnv):
         self.single_action_space = action_space()
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self._seeded = False
-        self._needs_reset = True
-
-    @property
-    def config(self) -> dict[str, Any]:
-        """The full configuration (defaults filled in)."""
-        return json.loads(json.dumps(self._config))
-
-    @property
-    def num_threads(self) -> int:
-        """Threads stepping the envs."""
-        return self._core.num_threads
 
     def reset(
         self,
@@ -117,18 +104,13 @@ class InAirCaptureVectorEnv(VectorEnv):
             self._np_random, self._np_random_seed = gym.utils.seeding.np_random(
                 seed if isinstance(seed, int) else int(seed[0])
             )
-        wake_options(self._core, options)
-        if seed is None and not self._seeded:
-            seed = random_seed()
         if seed is not None and not isinstance(seed, int):
             seed = [int(s) for s in seed]
             if len(seed) != self.num_envs:
                 raise ConfigError(
                     f"invalid config: `seed` has {len(seed)} values, expected num_envs = {self.num_envs}"
                 )
-        obs, wake = self._core.reset(seed)
-        self._seeded = True
-        self._needs_reset = False
+        obs, wake = self._reset_core(seed, options)
         mask = np.ones(self.num_envs, dtype=bool)
         return obs, {"wake_seed": wake, "_wake_seed": mask}
 
@@ -176,19 +158,6 @@ class InAirCaptureVectorEnv(VectorEnv):
 
     def close_extras(self, **kwargs: Any) -> None:
         """Nothing to release: the Rust core frees its memory and threads when dropped."""
-
-    def get_state(self) -> bytes:
-        """Every env's exact state (physics, random streams, seeds, counters) as bytes."""
-        return bytes([self._needs_reset, self._seeded]) + self._core.get_state()
-
-    def set_state(self, state: bytes) -> None:
-        """Restores a state from :meth:`get_state` of a vector env with the same config and size."""
-        from accd_gym.errors import StateError
-
-        if len(state) < 2 or state[0] > 1 or state[1] > 1:
-            raise StateError("not a state from InAirCaptureVectorEnv.get_state()")
-        self._core.set_state(state[2:])
-        self._needs_reset, self._seeded = bool(state[0]), bool(state[1])
 
     def __getstate__(self) -> dict[str, Any]:
         return {

@@ -1,0 +1,57 @@
+"""What every env class shares: the Rust batch core, its configuration, seeding on reset and
+exact state snapshots."""
+
+from __future__ import annotations
+
+import copy
+from typing import Any, Optional, Sequence, Union
+
+import numpy as np
+
+from accd_gym.errors import StateError
+from accd_gym.task import random_seed, wake_options
+
+
+class CoreEnvMixin:
+    """Methods of an env backed by ``self._core`` (an ``accd_gym._core.BatchEnv``) built from
+    ``self._config``. Tracks whether the env was ever seeded and whether it must be reset."""
+
+    _core: Any
+    _config: dict[str, Any]
+    _seeded: bool = False
+    _needs_reset: bool = True
+
+    @property
+    def config(self) -> dict[str, Any]:
+        """The full configuration (defaults filled in; a copy)."""
+        return copy.deepcopy(self._config)
+
+    @property
+    def num_threads(self) -> int:
+        """Threads stepping the envs."""
+        return self._core.num_threads
+
+    def _reset_core(
+        self, seed: Optional[Union[int, Sequence[int]]], options: Optional[dict[str, Any]]
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Applies the wake options, seeds the core (from the operating system's entropy on a
+        first reset without a seed) and starts new episodes; returns ``(obs, wake_seeds)``."""
+        wake_options(self._core, options)
+        if seed is None and not self._seeded:
+            seed = random_seed()
+        obs, wake = self._core.reset(seed)
+        self._seeded = True
+        self._needs_reset = False
+        return obs, wake
+
+    def get_state(self) -> bytes:
+        """The env's exact state (physics, random streams, seeds, counters) as bytes."""
+        return bytes([self._needs_reset, self._seeded]) + self._core.get_state()
+
+    def set_state(self, state: bytes) -> None:
+        """Restores a state from :meth:`get_state` of an env with the same configuration and size;
+        raises ConfigError for another configuration and StateError for anything else."""
+        if len(state) < 2 or state[0] > 1 or state[1] > 1:
+            raise StateError(f"not a state from {type(self).__name__}.get_state()")
+        self._core.set_state(state[2:])
+        self._needs_reset, self._seeded = bool(state[0]), bool(state[1])
