@@ -46,7 +46,12 @@ fn batch_steps_allocate_nothing() {
             .collect();
         let mut out = StepOutputs::new(n);
         let mut step = |env: &mut BatchEnv| env.step(&actions, out.buffers()).unwrap();
-        step(&mut env);
+        // Warm-up: the pool's workers allocate once, lazily, the first time they take work and
+        // the first time they go to sleep (their thread handles); let every worker do both.
+        for _ in 0..5 {
+            step(&mut env);
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
         let before = ALLOCATIONS.load(Ordering::SeqCst);
         // 30 steps of 5-step episodes: every env resets several times.
         for _ in 0..30 {
