@@ -2,7 +2,7 @@
 //! `cargo run --release -p accd-sim --example episode_probe [steps]`.
 use std::sync::Arc;
 
-use accd_sim::{EnvConfig, Episode, Equilibrium, Seeds};
+use accd_sim::{AirSampling, EnvConfig, Episode, Equilibrium, NormalSampler, Seeds};
 
 fn time(label: &str, config: EnvConfig, steps: usize) {
     let mut config = config;
@@ -35,6 +35,21 @@ fn main() {
         .nth(1)
         .and_then(|s| s.parse().ok())
         .unwrap_or(2000);
+    let only = std::env::args().nth(2).unwrap_or_default();
+    if only == "per_step" {
+        let mut per_step = EnvConfig::default();
+        per_step.wake.sampling = AirSampling::PerStep;
+        return time("... sampled once per step", per_step, steps);
+    }
+    if only == "fast" {
+        let mut fast = EnvConfig::default();
+        fast.wake.sampling = AirSampling::PerStep;
+        fast.turbulence.normal_sampler = NormalSampler::Ziggurat;
+        return time("per step + ziggurat", fast, steps);
+    }
+    if only == "default" {
+        return time("mean wake + turbulence", EnvConfig::default(), steps);
+    }
     let mut calm = EnvConfig::default();
     calm.wake.enabled = false;
     calm.turbulence.wake_turbulence = false;
@@ -43,4 +58,7 @@ fn main() {
     mean.turbulence.wake_turbulence = false;
     time("mean wake", mean, steps);
     time("mean wake + turbulence", EnvConfig::default(), steps);
+    let mut per_step = EnvConfig::default();
+    per_step.wake.sampling = AirSampling::PerStep;
+    time("... sampled once per step", per_step, steps);
 }

@@ -25,7 +25,7 @@ use crate::boom::{Boom, BoomConfig, CaptureStatus};
 use crate::codec::{StateReader, StateWriter};
 use crate::error::{Result, SimError};
 use crate::turbulence::{Turbulence, TurbulenceConfig};
-use crate::wake::{Wake, WakeConfig};
+use crate::wake::{AirSampling, Wake, WakeConfig};
 use crate::wake_field::WakeField;
 
 type V3 = Vector3<f64>;
@@ -198,11 +198,21 @@ struct Stage<'a> {
     accd: AccdState,
     deflection: [f64; 4],
     loads: Cell<AeroLoads>,
+    /// With [`AirSampling::PerStep`]: the disturbance at each segment centre, sampled once at the
+    /// step's initial state and held over the stages.
+    held: Option<&'a [V3]>,
 }
 
 impl Surroundings for Stage<'_> {
     fn air_velocity(&self, time: f64, position: &V3) -> V3 {
         -self.aircraft.velocity(time) + self.disturbance.velocity(time, position)
+    }
+    #[inline(always)]
+    fn segment_air_velocity(&self, time: f64, segment: usize, position: &V3) -> V3 {
+        match self.held {
+            Some(held) => -self.aircraft.velocity(time) + held[segment],
+            None => self.air_velocity(time, position),
+        }
     }
     fn air_density(&self, _time: f64, position: &V3) -> f64 {
         self.air.density + self.air.density_per_depth * position.z
@@ -233,6 +243,17 @@ struct Buffers {
     qd: Vec<f64>,
     qd_k: [Vec<f64>; 3],
     a_k: [Vec<f64>; 4],
+}
+
+/// What the stepper derives from the current state once and uses several times (the boom before
+/// a step, the capture check after it, the held disturbance): recomputed whenever the state
+/// changes ([`CaptureSim::refresh`]), never saved.
+#[derive(Debug, Clone)]
+struct Derived {
+    /// Segment centres (n), m.
+    centres: Vec<V3>,
+    /// The capture point and its velocity, m and m/s.
+    capture_point: (V3, V3),
 }
 
 /// A snapshot of everything a user may want to see, in the TA frame, SI units.
@@ -284,6 +305,10 @@ pub struct CaptureSim {
     boom: Boom,
     disturbance: Box<dyn AirDisturbance>,
     buffers: Buffers,
+    derived: Derived,
+    /// The disturbance held at each segment centre over a step (n), for [`AirSampling::PerStep`];
+    /// a function of the step's initial state, so not part of the saved state.
+    held: Vec<V3>,
     /// Time of the last state set from outside, s; the episode time is
     /// `time_origin + steps * dt`, free of the drift of summing dt.
     time_origin: f64,
@@ -305,6 +330,8 @@ impl Clone for CaptureSim {
             boom: self.boom.clone(),
             disturbance: self.disturbance.clone_box(),
             buffers: self.buffers.clone(),
+            derived: self.derived.clone(),
+            held: self.held.clone(),
             time_origin: self.time_origin,
             steps: self.steps,
         }
@@ -343,7 +370,7 @@ impl CaptureSim {
         let (capture, _) = capture_point(&tip, &tip_velocity, &accd, &capture_offset);
         let dofs = model.dofs();
         let z = || vec![0.0; dofs];
-        Ok(CaptureSim {
+        let mut sim = CaptureSim {
             inertia: config.accd.principal_inertia(),
             capture_offset,
             boom: Boom::new(&config.boom, seeds.rlv, capture.x),
@@ -360,20 +387,32 @@ impl CaptureSim {
                 qd_k: [z(), z(), z()],
                 a_k: [z(), z(), z(), z()],
             },
+            derived: Derived {
+                centres: vec![V3::zeros(); tether_config.segments],
+                capture_point: (capture, V3::zeros()),
+            },
+            held: vec![V3::zeros(); tether_config.segments],
             time_origin: 0.0,
             steps: 0,
-        })
+        };
+        sim.refresh()?;
+        Ok(sim)
+    }
+
+    /// Recomputes what is derived from the state (one walk along the chain): after every change
+    /// of the tether's or the ACCD's state.
+    fn refresh(&mut self) -> Result<()> {
+        let d = &mut self.derived;
+        let (position, velocity) =
+            self.model
+                .centres_and_tip(&self.tether.q, &self.tether.qd, &mut d.centres)?;
+        d.capture_point = capture_point(&position, &velocity, &self.accd, &self.capture_offset);
+        Ok(())
     }
 
     /// The capture point and its velocity at the current state (TA frame, m and m/s).
-    fn capture_point_state(&mut self) -> Result<(V3, V3)> {
-        let (position, velocity) = self.model.tip_state(&self.tether.q, &self.tether.qd)?;
-        Ok(capture_point(
-            &position,
-            &velocity,
-            &self.accd,
-            &self.capture_offset,
-        ))
+    fn capture_point_state(&self) -> (V3, V3) {
+        self.derived.capture_point
     }
 
     /// The configuration.
@@ -398,6 +437,12 @@ impl CaptureSim {
 
     /// Replaces the ACCD's attitude and rates (e.g. to test its stability).
     pub fn set_accd_state(&mut self, state: AccdState) -> Result<()> {
+        Self::check_accd_state(&state)?;
+        self.accd = state;
+        self.refresh()
+    }
+
+    fn check_accd_state(state: &AccdState) -> Result<()> {
         if !(state.attitude.coords.iter().all(|v| v.is_finite())
             && state.omega.iter().all(|v| v.is_finite()))
         {
@@ -407,7 +452,6 @@ impl CaptureSim {
                 "finite values",
             ));
         }
-        self.accd = state;
         Ok(())
     }
 
@@ -425,7 +469,7 @@ impl CaptureSim {
         self.time_origin = state.time;
         self.steps = 0;
         self.tether = state;
-        Ok(())
+        self.refresh()
     }
 
     /// Starts a new episode at t = 0 from the tether state `tether` (its time is ignored) and
@@ -441,14 +485,16 @@ impl CaptureSim {
             .into());
         }
         tether.validate()?;
-        self.set_accd_state(accd)?;
+        Self::check_accd_state(&accd)?;
+        self.accd = accd;
         self.tether.q.copy_from_slice(&tether.q);
         self.tether.qd.copy_from_slice(&tether.qd);
         self.tether.time = 0.0;
         self.time_origin = 0.0;
         self.steps = 0;
         self.actuators = Actuators::default();
-        let x = self.capture_point_state()?.0.x;
+        self.refresh()?;
+        let x = self.capture_point_state().0.x;
         self.boom = Boom::new(&self.config.boom, seeds.rlv, x);
         self.disturbance.reset(seeds.wake);
         Ok(())
@@ -491,7 +537,8 @@ impl CaptureSim {
         r.f64s_into("flap commands", &mut self.actuators.command)?;
         r.f64s_into("flap deflections", &mut self.actuators.deflection)?;
         self.boom.load(r)?;
-        self.disturbance.load(r)
+        self.disturbance.load(r)?;
+        self.refresh()
     }
 
     /// The flap actuators.
@@ -517,7 +564,14 @@ impl CaptureSim {
     /// The surroundings of the current step (with the ACCD's current state), the tether model and
     /// the stage buffers, borrowed apart so that the model can run while the stage is alive.
     fn parts(&mut self) -> Result<(Stage<'_>, &mut TetherModel, &mut Buffers)> {
+        self.parts_with(false)
+    }
+
+    /// [`CaptureSim::parts`]; with `hold`, the segments see the disturbance held in the buffers.
+    fn parts_with(&mut self, hold: bool) -> Result<(Stage<'_>, &mut TetherModel, &mut Buffers)> {
         let air = self.air_at_step()?;
+        let (model, buffers) = (&mut self.model, &mut self.buffers);
+        let held: Option<&[V3]> = if hold { Some(&self.held) } else { None };
         let stage = Stage {
             aircraft: &self.config.aircraft,
             air,
@@ -526,8 +580,17 @@ impl CaptureSim {
             accd: self.accd,
             deflection: self.actuators.deflection,
             loads: Cell::new(AeroLoads::default()),
+            held,
         };
-        Ok((stage, &mut self.model, &mut self.buffers))
+        Ok((stage, model, buffers))
+    }
+
+    /// Samples the disturbance at the segment centres of the current state into the held
+    /// buffer ([`AirSampling::PerStep`]).
+    fn hold_disturbance(&mut self, time: f64) {
+        for (held, centre) in self.held.iter_mut().zip(&self.derived.centres) {
+            *held = self.disturbance.velocity(time, centre);
+        }
     }
 
     /// Derivatives at one stage: tether accelerations into `qdd`, and the quaternion and body-rate
@@ -564,7 +627,7 @@ impl CaptureSim {
         self.actuators.advance(&self.config.accd, dt);
         // Only an approaching RLV needs to know where the capture point is.
         let capture_x = if self.boom.approaching() {
-            Some(self.capture_point_state()?.0.x)
+            Some(self.capture_point_state().0.x)
         } else {
             None
         };
@@ -585,7 +648,7 @@ impl CaptureSim {
                     attitude: UnitQuaternion::new_normalize(attitude),
                     omega,
                 };
-                Ok(())
+                self.refresh()
             }
             Err(e) => {
                 self.tether.q = q0;
@@ -606,7 +669,11 @@ impl CaptureSim {
     ) -> Result<(Quaternion<f64>, V3)> {
         let inertia = self.inertia;
         let (att0, w0) = (*self.accd.attitude.quaternion(), self.accd.omega);
-        let (mut stage, model, b) = self.parts()?;
+        let hold = self.config.wake.sampling == AirSampling::PerStep;
+        if hold {
+            self.hold_disturbance(t);
+        }
+        let (mut stage, model, b) = self.parts_with(hold)?;
         let dim = q0.len();
         let h = 0.5 * dt;
 
@@ -708,7 +775,7 @@ impl CaptureSim {
     /// The capture criteria at the current state (cheaper than a [`CaptureSim::snapshot`]: no
     /// aerodynamics).
     pub fn capture_status(&mut self) -> Result<CaptureStatus> {
-        let (point, point_velocity) = self.capture_point_state()?;
+        let (point, point_velocity) = self.capture_point_state();
         Ok(CaptureStatus::evaluate(
             &self.config.boom,
             &point,

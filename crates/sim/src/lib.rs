@@ -32,10 +32,11 @@ pub use boom::{BoomConfig, CaptureStatus};
 pub use capture::{AirDisturbance, CalmAir, CaptureConfig, CaptureSim, Seeds, Snapshot};
 pub use episode::{Episode, Equilibrium, Outcome};
 pub use error::SimError;
+pub use rng::NormalSampler;
 pub use task::{EnvConfig, ACT_DIM, OBSERVATION, OBS_BOUND, OBS_DIM};
 pub use turbulence::{AmbientTurbulence, Turbulence, TurbulenceConfig};
 pub use wake::{
-    AnalyticWake, Wake, WakeConfig, WakeSample, WakeTable, WakeTableData, WakeTableFiles,
-    WakeTables,
+    AirSampling, AnalyticWake, Wake, WakeConfig, WakeSample, WakeTable, WakeTableData,
+    WakeTableFiles, WakeTables,
 };
 pub use wake_field::{WakeField, WakeFieldConfig};

@@ -6,17 +6,24 @@
 //!   whose ChaCha stream (nonce) is a fixed label per use ([`WAKE_LANES_STREAM`],
 //!   [`AMBIENT_STREAM`], [`RLV_STREAM`]). SplitMix64's output function is a bijective avalanche
 //!   mix, so neighbouring seeds give unrelated keys; distinct labels give independent streams.
-//! * **Gaussians** ([`Stream::gaussian`]): Box-Muller written here (not a library sampler whose
-//!   algorithm may change) on two uniforms from the top 53 bits of one `u64` each,
-//!   `u1 = 1 - m1 2^-53` in (0, 1], `u2 = m2 2^-53` in [0, 1):
-//!   `r = sqrt(-2 ln u1)`, `z0 = r cos(2 pi u2)`, `z1 = r sin(2 pi u2)`; both used, in that order.
+//! * **Gaussians** ([`Stream::gaussian`]), by one of two samplers ([`NormalSampler`]):
+//!   - **Box-Muller**, written here, on two uniforms from the top 53 bits of one `u64` each,
+//!     `u1 = 1 - m1 2^-53` in (0, 1], `u2 = m2 2^-53` in [0, 1):
+//!     `r = sqrt(-2 ln u1)`, `z0 = r cos(2 pi u2)`, `z1 = r sin(2 pi u2)`; both used, in that
+//!     order. It goes through the platform's `ln`, `sqrt`, `sin` and `cos`, so it is bitwise
+//!     identical on one platform and may differ in the last bits across math libraries.
+//!   - **Ziggurat** (Marsaglia & Tsang 2000), `rand_distr::StandardNormal` 0.6 built without its
+//!     `std` feature: about one `u64` per deviate, no trigonometry (4-5x cheaper), and its rare
+//!     tail draws use `libm`'s pure-Rust `ln`/`exp`, so the deviates are bitwise identical on
+//!     every platform. The version is pinned in `Cargo.lock`; a change of its algorithm would
+//!     show in `tests/test_physics_hash.py`.
 //!
-//! The `u64` streams are identical on every platform; the Gaussians go through the platform's
-//! `ln`, `sqrt`, `sin` and `cos`, so they are bitwise identical on one platform and may differ in
-//! the last bits across math libraries.
+//! The `u64` streams are identical on every platform.
 
 use rand_chacha::ChaCha8Rng;
 use rand_core::{Rng, SeedableRng};
+use rand_distr::{Distribution, StandardNormal};
+use serde::{Deserialize, Serialize};
 
 use crate::codec::{StateReader, StateWriter};
 use crate::error::Result;
@@ -51,19 +58,37 @@ pub fn stream_rng(seed: u64, stream: u64) -> ChaCha8Rng {
     rng
 }
 
-/// A random stream: uniform and standard normal deviates (Box-Muller) from one ChaCha8 stream.
+/// How a [`Stream`] turns its `u64`s into standard normal deviates (module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NormalSampler {
+    /// Box-Muller, two deviates from two `u64`s (sin, cos, ln, sqrt).
+    #[default]
+    BoxMuller,
+    /// The ziggurat of `rand_distr::StandardNormal`, about one `u64` per deviate.
+    Ziggurat,
+}
+
+/// A random stream: uniform and standard normal deviates from one ChaCha8 stream.
 #[derive(Debug, Clone)]
 pub struct Stream {
     rng: ChaCha8Rng,
     spare: Option<f64>,
+    sampler: NormalSampler,
 }
 
 impl Stream {
-    /// The deviates of stream `stream` for `seed` ([`stream_rng`]).
+    /// The deviates of stream `stream` for `seed` ([`stream_rng`]), normals by Box-Muller.
     pub fn new(seed: u64, stream: u64) -> Stream {
+        Stream::with_sampler(seed, stream, NormalSampler::BoxMuller)
+    }
+
+    /// The deviates of stream `stream` for `seed`, normals by `sampler`.
+    pub fn with_sampler(seed: u64, stream: u64, sampler: NormalSampler) -> Stream {
         Stream {
             rng: stream_rng(seed, stream),
             spare: None,
+            sampler,
         }
     }
 
@@ -76,8 +101,15 @@ impl Stream {
         w.f64(self.spare.unwrap_or(0.0));
     }
 
-    /// Reads a stream written by [`Stream::save`]: it continues exactly where the saved one was.
+    /// Reads a stream written by [`Stream::save`] (normals by Box-Muller): it continues exactly
+    /// where the saved one was.
     pub fn load(r: &mut StateReader<'_>) -> Result<Stream> {
+        Stream::load_with_sampler(r, NormalSampler::BoxMuller)
+    }
+
+    /// [`Stream::load`] for a stream whose normals come from `sampler` (a configuration choice,
+    /// not part of the saved state).
+    pub fn load_with_sampler(r: &mut StateReader<'_>, sampler: NormalSampler) -> Result<Stream> {
         let key = r.raw::<32>("stream key")?;
         let mut rng = ChaCha8Rng::from_seed(key);
         rng.set_stream(r.u64("stream label")?);
@@ -87,6 +119,7 @@ impl Stream {
         Ok(Stream {
             rng,
             spare: has_spare.then_some(spare),
+            sampler,
         })
     }
 
@@ -104,6 +137,9 @@ impl Stream {
     /// The next N(0, 1) deviate.
     #[inline]
     pub fn gaussian(&mut self) -> f64 {
+        if self.sampler == NormalSampler::Ziggurat {
+            return StandardNormal.sample(&mut self.rng);
+        }
         if let Some(z) = self.spare.take() {
             return z;
         }

@@ -699,6 +699,20 @@ pub struct WakeTableFiles {
     pub high: String,
 }
 
+/// Where the tether's segments sample the air disturbance (mean wake and turbulence) during a
+/// physics step. The capturing device samples it at every RK4 stage in both schemes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AirSampling {
+    /// At every RK4 stage, at the stage's segment centres (4 samples per segment and step): the
+    /// exact scheme for a field that is frozen over the step.
+    #[default]
+    PerStage,
+    /// Once per step, at the segment centres of the step's initial state, held over its four
+    /// stages (a first-order error in the forcing: the segments move by millimetres in a step).
+    PerStep,
+}
+
 /// Configuration of the mean wake.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -715,6 +729,9 @@ pub struct WakeConfig {
     pub attachment_from_nose_m: [f64; 3],
     /// User tables (JSON files); `None` (the default) uses the analytic model.
     pub tables: Option<WakeTableFiles>,
+    /// Where the tether's segments sample the wake and its turbulence: `"per_stage"` (default)
+    /// or `"per_step"` ([`AirSampling`]).
+    pub sampling: AirSampling,
 }
 
 impl Default for WakeConfig {
@@ -724,6 +741,7 @@ impl Default for WakeConfig {
             alpha_deg: 8.0,
             attachment_from_nose_m: DEFAULT_ATTACHMENT_FROM_NOSE_M,
             tables: None,
+            sampling: AirSampling::PerStage,
         }
     }
 }

@@ -484,7 +484,7 @@ fn segment_loads<M: Madd, S: Surroundings + ?Sized>(
         let e = V3::new(ex[k], ey[k], ez[k]);
         let com = V3::new(cx[k], cy[k], cz[k]);
         let rho = surroundings.air_density(time, &com);
-        let rel = surroundings.air_velocity(time, &com) - V3::new(vx[k], vy[k], vz[k]);
+        let rel = surroundings.segment_air_velocity(time, k, &com) - V3::new(vx[k], vy[k], vz[k]);
         let vt = dot::<M>(&rel, &e);
         let vn = axpy::<M>(&e, -vt, &rel);
         let vn_abs = dot::<M>(&vn, &vn).sqrt();

@@ -578,6 +578,30 @@ impl TetherModel {
         Ok(())
     }
 
+    /// Segment centres (n, m) into `centres`, and the tip position (m) and velocity (m/s), in the
+    /// TA frame; the tip is exactly [`TetherModel::tip_state`]'s.
+    pub fn centres_and_tip(
+        &mut self,
+        q: &[f64],
+        qd: &[f64],
+        centres: &mut [V3],
+    ) -> Result<(V3, V3)> {
+        self.check_len("q", q)?;
+        self.check_len("qd", qd)?;
+        if centres.len() != self.n {
+            return Err(TetherError::WrongSize {
+                what: "segment centres",
+                expected: self.n,
+                found: centres.len(),
+            });
+        }
+        let mut k = 0;
+        Ok(self.walk(q, qd, |_, _, centre, _| {
+            centres[k] = centre;
+            k += 1;
+        }))
+    }
+
     /// Tip position (m) and velocity (m/s) in the TA frame.
     pub fn tip_state(&mut self, q: &[f64], qd: &[f64]) -> Result<(V3, V3)> {
         self.check_len("q", q)?;

@@ -15,6 +15,20 @@ pub trait Surroundings {
     /// Velocity of the air relative to the TA frame at `position` (m), m/s.
     fn air_velocity(&self, time: f64, position: &Vector3<f64>) -> Vector3<f64>;
 
+    /// Velocity of the air at the centre of segment `segment` (0 at the attachment), which is at
+    /// `position` (m), m/s. The tether's loads ask this for every segment; the default is
+    /// [`Surroundings::air_velocity`] there. Surroundings that sample a costly field once per
+    /// step and hold it over the RK4 stages answer from their held samples instead.
+    #[inline(always)]
+    fn segment_air_velocity(
+        &self,
+        time: f64,
+        _segment: usize,
+        position: &Vector3<f64>,
+    ) -> Vector3<f64> {
+        self.air_velocity(time, position)
+    }
+
     /// Air density at `position` (m), kg/m^3.
     fn air_density(&self, time: f64, position: &Vector3<f64>) -> f64;
 
