@@ -1,7 +1,7 @@
 //! Turbulence: RMS and time correlation as modelled, frozen advection, determinism and seed
 //! independence, ambient levels, and the Gaussian generator.
 
-use accd_sim::rng::{stream_rng, Stream, AMBIENT_STREAM, WAKE_LANES_STREAM};
+use accd_sim::rng::{stream_rng, NormalSampler, Stream, AMBIENT_STREAM, WAKE_LANES_STREAM};
 use accd_sim::turbulence::{AmbientTurbulence, Turbulence, TurbulenceConfig};
 use accd_sim::SimError;
 use nalgebra::Vector3;
@@ -17,6 +17,23 @@ fn small_grid() -> TurbulenceConfig {
         lanes_y_m: [0.0, 0.0],
         lanes_z_m: [0.0, 20.0],
         ..TurbulenceConfig::default()
+    }
+}
+
+/// Both normal samplers: every statistical property is checked for each.
+/// The first three ziggurat deviates of seed 0's wake-lane stream.
+const ZIGGURAT_GOLDEN: [f64; 3] = [
+    0.3494953120445609,
+    -0.23333540016924717,
+    -0.16149089858050833,
+];
+
+const SAMPLERS: [NormalSampler; 2] = [NormalSampler::BoxMuller, NormalSampler::Ziggurat];
+
+fn small_grid_with(normal_sampler: NormalSampler) -> TurbulenceConfig {
+    TurbulenceConfig {
+        normal_sampler,
+        ..small_grid()
     }
 }
 
@@ -67,14 +84,19 @@ fn record(
 fn rms_matches_u_prime_per_component() {
     // 2000 s at 0.01 s in uniform k: u' = sqrt(2 k / 3) = 3 m/s.
     let tke = 1.5 * 3.0 * 3.0;
-    let mut t = Turbulence::new(&small_grid(), U, 7).unwrap();
-    // Between lanes (z = 5 m) and between grid times (delay 100 m / 185 m/s).
-    let p = Vector3::new(-100.0, 0.0, 5.0);
-    let h = record(&mut t, 200_000, DT, |t| t.sample(&p, tke));
-    for (c, x) in h.iter().enumerate() {
-        let r = rms(x);
-        assert!((r / 3.0 - 1.0).abs() < 0.03, "component {c}: rms {r} m/s");
-        assert!(mean(x).abs() < 0.1, "component {c}: mean {}", mean(x));
+    for sampler in SAMPLERS {
+        let mut t = Turbulence::new(&small_grid_with(sampler), U, 7).unwrap();
+        // Between lanes (z = 5 m) and between grid times (delay 100 m / 185 m/s).
+        let p = Vector3::new(-100.0, 0.0, 5.0);
+        let h = record(&mut t, 200_000, DT, |t| t.sample(&p, tke));
+        for (c, x) in h.iter().enumerate() {
+            let r = rms(x);
+            assert!(
+                (r / 3.0 - 1.0).abs() < 0.03,
+                "{sampler:?} component {c}: rms {r} m/s"
+            );
+            assert!(mean(x).abs() < 0.1, "component {c}: mean {}", mean(x));
+        }
     }
 }
 
@@ -138,20 +160,22 @@ fn autocorrelation_time_is_length_scale_over_airspeed() {
     let lt = TurbulenceConfig::default().wake_length_scale_m;
     let expected = lt / U;
     let points = [Vector3::new(0.0, 0.0, 0.0), Vector3::new(-100.0, 0.0, 5.0)];
-    let h: Vec<[Vec<f64>; 3]> = points
-        .iter()
-        .map(|p| {
-            let mut t = Turbulence::new(&small_grid(), U, 3).unwrap();
-            record(&mut t, 200_000, DT, |t| t.wake_unit(p))
-        })
-        .collect();
-    for (hp, p) in h.iter().zip(&points) {
-        for (c, x) in hp.iter().enumerate() {
-            let lag = e_folding_lag(x, DT);
-            assert!(
-                (lag / expected - 1.0).abs() < 0.1,
-                "1/e lag {lag} s vs L_t / U = {expected} s at {p:?}, component {c}"
-            );
+    for sampler in SAMPLERS {
+        let h: Vec<[Vec<f64>; 3]> = points
+            .iter()
+            .map(|p| {
+                let mut t = Turbulence::new(&small_grid_with(sampler), U, 3).unwrap();
+                record(&mut t, 200_000, DT, |t| t.wake_unit(p))
+            })
+            .collect();
+        for (hp, p) in h.iter().zip(&points) {
+            for (c, x) in hp.iter().enumerate() {
+                let lag = e_folding_lag(x, DT);
+                assert!(
+                    (lag / expected - 1.0).abs() < 0.1,
+                    "{sampler:?}: 1/e lag {lag} s vs L_t / U = {expected} s at {p:?}, component {c}"
+                );
+            }
         }
     }
     // Ambient: 533.4 m / 185 m/s = 2.88 s.
@@ -409,7 +433,13 @@ fn the_history_does_not_depend_on_how_time_is_advanced() {
 
 #[test]
 fn gaussian_has_zero_mean_and_unit_variance() {
-    let mut g = Stream::new(12345, WAKE_LANES_STREAM);
+    for sampler in SAMPLERS {
+        gaussian_moments(sampler);
+    }
+}
+
+fn gaussian_moments(sampler: NormalSampler) {
+    let mut g = Stream::with_sampler(12345, WAKE_LANES_STREAM, sampler);
     let n = 2_000_000;
     let (mut s1, mut s2, mut s3, mut s4) = (0.0, 0.0, 0.0, 0.0);
     let mut max = 0.0f64;
@@ -429,10 +459,32 @@ fn gaussian_has_zero_mean_and_unit_variance() {
     assert!((s3 / nf).abs() < 0.02, "skewness {}", s3 / nf);
     assert!((s4 / nf - 3.0).abs() < 0.05, "kurtosis {}", s4 / nf);
     assert!(max < 8.6 && max > 4.5, "max |z| {max}");
-    // The fraction within one sigma: 68.27 %.
-    let mut g = Stream::new(99, AMBIENT_STREAM);
-    let inside = (0..1_000_000).filter(|_| g.gaussian().abs() < 1.0).count() as f64 / 1e6;
-    assert!((inside - 0.682_689).abs() < 0.002, "{inside}");
+    // The fraction within one, two and three sigma: 68.27 %, 95.45 %, 99.73 %.
+    let mut g = Stream::with_sampler(99, AMBIENT_STREAM, sampler);
+    let z: Vec<f64> = (0..1_000_000).map(|_| g.gaussian().abs()).collect();
+    for (k, expected, tol) in [
+        (1.0, 0.682_689, 0.002),
+        (2.0, 0.954_500, 0.001),
+        (3.0, 0.997_300, 2.5e-4),
+    ] {
+        let inside = z.iter().filter(|v| **v < k).count() as f64 / 1e6;
+        assert!(
+            (inside - expected).abs() < tol,
+            "{sampler:?}: within {k} sigma {inside}"
+        );
+    }
+}
+
+/// The ziggurat deviates are pinned too (rand_distr's algorithm, on our ChaCha8 stream): a
+/// change of rand_distr's sampler would change every episode, so it must show here.
+#[test]
+fn ziggurat_stream_is_pinned() {
+    let mut g = Stream::with_sampler(0, WAKE_LANES_STREAM, NormalSampler::Ziggurat);
+    let z: Vec<f64> = (0..3).map(|_| g.gaussian()).collect();
+    let golden = ZIGGURAT_GOLDEN;
+    for (a, b) in z.iter().zip(golden) {
+        assert_eq!(a.to_bits(), b.to_bits(), "{a} vs {b}");
+    }
 }
 
 /// The streams are pinned: a change of ChaCha8 or of our derivation would change every episode's
