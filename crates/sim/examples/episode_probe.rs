@@ -2,7 +2,7 @@
 //! `cargo run --release -p accd-sim --example episode_probe [steps]`.
 use std::sync::Arc;
 
-use accd_sim::{AirSampling, EnvConfig, Episode, Equilibrium, NormalSampler, Seeds};
+use accd_sim::{AirSampling, EnvConfig, Episode, Equilibrium, LaneStreams, NormalSampler, Seeds};
 
 fn time(label: &str, config: EnvConfig, steps: usize) {
     let mut config = config;
@@ -45,7 +45,8 @@ fn main() {
         let mut fast = EnvConfig::default();
         fast.wake.sampling = AirSampling::PerStep;
         fast.turbulence.normal_sampler = NormalSampler::Ziggurat;
-        return time("per step + ziggurat", fast, steps);
+        fast.turbulence.lane_streams = LaneStreams::PerLane;
+        return time("per step, ziggurat, on-demand lanes", fast, steps);
     }
     if only == "default" {
         return time("mean wake + turbulence", EnvConfig::default(), steps);

@@ -45,6 +45,14 @@ pub trait AirDisturbance: Send + Sync {
     /// Restarts at time 0 with the random streams of `wake_seed`. Must not allocate.
     fn reset(&mut self, _wake_seed: u64) {}
 
+    /// Declares points that will be sampled during the coming step (before any of them is):
+    /// a disturbance that generates its field lazily generates it there. Must not allocate.
+    fn prepare(&mut self, _points: &[V3]) {}
+
+    /// Declares that the disturbance may be sampled anywhere (the stepper cannot say where
+    /// beforehand). Must not allocate.
+    fn prepare_all(&mut self) {}
+
     /// A boxed copy (the episode is cloned for snapshots).
     fn clone_box(&self) -> Box<dyn AirDisturbance>;
 
@@ -198,9 +206,9 @@ struct Stage<'a> {
     accd: AccdState,
     deflection: [f64; 4],
     loads: Cell<AeroLoads>,
-    /// With [`AirSampling::PerStep`]: the disturbance at each segment centre, sampled once at the
-    /// step's initial state and held over the stages.
-    held: Option<&'a [V3]>,
+    /// With [`AirSampling::PerStep`]: the disturbance at each segment centre and at the tip,
+    /// sampled once at the step's initial state and held over the stages.
+    held: Option<(&'a [V3], V3)>,
 }
 
 impl Surroundings for Stage<'_> {
@@ -210,7 +218,7 @@ impl Surroundings for Stage<'_> {
     #[inline(always)]
     fn segment_air_velocity(&self, time: f64, segment: usize, position: &V3) -> V3 {
         match self.held {
-            Some(held) => -self.aircraft.velocity(time) + held[segment],
+            Some((held, _)) => -self.aircraft.velocity(time) + held[segment],
             None => self.air_velocity(time, position),
         }
     }
@@ -221,7 +229,10 @@ impl Surroundings for Stage<'_> {
         self.aircraft.acceleration(time)
     }
     fn tip_force(&self, time: f64, position: &V3, velocity: &V3) -> V3 {
-        let wind = self.air_velocity(time, position);
+        let wind = match self.held {
+            Some((_, tip)) => -self.aircraft.velocity(time) + tip,
+            None => self.air_velocity(time, position),
+        };
         let rho = self.air_density(time, position);
         let loads = aero_loads(
             self.aero,
@@ -252,6 +263,8 @@ struct Buffers {
 struct Derived {
     /// Segment centres (n), m.
     centres: Vec<V3>,
+    /// The tip (the ACCD's centre of gravity), m.
+    tip: V3,
     /// The capture point and its velocity, m and m/s.
     capture_point: (V3, V3),
 }
@@ -306,9 +319,10 @@ pub struct CaptureSim {
     disturbance: Box<dyn AirDisturbance>,
     buffers: Buffers,
     derived: Derived,
-    /// The disturbance held at each segment centre over a step (n), for [`AirSampling::PerStep`];
-    /// a function of the step's initial state, so not part of the saved state.
+    /// The disturbance held at each segment centre and at the tip over a step, for
+    /// [`AirSampling::PerStep`]; a function of the step's initial state, so not saved.
     held: Vec<V3>,
+    held_tip: V3,
     /// Time of the last state set from outside, s; the episode time is
     /// `time_origin + steps * dt`, free of the drift of summing dt.
     time_origin: f64,
@@ -332,6 +346,7 @@ impl Clone for CaptureSim {
             buffers: self.buffers.clone(),
             derived: self.derived.clone(),
             held: self.held.clone(),
+            held_tip: self.held_tip,
             time_origin: self.time_origin,
             steps: self.steps,
         }
@@ -389,9 +404,11 @@ impl CaptureSim {
             },
             derived: Derived {
                 centres: vec![V3::zeros(); tether_config.segments],
+                tip,
                 capture_point: (capture, V3::zeros()),
             },
             held: vec![V3::zeros(); tether_config.segments],
+            held_tip: V3::zeros(),
             time_origin: 0.0,
             steps: 0,
         };
@@ -406,6 +423,7 @@ impl CaptureSim {
         let (position, velocity) =
             self.model
                 .centres_and_tip(&self.tether.q, &self.tether.qd, &mut d.centres)?;
+        d.tip = position;
         d.capture_point = capture_point(&position, &velocity, &self.accd, &self.capture_offset);
         Ok(())
     }
@@ -497,6 +515,10 @@ impl CaptureSim {
         let x = self.capture_point_state().0.x;
         self.boom = Boom::new(&self.config.boom, seeds.rlv, x);
         self.disturbance.reset(seeds.wake);
+        if self.config.wake.sampling == AirSampling::PerStage {
+            // The stages sample where the tether moves: generate the field everywhere.
+            self.disturbance.prepare_all();
+        }
         Ok(())
     }
 
@@ -570,8 +592,14 @@ impl CaptureSim {
     /// [`CaptureSim::parts`]; with `hold`, the segments see the disturbance held in the buffers.
     fn parts_with(&mut self, hold: bool) -> Result<(Stage<'_>, &mut TetherModel, &mut Buffers)> {
         let air = self.air_at_step()?;
+        if !hold {
+            // The stage samples the disturbance at the current state's points.
+            self.disturbance.prepare(&self.derived.centres);
+            self.disturbance
+                .prepare(std::slice::from_ref(&self.derived.tip));
+        }
         let (model, buffers) = (&mut self.model, &mut self.buffers);
-        let held: Option<&[V3]> = if hold { Some(&self.held) } else { None };
+        let held = hold.then_some((&self.held[..], self.held_tip));
         let stage = Stage {
             aircraft: &self.config.aircraft,
             air,
@@ -588,9 +616,13 @@ impl CaptureSim {
     /// Samples the disturbance at the segment centres of the current state into the held
     /// buffer ([`AirSampling::PerStep`]).
     fn hold_disturbance(&mut self, time: f64) {
-        for (held, centre) in self.held.iter_mut().zip(&self.derived.centres) {
+        let d = &self.derived;
+        self.disturbance.prepare(&d.centres);
+        self.disturbance.prepare(std::slice::from_ref(&d.tip));
+        for (held, centre) in self.held.iter_mut().zip(&d.centres) {
             *held = self.disturbance.velocity(time, centre);
         }
+        self.held_tip = self.disturbance.velocity(time, &d.tip);
     }
 
     /// Derivatives at one stage: tether accelerations into `qdd`, and the quaternion and body-rate

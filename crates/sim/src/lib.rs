@@ -34,7 +34,7 @@ pub use episode::{Episode, Equilibrium, Outcome};
 pub use error::SimError;
 pub use rng::NormalSampler;
 pub use task::{EnvConfig, ACT_DIM, OBSERVATION, OBS_BOUND, OBS_DIM};
-pub use turbulence::{AmbientTurbulence, Turbulence, TurbulenceConfig};
+pub use turbulence::{AmbientTurbulence, LaneStreams, Turbulence, TurbulenceConfig};
 pub use wake::{
     AirSampling, AnalyticWake, Wake, WakeConfig, WakeSample, WakeTable, WakeTableData,
     WakeTableFiles, WakeTables,

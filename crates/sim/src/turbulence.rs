@@ -138,6 +138,24 @@ impl AmbientTurbulence {
     }
 }
 
+/// Where the wake lanes' random numbers come from ([`TurbulenceConfig::lane_streams`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LaneStreams {
+    /// One stream for every lane, drawn lane by lane (x, y, z) at every grid step: every lane is
+    /// generated all the time.
+    #[default]
+    Shared,
+    /// Each lane from its own stream (label [`WAKE_LANES_STREAM`]` + 1 + lane`), so that a lane's
+    /// history is a function of the seed and the lane alone. A lane can then be generated late,
+    /// from the episode's start, once a point to be sampled comes near it
+    /// ([`Turbulence::activate_box`]): which lanes are generated changes the cost, never a value.
+    /// The capture simulation generates lanes on demand with `wake.sampling = "per_step"` (which
+    /// declares every point it samples) and all of them otherwise; a standalone
+    /// [`crate::WakeField`] generates all of them.
+    PerLane,
+}
+
 /// Configuration of the turbulence (model in the [module docs](self)).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -164,6 +182,9 @@ pub struct TurbulenceConfig {
     /// How the gusts' normal deviates are drawn: `"box_muller"` (default) or `"ziggurat"`
     /// ([`NormalSampler`]; 4-5x cheaper, another realisation of the same process per seed).
     pub normal_sampler: NormalSampler,
+    /// Where the wake lanes' random numbers come from: `"shared"` (default, one stream) or
+    /// `"per_lane"` ([`LaneStreams`]; lanes far from the tether are then not generated).
+    pub lane_streams: LaneStreams,
 }
 
 impl Default for TurbulenceConfig {
@@ -177,6 +198,7 @@ impl Default for TurbulenceConfig {
             time_step_s: 0.01,
             ambient: AmbientTurbulence::None,
             normal_sampler: NormalSampler::BoxMuller,
+            lane_streams: LaneStreams::Shared,
         }
     }
 }
@@ -326,8 +348,22 @@ pub struct Turbulence {
     /// Grid index of the newest generated time.
     newest: i64,
     time: f64,
+    /// The shared stream of every wake lane ([`LaneStreams::Shared`]).
     wake_rng: Stream,
     ambient_rng: Stream,
+    /// [`LaneStreams::PerLane`]: one stream per lane, which lanes are generated, and the
+    /// generated ones in the order they were activated.
+    on_demand: bool,
+    lane_rngs: Vec<Stream>,
+    active: Vec<bool>,
+    active_list: Vec<usize>,
+    /// Lane-index rectangle `[iy0, iy1, iz0, iz1]` whose lanes are all generated.
+    covered: Option<[usize; 4]>,
+}
+
+/// The ChaCha stream label of wake lane `lane` under [`LaneStreams::PerLane`].
+pub fn lane_stream(lane: usize) -> u64 {
+    WAKE_LANES_STREAM.wrapping_add(1 + lane as u64)
 }
 
 impl Turbulence {
@@ -367,6 +403,7 @@ impl Turbulence {
                 ),
             ));
         }
+        let on_demand = config.lane_streams == LaneStreams::PerLane && lanes > 0;
         let a_wake = (-airspeed_mps * dt / spacing).exp();
         let a_ambient = (-airspeed_mps * dt / config.ambient.length_scale_m()).exp();
         let mut t = Turbulence {
@@ -393,6 +430,17 @@ impl Turbulence {
             time: 0.0,
             wake_rng: Stream::with_sampler(seed, WAKE_LANES_STREAM, config.normal_sampler),
             ambient_rng: Stream::with_sampler(seed, AMBIENT_STREAM, config.normal_sampler),
+            on_demand,
+            lane_rngs: if on_demand {
+                (0..lanes)
+                    .map(|l| Stream::with_sampler(seed, lane_stream(l), config.normal_sampler))
+                    .collect()
+            } else {
+                Vec::new()
+            },
+            active: vec![!on_demand; lanes],
+            active_list: Vec::with_capacity(if on_demand { lanes } else { 0 }),
+            covered: None,
         };
         t.reset(seed);
         Ok(t)
@@ -402,14 +450,24 @@ impl Turbulence {
     /// Allocates nothing.
     pub fn reset(&mut self, seed: u64) {
         self.seed = seed;
-        self.wake_rng = Stream::with_sampler(seed, WAKE_LANES_STREAM, self.config.normal_sampler);
-        self.ambient_rng = Stream::with_sampler(seed, AMBIENT_STREAM, self.config.normal_sampler);
+        let sampler = self.config.normal_sampler;
+        self.wake_rng = Stream::with_sampler(seed, WAKE_LANES_STREAM, sampler);
+        self.ambient_rng = Stream::with_sampler(seed, AMBIENT_STREAM, sampler);
         self.time = 0.0;
         // Grid indices -(slots - 1) ..= 0; the first from the stationary distribution.
-        self.newest = -(self.slots as i64 - 1);
+        self.newest = self.first_index();
         let wake_channels = 3 * self.lanes;
-        for c in 0..wake_channels {
-            self.state[c] = self.wake_rng.gaussian();
+        if self.on_demand {
+            for (l, rng) in self.lane_rngs.iter_mut().enumerate() {
+                *rng = Stream::with_sampler(seed, lane_stream(l), sampler);
+            }
+            self.active.fill(false);
+            self.active_list.clear();
+            self.covered = None;
+        } else {
+            for c in 0..wake_channels {
+                self.state[c] = self.wake_rng.gaussian();
+            }
         }
         if self.ambient {
             for c in wake_channels..self.channels {
@@ -425,17 +483,118 @@ impl Turbulence {
     fn store_newest(&mut self) {
         let slot = self.newest.rem_euclid(self.slots as i64) as usize;
         let row = &mut self.ring[slot * self.channels..(slot + 1) * self.channels];
-        for (r, s) in row.iter_mut().zip(&self.state) {
-            *r = *s as f32;
+        if self.on_demand {
+            for &l in &self.active_list {
+                for c in 3 * l..3 * l + 3 {
+                    row[c] = self.state[c] as f32;
+                }
+            }
+            for c in 3 * self.lanes..self.channels {
+                row[c] = self.state[c] as f32;
+            }
+        } else {
+            for (r, s) in row.iter_mut().zip(&self.state) {
+                *r = *s as f32;
+            }
         }
+    }
+
+    /// Grid index of the first (stationary) sample of every history.
+    fn first_index(&self) -> i64 {
+        -(self.slots as i64 - 1)
+    }
+
+    /// Generates wake lane `lane` from the start up to the newest grid time, if it is not yet
+    /// ([`LaneStreams::PerLane`]); the values are those it would have had if generated from
+    /// the start. Allocates nothing.
+    fn activate(&mut self, lane: usize) {
+        if self.active[lane] {
+            return;
+        }
+        self.active[lane] = true;
+        self.active_list.push(lane);
+        let (a, b) = (self.a_wake, self.b_wake);
+        let first = self.first_index();
+        let rng = &mut self.lane_rngs[lane];
+        let kept = self.newest - self.slots as i64 + 1;
+        let mut g = [0.0; 3];
+        for j in first..=self.newest {
+            for gc in &mut g {
+                *gc = if j == first {
+                    rng.gaussian()
+                } else {
+                    a * *gc + b * rng.gaussian()
+                };
+            }
+            if j >= kept {
+                let slot = j.rem_euclid(self.slots as i64) as usize;
+                for (c, gc) in g.iter().enumerate() {
+                    self.ring[slot * self.channels + 3 * lane + c] = *gc as f32;
+                }
+            }
+        }
+        self.state[3 * lane..3 * lane + 3].copy_from_slice(&g);
+    }
+
+    /// Makes sure the wake lanes read by samples anywhere in the box `y in [y_min, y_max]`,
+    /// `z in [z_min, z_max]` (TA frame, m) are generated ([`LaneStreams::PerLane`]; nothing
+    /// otherwise): every lane of the cells the box touches. Call for the points to be sampled
+    /// before sampling them. Cheap when the box lies in the region already generated.
+    /// Allocates nothing.
+    pub fn activate_box(&mut self, y_min: f64, y_max: f64, z_min: f64, z_max: f64) {
+        if !self.on_demand {
+            return;
+        }
+        let (y0, _, _) = self.lanes_y.locate(y_min);
+        let (_, y1, _) = self.lanes_y.locate(y_max);
+        let (z0, _, _) = self.lanes_z.locate(z_min);
+        let (_, z1, _) = self.lanes_z.locate(z_max);
+        let mut rect = [y0, y1, z0, z1];
+        if let Some(c) = self.covered {
+            if c[0] <= rect[0] && rect[1] <= c[1] && c[2] <= rect[2] && rect[3] <= c[3] {
+                return;
+            }
+            rect = [c[0].min(y0), c[1].max(y1), c[2].min(z0), c[3].max(z1)];
+        }
+        let nz = self.lanes_z.count;
+        for iy in rect[0]..=rect[1] {
+            for iz in rect[2]..=rect[3] {
+                self.activate(iy * nz + iz);
+            }
+        }
+        self.covered = Some(rect);
+    }
+
+    /// Generates every wake lane (for owners that cannot declare their sample points).
+    pub fn activate_all(&mut self) {
+        if self.on_demand {
+            for lane in 0..self.lanes {
+                self.activate(lane);
+            }
+            self.covered = Some([0, self.lanes_y.count - 1, 0, self.lanes_z.count - 1]);
+        }
+    }
+
+    /// Number of wake lanes generated so far.
+    pub fn active_lanes(&self) -> usize {
+        self.active.iter().filter(|a| **a).count()
     }
 
     /// Generates the next grid time.
     fn generate(&mut self) {
         let wake_channels = 3 * self.lanes;
         let (a, b) = (self.a_wake, self.b_wake);
-        for g in &mut self.state[..wake_channels] {
-            *g = a * *g + b * self.wake_rng.gaussian();
+        if self.on_demand {
+            for &l in &self.active_list {
+                let rng = &mut self.lane_rngs[l];
+                for g in &mut self.state[3 * l..3 * l + 3] {
+                    *g = a * *g + b * rng.gaussian();
+                }
+            }
+        } else {
+            for g in &mut self.state[..wake_channels] {
+                *g = a * *g + b * self.wake_rng.gaussian();
+            }
         }
         if self.ambient {
             let (a, b) = (self.a_ambient, self.b_ambient);
@@ -469,6 +628,16 @@ impl Turbulence {
         w.f64s(&self.state);
         self.wake_rng.save(w);
         self.ambient_rng.save(w);
+        if self.on_demand {
+            for (active, rng) in self.active.iter().zip(&self.lane_rngs) {
+                w.bool(*active);
+                rng.save(w);
+            }
+            w.bool(self.covered.is_some());
+            for v in self.covered.unwrap_or_default() {
+                w.u64(v as u64);
+            }
+        }
     }
 
     /// Restores a state written by [`Turbulence::save`] of turbulence with the same config.
@@ -480,6 +649,42 @@ impl Turbulence {
         r.f64s_into("turbulence processes", &mut self.state)?;
         self.wake_rng = Stream::load_with_sampler(r, self.config.normal_sampler)?;
         self.ambient_rng = Stream::load_with_sampler(r, self.config.normal_sampler)?;
+        if self.on_demand {
+            self.active_list.clear();
+            for l in 0..self.lanes {
+                self.active[l] = r.bool("turbulence lane generated")?;
+                self.lane_rngs[l] = Stream::load_with_sampler(r, self.config.normal_sampler)?;
+                if self.active[l] {
+                    self.active_list.push(l);
+                }
+            }
+            let has_covered = r.bool("turbulence covered flag")?;
+            let mut c = [0usize; 4];
+            for v in &mut c {
+                *v = r.u64("turbulence covered lanes")? as usize;
+            }
+            let (ny, nz) = (self.lanes_y.count, self.lanes_z.count);
+            self.covered = if has_covered {
+                if c[0] > c[1] || c[1] >= ny || c[2] > c[3] || c[3] >= nz {
+                    return Err(SimError::invalid_config(
+                        "turbulence state",
+                        format!("{c:?}"),
+                        "a lane rectangle within the lane grid",
+                    ));
+                }
+                let all = (c[0]..=c[1]).all(|iy| (c[2]..=c[3]).all(|iz| self.active[iy * nz + iz]));
+                if !all {
+                    return Err(SimError::invalid_config(
+                        "turbulence state",
+                        format!("{c:?}"),
+                        "a rectangle of generated lanes",
+                    ));
+                }
+                Some(c)
+            } else {
+                None
+            };
+        }
         Ok(())
     }
 
@@ -576,6 +781,10 @@ impl Turbulence {
             if w == 0.0 {
                 continue;
             }
+            debug_assert!(
+                self.active[lane],
+                "wake lane {lane} sampled before it was generated"
+            );
             weights2 += w * w;
             for c in 0..3 {
                 sum[c] += w * self.read(&ts, 3 * lane + c);

@@ -86,7 +86,10 @@ impl WakeField {
     }
 
     /// Assembles a field; the free stream is `(-wake.airspeed(), 0, 0)`, `density` in kg/m^3.
-    pub fn from_parts(wake: Wake, turbulence: Turbulence, density: f64) -> WakeField {
+    /// Every wake lane is generated (per-lane streams too, [`crate::turbulence::LaneStreams`]:
+    /// a standalone field cannot know where it will be sampled).
+    pub fn from_parts(wake: Wake, mut turbulence: Turbulence, density: f64) -> WakeField {
+        turbulence.activate_all();
         WakeField {
             free_stream: Vector3::new(-wake.airspeed(), 0.0, 0.0),
             wake,
@@ -109,9 +112,11 @@ impl WakeField {
         self.turbulence.advance(dt)
     }
 
-    /// Restarts the turbulence at time 0 from `wake_seed`. Allocates nothing.
+    /// Restarts the turbulence at time 0 from `wake_seed` (every lane generated). Allocates
+    /// nothing.
     pub fn reset(&mut self, wake_seed: u64) {
         self.turbulence.reset(wake_seed);
+        self.turbulence.activate_all();
     }
 
     /// The mean wake.
@@ -185,8 +190,33 @@ impl crate::capture::AirDisturbance for WakeField {
         self.turbulence.advance(dt)
     }
 
+    /// Restarts the turbulence; with per-lane streams no lane is generated until
+    /// [`crate::capture::AirDisturbance::prepare`] declares the points sampled (or
+    /// [`crate::capture::AirDisturbance::prepare_all`]).
     fn reset(&mut self, wake_seed: u64) {
         self.turbulence.reset(wake_seed);
+    }
+
+    fn prepare_all(&mut self) {
+        self.turbulence.activate_all();
+    }
+
+    fn prepare(&mut self, points: &[Vector3<f64>]) {
+        let (mut y0, mut y1, mut z0, mut z1) = (
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        );
+        for p in points {
+            y0 = y0.min(p.y);
+            y1 = y1.max(p.y);
+            z0 = z0.min(p.z);
+            z1 = z1.max(p.z);
+        }
+        if !points.is_empty() {
+            self.turbulence.activate_box(y0, y1, z0, z1);
+        }
     }
 
     fn clone_box(&self) -> Box<dyn crate::capture::AirDisturbance> {

@@ -578,3 +578,117 @@ fn config_errors_name_field_value_and_range() {
     let err = Turbulence::new(&TurbulenceConfig::default(), 0.0, 0).unwrap_err();
     assert!(err.to_string().contains("airspeed_mps"));
 }
+
+fn on_demand(normal_sampler: NormalSampler) -> TurbulenceConfig {
+    TurbulenceConfig {
+        normal_sampler,
+        lane_streams: accd_sim::LaneStreams::PerLane,
+        ..TurbulenceConfig::default()
+    }
+}
+
+/// A lane's history is a function of the seed and the lane alone: generating it late (when a
+/// point first comes near) gives the same bits as generating every lane from the start.
+#[test]
+fn on_demand_lanes_are_the_same_whenever_they_are_generated() {
+    for sampler in SAMPLERS {
+        let config = on_demand(sampler);
+        let mut all = Turbulence::new(&config, U, 5).unwrap();
+        all.activate_all();
+        assert_eq!(all.active_lanes(), 77);
+        let mut lazy = Turbulence::new(&config, U, 5).unwrap();
+        assert_eq!(lazy.active_lanes(), 0);
+        let near = Vector3::new(-120.0, 2.0, 33.0);
+        let far = Vector3::new(-240.0, -27.0, 81.0);
+        lazy.activate_box(near.y, near.y, near.z, near.z);
+        assert_eq!(lazy.active_lanes(), 4);
+        for step in 0..600 {
+            if step == 350 {
+                lazy.activate_box(far.y, far.y, far.z, far.z);
+                // The box spanning both points covers every cell between them.
+                lazy.activate_box(far.y, near.y, near.z, far.z);
+            }
+            all.advance(DT).unwrap();
+            lazy.advance(DT).unwrap();
+            let a = all.wake_unit(&near);
+            let b = lazy.wake_unit(&near);
+            assert_eq!(bits(&[a]), bits(&[b]), "{sampler:?} step {step}");
+            if step >= 350 {
+                assert_eq!(
+                    bits(&[all.wake_unit(&far)]),
+                    bits(&[lazy.wake_unit(&far)]),
+                    "{sampler:?} step {step}"
+                );
+            }
+        }
+        assert!(lazy.active_lanes() < 77);
+        // And the on-demand streams are another realisation than the shared stream's.
+        let mut shared = Turbulence::new(
+            &TurbulenceConfig {
+                normal_sampler: sampler,
+                ..Default::default()
+            },
+            U,
+            5,
+        )
+        .unwrap();
+        shared.advance(DT).unwrap();
+        all.reset(5);
+        all.activate_all();
+        all.advance(DT).unwrap();
+        assert_ne!(
+            bits(&[shared.wake_unit(&near)]),
+            bits(&[all.wake_unit(&near)])
+        );
+    }
+}
+
+#[test]
+fn on_demand_state_saves_and_continues_bit_for_bit() {
+    let config = on_demand(NormalSampler::Ziggurat);
+    let mut a = Turbulence::new(&config, U, 9).unwrap();
+    let p = Vector3::new(-60.0, 4.0, 20.0);
+    let q = Vector3::new(-200.0, 12.0, 66.0);
+    a.activate_box(p.y, p.y, p.z, p.z);
+    for _ in 0..150 {
+        a.advance(DT).unwrap();
+    }
+    let mut w = accd_sim::codec::StateWriter::new();
+    a.save(&mut w);
+    let bytes = w.into_bytes();
+    let mut b = Turbulence::new(&config, U, 1).unwrap();
+    b.load(&mut accd_sim::codec::StateReader::new(&bytes))
+        .unwrap();
+    assert_eq!(a.active_lanes(), b.active_lanes());
+    for step in 0..200 {
+        if step == 50 {
+            a.activate_box(q.y, q.y, q.z, q.z);
+            b.activate_box(q.y, q.y, q.z, q.z);
+        }
+        a.advance(DT).unwrap();
+        b.advance(DT).unwrap();
+        assert_eq!(bits(&[a.wake_unit(&p)]), bits(&[b.wake_unit(&p)]));
+        if step >= 50 {
+            assert_eq!(bits(&[a.wake_unit(&q)]), bits(&[b.wake_unit(&q)]));
+        }
+    }
+}
+
+#[test]
+fn on_demand_statistics_match_the_model() {
+    let tke = 1.5 * 3.0 * 3.0;
+    let mut t = Turbulence::new(&on_demand(NormalSampler::Ziggurat), U, 21).unwrap();
+    let p = Vector3::new(-100.0, 3.0, 45.0);
+    t.activate_box(p.y, p.y, p.z, p.z);
+    let h = record(&mut t, 100_000, DT, |t| t.sample(&p, tke));
+    for (c, x) in h.iter().enumerate() {
+        let r = rms(x);
+        assert!((r / 3.0 - 1.0).abs() < 0.04, "component {c}: rms {r} m/s");
+        let lag = e_folding_lag(x, DT);
+        let expected = TurbulenceConfig::default().wake_length_scale_m / U;
+        assert!(
+            (lag / expected - 1.0).abs() < 0.1,
+            "component {c}: 1/e lag {lag} s"
+        );
+    }
+}
