@@ -485,12 +485,14 @@ impl Turbulence {
         let row = &mut self.ring[slot * self.channels..(slot + 1) * self.channels];
         if self.on_demand {
             for &l in &self.active_list {
-                for c in 3 * l..3 * l + 3 {
-                    row[c] = self.state[c] as f32;
+                let lane = 3 * l..3 * l + 3;
+                for (r, s) in row[lane.clone()].iter_mut().zip(&self.state[lane]) {
+                    *r = *s as f32;
                 }
             }
-            for c in 3 * self.lanes..self.channels {
-                row[c] = self.state[c] as f32;
+            let ambient = 3 * self.lanes..self.channels;
+            for (r, s) in row[ambient.clone()].iter_mut().zip(&self.state[ambient]) {
+                *r = *s as f32;
             }
         } else {
             for (r, s) in row.iter_mut().zip(&self.state) {
