@@ -3,7 +3,10 @@ single envs, the native gymnasium VectorEnv and the native stable-baselines3 Vec
 N = 1, 16, 256 envs. One agent step is ``agent_step / tether.time_step`` physics steps (10 by
 default). Random actions are drawn before timing; episodes autoreset (their resets are timed too).
 
-Usage: python scripts/bench_envs.py [--seconds S] [--threads T] [--json OUT]
+Usage: python scripts/bench_envs.py [--seconds S] [--threads T] [--config JSON] [--json OUT]
+
+``--config``: env configuration (JSON) for every case, e.g. the fast air scheme
+``'{"wake": {"sampling": "per_step"}, "turbulence": {"normal_sampler": "ziggurat", "lane_streams": "per_lane"}}'``.
 """
 
 from __future__ import annotations
@@ -20,6 +23,8 @@ import numpy as np
 import accd_gym
 
 ENV_ID = "accd_gym/InAirCapture-v0"
+#: Env configuration of every case (``--config``).
+CONFIG: dict = {}
 
 
 def timed(step, actions, seconds: float) -> tuple[float, int]:
@@ -36,7 +41,7 @@ def timed(step, actions, seconds: float) -> tuple[float, int]:
 
 def bench_single(seconds: float) -> float:
     """The single env through ``gymnasium.make`` (with its checker wrappers), manual resets."""
-    env = gym.make(ENV_ID)
+    env = gym.make(ENV_ID, **CONFIG)
     env.reset(seed=0)
     rng = np.random.default_rng(0)
     actions = rng.uniform(-1, 1, (256, 4)).astype(np.float32)
@@ -51,7 +56,7 @@ def bench_single(seconds: float) -> float:
 
 def bench_sync(n: int, seconds: float) -> float:
     """gymnasium's SyncVectorEnv of ``n`` single envs (Python loop over envs)."""
-    env = gym.make_vec(ENV_ID, num_envs=n, vectorization_mode="sync")
+    env = gym.make_vec(ENV_ID, num_envs=n, vectorization_mode="sync", **CONFIG)
     env.reset(seed=0)
     actions = np.random.default_rng(0).uniform(-1, 1, (64, n, 4)).astype(np.float32)
     return timed(env.step, actions, seconds)[0] * n
@@ -59,7 +64,7 @@ def bench_sync(n: int, seconds: float) -> float:
 
 def bench_native(n: int, seconds: float, threads: int) -> float:
     """The native gymnasium VectorEnv (``gymnasium.make_vec``)."""
-    env = gym.make_vec(ENV_ID, num_envs=n, num_threads=threads)
+    env = gym.make_vec(ENV_ID, num_envs=n, num_threads=threads, **CONFIG)
     env.reset(seed=0)
     actions = np.random.default_rng(0).uniform(-1, 1, (64, n, 4)).astype(np.float32)
     return timed(env.step, actions, seconds)[0] * n
@@ -67,7 +72,7 @@ def bench_native(n: int, seconds: float, threads: int) -> float:
 
 def bench_sb3(n: int, seconds: float, threads: int) -> float:
     """The native stable-baselines3 VecEnv (builds an info dict per env per step)."""
-    env = accd_gym.AccdVecEnv(num_envs=n, seed=0, num_threads=threads)
+    env = accd_gym.AccdVecEnv(num_envs=n, seed=0, num_threads=threads, **CONFIG)
     env.reset()
     actions = np.random.default_rng(0).uniform(-1, 1, (64, n, 4)).astype(np.float32)
 
@@ -84,7 +89,9 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=5.0, help="time per case, s (default 5)")
     parser.add_argument("--threads", type=int, default=0, help="threads of the native envs (0: one per core)")
     parser.add_argument("--json", default=None, help="write the results to this JSON file")
+    parser.add_argument("--config", default="{}", help="env configuration (JSON) for every case")
     args = parser.parse_args()
+    CONFIG.update(json.loads(args.config))
     substeps = round(accd_gym.default_config()["agent_step"] / accd_gym.default_config()["tether"]["time_step"])
     rows = []
 

@@ -11,7 +11,8 @@ minimum over rounds is reported, so the ratios compare runs made under the same 
 * ``capture exact``: the whole capture system at its defaults apart from the sampling scheme
   (tether n = 30, ACCD 6-DoF with aerodynamics, 8 deg wake with turbulence sampled at every RK4
   stage, boom, capture check), ``CaptureSim.step(steps=N)``;
-  ``capture (default)``: the same with the default configuration.
+  ``capture fast``: per-step sampling, ziggurat normals, per-lane turbulence streams;
+  ``capture (default)``: the default configuration.
 
     python scripts/bench_physics.py [--rounds 7] [--seconds 0.5] [--json OUT]
 """
@@ -25,6 +26,7 @@ import time
 
 import accd_gym
 
+FAST = {"wake": {"sampling": "per_step"}, "turbulence": {"normal_sampler": "ziggurat", "lane_streams": "per_lane"}}
 EXACT = {"wake": {"sampling": "per_stage"}, "turbulence": {"normal_sampler": "box_muller"}}
 
 
@@ -74,6 +76,9 @@ def cases():
     exact = accd_gym.CaptureSim(EXACT, seed=1, wake_seed=42)
     exact.settle(20.0)
     out.append(("capture exact", lambda steps: exact.step(steps=steps)))
+    fast = accd_gym.CaptureSim(FAST, seed=1, wake_seed=42)
+    fast.settle(20.0)
+    out.append(("capture fast", lambda steps: fast.step(steps=steps)))
     default = accd_gym.CaptureSim(seed=1, wake_seed=42)
     default.settle(20.0)
     out.append(("capture (default)", lambda steps: default.step(steps=steps)))
@@ -118,12 +123,14 @@ def main() -> None:
         "tether n=300 / n=30 (per step)": best["tether n=300 (dt 0.005)"] / t30,
         "capture exact / tether": best["capture exact"] / t30,
         "capture default / tether": best["capture (default)"] / t30,
+        "capture fast / tether": best["capture fast"] / t30,
     }
     mj = best.get("mujoco bare chain n=30")
     if mj:
         ratios["mujoco / tether"] = mj / t30
         ratios["mujoco / capture default"] = mj / best["capture (default)"]
         ratios["mujoco / capture exact"] = mj / best["capture exact"]
+        ratios["mujoco / capture fast"] = mj / best["capture fast"]
     for name, r in ratios.items():
         print(f"{name:<32} {r:7.2f}")
     if a.json:

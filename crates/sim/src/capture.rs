@@ -418,11 +418,15 @@ impl CaptureSim {
 
     /// Recomputes what is derived from the state (one walk along the chain): after every change
     /// of the tether's or the ACCD's state.
+    /// Per-stage sampling keeps the original scalar walk (its results are bitwise those of the
+    /// first version); per-step sampling uses the kinematics pass with vectorised sin/cos.
     fn refresh(&mut self) -> Result<()> {
         let d = &mut self.derived;
-        let (position, velocity) =
-            self.model
-                .centres_and_tip(&self.tether.q, &self.tether.qd, &mut d.centres)?;
+        let (q, qd) = (&self.tether.q, &self.tether.qd);
+        let (position, velocity) = match self.config.wake.sampling {
+            AirSampling::PerStage => self.model.centres_and_tip(q, qd, &mut d.centres)?,
+            AirSampling::PerStep => self.model.centres_and_tip_batch(q, qd, &mut d.centres)?,
+        };
         d.tip = position;
         d.capture_point = capture_point(&position, &velocity, &self.accd, &self.capture_offset);
         Ok(())

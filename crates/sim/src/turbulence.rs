@@ -347,6 +347,8 @@ pub struct Turbulence {
     state: Vec<f64>,
     /// Grid index of the newest generated time.
     newest: i64,
+    /// Its ring slot, `newest mod slots`.
+    newest_slot: usize,
     time: f64,
     /// The shared stream of every wake lane ([`LaneStreams::Shared`]).
     wake_rng: Stream,
@@ -427,6 +429,7 @@ impl Turbulence {
             ring: vec![0.0; slots * channels],
             state: vec![0.0; channels],
             newest: 0,
+            newest_slot: 0,
             time: 0.0,
             wake_rng: Stream::with_sampler(seed, WAKE_LANES_STREAM, config.normal_sampler),
             ambient_rng: Stream::with_sampler(seed, AMBIENT_STREAM, config.normal_sampler),
@@ -482,6 +485,7 @@ impl Turbulence {
 
     fn store_newest(&mut self) {
         let slot = self.newest.rem_euclid(self.slots as i64) as usize;
+        self.newest_slot = slot;
         let row = &mut self.ring[slot * self.channels..(slot + 1) * self.channels];
         if self.on_demand {
             for &l in &self.active_list {
@@ -647,6 +651,7 @@ impl Turbulence {
         self.seed = r.u64("turbulence seed")?;
         self.time = r.f64("turbulence time")?;
         self.newest = r.i64("turbulence grid index")?;
+        self.newest_slot = self.newest.rem_euclid(self.slots as i64) as usize;
         r.f32s_into("turbulence history", &mut self.ring)?;
         r.f64s_into("turbulence processes", &mut self.state)?;
         self.wake_rng = Stream::load_with_sampler(r, self.config.normal_sampler)?;
@@ -727,7 +732,9 @@ impl Turbulence {
         let delay = (-x * self.inv_airspeed).clamp(0.0, self.max_delay);
         let delay = if delay.is_nan() { 0.0 } else { delay };
         let r = (self.time - delay) * self.inv_dt;
-        let mut j0 = r.floor() as i64;
+        // floor(r) without a libm call (r is finite and small here).
+        let t = r as i64;
+        let mut j0 = if (t as f64) > r { t - 1 } else { t };
         let mut f = r - j0 as f64;
         if j0 >= self.newest {
             j0 = self.newest - 1;
@@ -738,10 +745,18 @@ impl Turbulence {
             j0 = oldest;
             f = 0.0;
         }
-        let n = self.slots as i64;
+        // Slots from the newest one's, without an integer division: j0 in [oldest, newest - 1].
+        let slot_back = |back: usize| {
+            if self.newest_slot >= back {
+                self.newest_slot - back
+            } else {
+                self.newest_slot + self.slots - back
+            }
+        };
+        let back = (self.newest - j0) as usize;
         TimeStencil {
-            slot0: j0.rem_euclid(n) as usize,
-            slot1: (j0 + 1).rem_euclid(n) as usize,
+            slot0: slot_back(back),
+            slot1: slot_back(back - 1),
             f,
         }
     }

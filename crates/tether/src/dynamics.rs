@@ -602,6 +602,53 @@ impl TetherModel {
         }))
     }
 
+    /// [`TetherModel::centres_and_tip`] through the kinematics pass of the right-hand side
+    /// (vectorised sin/cos, FMA where the processor has it): equal to it within rounding (a few
+    /// ulps), about 4x cheaper. Errors at the coordinate singularity.
+    pub fn centres_and_tip_batch(
+        &mut self,
+        q: &[f64],
+        qd: &[f64],
+        centres: &mut [V3],
+    ) -> Result<(V3, V3)> {
+        self.check_len("q", q)?;
+        self.check_len("qd", qd)?;
+        if centres.len() != self.n {
+            return Err(TetherError::WrongSize {
+                what: "segment centres",
+                expected: self.n,
+                found: centres.len(),
+            });
+        }
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
+            // SAFETY: the processor has AVX2 and FMA, checked just above.
+            unsafe { self.kinematics_avx2(q, qd)? };
+            return Ok(self.copy_centres(centres));
+        }
+        let l = self.l;
+        self.ws.chain.kinematics::<Plain>(0.0, l, q, qd)?;
+        Ok(self.copy_centres(centres))
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn kinematics_avx2(&mut self, q: &[f64], qd: &[f64]) -> Result<()> {
+        let l = self.l;
+        self.ws
+            .chain
+            .kinematics::<crate::arith::Fused>(0.0, l, q, qd)
+    }
+
+    fn copy_centres(&self, centres: &mut [V3]) -> (V3, V3) {
+        let ch = &self.ws.chain;
+        for (k, c) in centres.iter_mut().enumerate() {
+            *c = ch.com.get(k);
+        }
+        (ch.tip, ch.tip_vel)
+    }
+
     /// Tip position (m) and velocity (m/s) in the TA frame.
     pub fn tip_state(&mut self, q: &[f64], qd: &[f64]) -> Result<(V3, V3)> {
         self.check_len("q", q)?;
