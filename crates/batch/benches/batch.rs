@@ -5,22 +5,33 @@ use accd_batch::{Autoreset, BatchEnv, StepOutputs};
 use accd_sim::{EnvConfig, ACT_DIM};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 
+/// The fast air scheme: per-step sampling, ziggurat normals, per-lane turbulence streams.
+fn fast() -> EnvConfig {
+    let mut config = EnvConfig::default();
+    config.wake.sampling = accd_sim::AirSampling::PerStep;
+    config.turbulence.normal_sampler = accd_sim::NormalSampler::Ziggurat;
+    config.turbulence.lane_streams = accd_sim::LaneStreams::PerLane;
+    config
+}
+
 fn bench(c: &mut Criterion) {
     let mut group = c.benchmark_group("batch_step");
     group.sample_size(10);
-    for &n in &[1usize, 16, 256] {
-        for &threads in &[1usize, 0] {
-            let mut env =
-                BatchEnv::new(EnvConfig::default(), n, 1, Autoreset::SameStep, threads).unwrap();
-            let label = format!("n{n}-threads{}", env.threads());
-            let actions: Vec<f32> = (0..n * ACT_DIM)
-                .map(|k| ((k % 7) as f32 - 3.0) / 4.0)
-                .collect();
-            let mut out = StepOutputs::new(n);
-            group.throughput(Throughput::Elements(n as u64));
-            group.bench_function(BenchmarkId::new("agent_steps", label), |b| {
-                b.iter(|| env.step(&actions, out.buffers()).unwrap())
-            });
+    for (scheme, config) in [("default", EnvConfig::default()), ("fast", fast())] {
+        for &n in &[1usize, 16, 256] {
+            for &threads in &[1usize, 0] {
+                let mut env =
+                    BatchEnv::new(config.clone(), n, 1, Autoreset::SameStep, threads).unwrap();
+                let label = format!("{scheme}-n{n}-threads{}", env.threads());
+                let actions: Vec<f32> = (0..n * ACT_DIM)
+                    .map(|k| ((k % 7) as f32 - 3.0) / 4.0)
+                    .collect();
+                let mut out = StepOutputs::new(n);
+                group.throughput(Throughput::Elements(n as u64));
+                group.bench_function(BenchmarkId::new("agent_steps", label), |b| {
+                    b.iter(|| env.step(&actions, out.buffers()).unwrap())
+                });
+            }
         }
     }
     group.finish();
