@@ -269,6 +269,44 @@ struct Derived {
     capture_point: (V3, V3),
 }
 
+/// One RK4 stage's state: `q = q0 + h rate`, `qd = qd0 + h acc` (slices of one length; the
+/// equal lengths let the compiler drop the bounds checks).
+#[inline(always)]
+fn stage_state(
+    q: &mut [f64],
+    qd: &mut [f64],
+    q0: &[f64],
+    qd0: &[f64],
+    rate: &[f64],
+    acc: &[f64],
+    h: f64,
+) {
+    let n = q.len();
+    let (qd, q0, qd0, rate, acc) = (&mut qd[..n], &q0[..n], &qd0[..n], &rate[..n], &acc[..n]);
+    for i in 0..n {
+        q[i] = q0[i] + h * rate[i];
+        qd[i] = qd0[i] + h * acc[i];
+    }
+}
+
+/// RK4's combination `out = x0 + sixth (k1 + 2 (k2 + k3) + k4)`.
+#[inline(always)]
+fn combine(
+    out: &mut [f64],
+    x0: &[f64],
+    k1: &[f64],
+    k2: &[f64],
+    k3: &[f64],
+    k4: &[f64],
+    sixth: f64,
+) {
+    let n = out.len();
+    let (x0, k1, k2, k3, k4) = (&x0[..n], &k1[..n], &k2[..n], &k3[..n], &k4[..n]);
+    for i in 0..n {
+        out[i] = x0[i] + sixth * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]);
+    }
+}
+
 /// A snapshot of everything a user may want to see, in the TA frame, SI units.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Snapshot {
@@ -710,7 +748,6 @@ impl CaptureSim {
             self.hold_disturbance(t);
         }
         let (mut stage, model, b) = self.parts_with(hold)?;
-        let dim = q0.len();
         let h = 0.5 * dt;
 
         let (dq1, dw1) = Self::stage(
@@ -724,10 +761,7 @@ impl CaptureSim {
             &w0,
             &mut b.a_k[0],
         )?;
-        for i in 0..dim {
-            b.q[i] = q0[i] + h * qd0[i];
-            b.qd_k[0][i] = qd0[i] + h * b.a_k[0][i];
-        }
+        stage_state(&mut b.q, &mut b.qd_k[0], q0, qd0, qd0, &b.a_k[0], h);
         let (att, w) = (att0 + dq1 * h, w0 + dw1 * h);
         let (dq2, dw2) = Self::stage(
             model,
@@ -740,9 +774,9 @@ impl CaptureSim {
             &w,
             &mut b.a_k[1],
         )?;
-        for i in 0..dim {
-            b.q[i] = q0[i] + h * b.qd_k[0][i];
-            b.qd_k[1][i] = qd0[i] + h * b.a_k[1][i];
+        {
+            let [k0, k1, _] = &mut b.qd_k;
+            stage_state(&mut b.q, k1, q0, qd0, k0, &b.a_k[1], h);
         }
         let (att, w) = (att0 + dq2 * h, w0 + dw2 * h);
         let (dq3, dw3) = Self::stage(
@@ -756,9 +790,9 @@ impl CaptureSim {
             &w,
             &mut b.a_k[2],
         )?;
-        for i in 0..dim {
-            b.q[i] = q0[i] + dt * b.qd_k[1][i];
-            b.qd_k[2][i] = qd0[i] + dt * b.a_k[2][i];
+        {
+            let [_, k1, k2] = &mut b.qd_k;
+            stage_state(&mut b.q, k2, q0, qd0, k1, &b.a_k[2], dt);
         }
         let (att, w) = (att0 + dq3 * dt, w0 + dw3 * dt);
         let (dq4, dw4) = Self::stage(
@@ -774,11 +808,10 @@ impl CaptureSim {
         )?;
 
         let sixth = dt / 6.0;
-        for i in 0..dim {
-            b.q[i] = q0[i] + sixth * (qd0[i] + 2.0 * (b.qd_k[0][i] + b.qd_k[1][i]) + b.qd_k[2][i]);
-            b.qd[i] =
-                qd0[i] + sixth * (b.a_k[0][i] + 2.0 * (b.a_k[1][i] + b.a_k[2][i]) + b.a_k[3][i]);
-        }
+        combine(&mut b.q, q0, qd0, &b.qd_k[0], &b.qd_k[1], &b.qd_k[2], sixth);
+        combine(
+            &mut b.qd, qd0, &b.a_k[0], &b.a_k[1], &b.a_k[2], &b.a_k[3], sixth,
+        );
         let att = att0 + (dq1 + (dq2 + dq3) * 2.0 + dq4) * sixth;
         let w = w0 + (dw1 + (dw2 + dw3) * 2.0 + dw4) * sixth;
         let finite = b.q.iter().chain(b.qd.iter()).all(|v| v.is_finite())
