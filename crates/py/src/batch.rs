@@ -358,6 +358,14 @@ pub fn reward_bounds(config_json: &str) -> PyResult<(f64, f64)> {
     Ok(config.reward.bounds(config.episode_steps()))
 }
 
+/// Agent steps of one episode under a configuration (JSON): ``capture_window / agent_step``,
+/// rounded.
+#[pyfunction]
+pub fn episode_steps(config_json: &str) -> PyResult<u64> {
+    let config = EnvConfig::from_json(config_json).map_err(sim_to_py)?;
+    Ok(config.episode_steps())
+}
+
 /// The observation table: a list of ``(name, unit, scale, description)``, in index order.
 #[pyfunction]
 pub fn observation_table() -> Vec<(&'static str, &'static str, f64, &'static str)> {
@@ -373,6 +381,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(default_env_config_json, m)?)?;
     m.add_function(wrap_pyfunction!(env_config_json, m)?)?;
     m.add_function(wrap_pyfunction!(reward_bounds, m)?)?;
+    m.add_function(wrap_pyfunction!(episode_steps, m)?)?;
     m.add_function(wrap_pyfunction!(observation_table, m)?)?;
     m.add("OBS_DIM", OBS_DIM)?;
     m.add("ACT_DIM", ACT_DIM)?;
