@@ -2,13 +2,15 @@
 tether, the capturing device and the RLV's boom tip, each whole and as a close-up around the
 capture point.
 
-Frames are drawn with Pillow's ``ImageDraw`` (lines, markers and its built-in bitmap font) into
-an RGB buffer: no display, no OpenGL and no matplotlib figure, so a 640 x 480 frame takes about a
-millisecond and recording a whole episode (``RecordVideo``, ``VecVideoRecorder``) takes seconds.
+Frames are drawn with Pillow's ``ImageDraw`` (lines, markers, and text in its default font with
+each label rendered once) into an RGB buffer: no display, no OpenGL and no matplotlib figure, so
+a 640 x 480 frame takes a few milliseconds and recording a whole episode (``RecordVideo``,
+``VecVideoRecorder``) takes seconds.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any, Mapping, Optional, Sequence
 
@@ -27,6 +29,34 @@ _GRID = (224, 224, 224)
 _FRAME = (64, 64, 64)
 _TEXT = (0, 0, 0)
 _LEGEND_HEIGHT = 18
+
+
+@functools.lru_cache(maxsize=1)
+def _font() -> Any:
+    """Pillow's default font (loaded once)."""
+    from PIL import ImageFont
+
+    return ImageFont.load_default()
+
+
+@functools.lru_cache(maxsize=2048)
+def _text_mask(text: str) -> Any:
+    """``text`` rendered once as an 8-bit mask (tick labels and names repeat every frame)."""
+    from PIL import Image, ImageDraw
+
+    font = _font()
+    left, top, right, bottom = font.getbbox(text)
+    mask = Image.new("L", (max(1, int(right) + 1), max(1, int(bottom) + 1)), 0)
+    ImageDraw.Draw(mask).text((0, 0), text, fill=255, font=font)
+    return mask
+
+
+def _text(image: Any, xy: tuple[float, float], text: str, anchor: str = "l") -> None:
+    """Writes ``text`` at ``xy`` (its top left; ``anchor`` ``"c"``/``"r"``: its top centre or
+    top right) in the text colour."""
+    mask = _text_mask(text)
+    x = xy[0] - {"l": 0.0, "c": 0.5, "r": 1.0}[anchor] * mask.width
+    image.paste(_TEXT, (int(round(x)), int(round(xy[1]))), mask)
 
 
 def _nice_ticks(lo: float, hi: float, count: int = 5) -> list[float]:
@@ -94,7 +124,7 @@ _MARKERS = (
 )
 
 
-def _draw_panel(image: Any, font: Any, panel: _Panel, title: str, xlabel: str, ylabel: str,
+def _draw_panel(image: Any, panel: _Panel, title: str, xlabel: str, ylabel: str,
                 points: Mapping[str, np.ndarray], tether: np.ndarray) -> None:
     """Grid, tether and markers of one view, clipped to its box (drawn on a tile pasted into
     ``image``), then the frame, tick labels, axis labels and title around it."""
@@ -118,14 +148,12 @@ def _draw_panel(image: Any, font: Any, panel: _Panel, title: str, xlabel: str, y
     draw = ImageDraw.Draw(image)
     draw.rectangle((left, top, right, bottom), outline=_FRAME)
     for value, px in zip(xticks, tick_px):
-        label = _format_tick(value)
-        draw.text((left + px - 3 * len(label), bottom + 2), label, fill=_TEXT, font=font)
+        _text(image, (left + px, bottom + 2), _format_tick(value), "c")
     for value, py in zip(yticks, tick_py):
-        label = _format_tick(value)
-        draw.text((left - 6 * len(label) - 3, top + py - 5), label, fill=_TEXT, font=font)
-    draw.text((right - draw.textlength(title, font=font), top - 13), title, fill=_TEXT, font=font)
-    draw.text((left + 0.5 * (right - left - draw.textlength(xlabel, font=font)), bottom + 13), xlabel, fill=_TEXT, font=font)
-    draw.text((left - 42, top - 13), ylabel, fill=_TEXT, font=font)
+        _text(image, (left - 3, top + py - 5), _format_tick(value), "r")
+    _text(image, (right, top - 13), title, "r")
+    _text(image, (0.5 * (left + right), bottom + 13), xlabel, "c")
+    _text(image, (left - 42, top - 13), ylabel)
 
 
 def render_frame(data: Mapping[str, Any], width: int = 640, height: int = 480) -> np.ndarray:
@@ -136,7 +164,7 @@ def render_frame(data: Mapping[str, Any], width: int = 640, height: int = 480) -
     view (x forward, lateral y), whole and close-up. Close-ups are square, centred between the
     capture point and the boom tip, at least 8 m wide. A legend runs along the bottom.
     """
-    from PIL import Image, ImageDraw, ImageFont
+    from PIL import Image, ImageDraw
 
     joints = np.asarray(data["joints"], dtype=float)
     named = {
@@ -149,7 +177,6 @@ def render_frame(data: Mapping[str, Any], width: int = 640, height: int = 480) -
     capture, boom = named["capture point"], named["boom tip"]
     image = Image.new("RGB", (width, height), (255, 255, 255))
     draw = ImageDraw.Draw(image)
-    font = ImageFont.load_default()
     columns, rows = 2, 2
     cell_w, cell_h = width / columns, (height - _LEGEND_HEIGHT) / rows
     everything = np.vstack([joints, *named.values()])
@@ -173,7 +200,7 @@ def render_frame(data: Mapping[str, Any], width: int = 640, height: int = 480) -
                 title = f"{name}, t = {float(data['time']):.1f} s"
             panel = _Panel(box, xlim, ylim)
             points = {n: p[[0, k]] for n, p in named.items()}
-            _draw_panel(image, font, panel, title, "x forward [m]", ylabel, points, joints[:, [0, k]])
+            _draw_panel(image, panel, title, "x forward [m]", ylabel, points, joints[:, [0, k]])
     x = 8
     y = height - _LEGEND_HEIGHT + 4
     for name, kind, size in (("tether", "-", 0), *_MARKERS):
@@ -181,8 +208,8 @@ def render_frame(data: Mapping[str, Any], width: int = 640, height: int = 480) -
             draw.line((x, y + 5, x + 14, y + 5), fill=COLOURS[name], width=2)
         else:
             _marker(draw, (x + 7, y + 5), kind, COLOURS[name], size)
-        draw.text((x + 18, y), name, fill=_TEXT, font=font)
-        x += 18 + int(draw.textlength(name, font=font)) + 16
+        _text(image, (x + 18, y), name)
+        x += 18 + _text_mask(name).width + 16
     return np.asarray(image, dtype=np.uint8).copy()
 
 
