@@ -112,9 +112,10 @@ def test_make_vec_refuses_wrappers_for_the_native_vector_env_and_passes_the_rend
 
 
 @pytest.mark.parametrize("mode", list(AutoresetMode))
-@pytest.mark.parametrize("how", ["enum", "value"])
+@pytest.mark.parametrize("how", ["enum", "value", "snake_case"])
 def test_autoreset_mode_is_declared_in_metadata(mode, how):
-    env = gym.make_vec(ENV_ID, num_envs=2, autoreset_mode=mode if how == "enum" else mode.value, **QUICK)
+    given = {"enum": mode, "value": mode.value, "snake_case": {"NextStep": "next_step", "SameStep": "same_step", "Disabled": "disabled"}[mode.value]}[how]
+    env = gym.make_vec(ENV_ID, num_envs=2, autoreset_mode=given, **QUICK)
     assert env.metadata["autoreset_mode"] is mode
     sync = gym.make_vec(ENV_ID, num_envs=2, vectorization_mode="sync", vector_kwargs={"autoreset_mode": mode}, **QUICK)
     assert sync.metadata["autoreset_mode"] is mode

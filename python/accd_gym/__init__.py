@@ -82,7 +82,7 @@ else:
                 from accd_gym.sb3 import AccdVecEnv
             except ModuleNotFoundError as e:
                 raise ModuleNotFoundError(
-                    f"accd_gym.AccdVecEnv needs stable-baselines3 ({e}): pip install 'accd-gym[sb3]'"
+                    f"accd_gym.AccdVecEnv needs stable-baselines3 ({e}): pip install 'accd-gym[sb3]'", name=e.name
                 ) from e
             return AccdVecEnv
         raise AttributeError(f"module 'accd_gym' has no attribute {name!r}")

@@ -45,7 +45,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
     or thread count. Python and numpy integers are accepted; bools, floats and strings are not.
 
     **Autoreset** (``metadata["autoreset_mode"]``, chosen with ``autoreset_mode=``, an
-    ``AutoresetMode`` or its value ``"next_step"``/``"same_step"``/``"disabled"``):
+    ``AutoresetMode``, its value or ``"next_step"``/``"same_step"``/``"disabled"``):
     ``NEXT_STEP`` (default), ``SAME_STEP`` or ``DISABLED`` (a step of a batch with an ended env
     raises ``StateError``; reset it with ``options={"reset_mask": mask}``). Seeds and wake options
     given to ``reset`` persist: automatic resets continue the seeded episode sequence with the
@@ -91,14 +91,18 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         max_episode_steps: Optional[int] = None,
         **config: Any,
     ) -> None:
-        try:
-            mode = AutoresetMode(autoreset_mode)
-        except ValueError:
-            mode = None
+        by_name = {name: m for m, name in _MODES.items()}
+        if isinstance(autoreset_mode, str) and autoreset_mode in by_name:
+            mode: Optional[AutoresetMode] = by_name[autoreset_mode]
+        else:
+            try:
+                mode = AutoresetMode(autoreset_mode)
+            except ValueError:
+                mode = None
         if mode not in _MODES:
             raise ConfigError(
-                f"invalid config: `autoreset_mode` = {autoreset_mode!r} is outside the allowed range: an AutoresetMode "
-                f"or one of {sorted(m.value for m in _MODES)}"
+                f"invalid config: `autoreset_mode` = {autoreset_mode!r} is outside the allowed range: an AutoresetMode, "
+                f"its value ({', '.join(repr(m.value) for m in _MODES)}) or {', '.join(map(repr, by_name))}"
             )
         if render_mode not in (None, "rgb_array"):
             raise ConfigError(
