@@ -207,3 +207,44 @@ def test_accd_vec_env_reset_infos_follow_automatic_resets():
     assert dones.all()
     assert [i["wake_seed"] for i in env.reset_infos] == [1_000_000_002, 1_000_000_003]
     assert [i["wake_seed"] for i in infos] == [1_000_000_000, 1_000_000_001]
+
+
+# -- CleanRL's env stack (ppo_continuous_action.py's make_env, and its vector-wrapper variant) ----
+
+
+def cleanrl_single(gamma=0.99):
+    env = gym.make(ENV_ID, **QUICK)
+    env = gym.wrappers.FlattenObservation(env)
+    env = gym.wrappers.RecordEpisodeStatistics(env)
+    env = gym.wrappers.ClipAction(env)
+    env = gym.wrappers.NormalizeObservation(env)
+    env = gym.wrappers.TransformObservation(env, lambda obs: np.clip(obs, -10, 10), env.observation_space)
+    env = gym.wrappers.NormalizeReward(env, gamma=gamma)
+    return gym.wrappers.TransformReward(env, lambda reward: np.clip(reward, -10, 10))
+
+
+def cleanrl_native(num_envs, gamma=0.99):
+    from gymnasium.wrappers import vector as vw
+
+    envs = gym.make_vec(ENV_ID, num_envs=num_envs, **QUICK)
+    envs = vw.RecordEpisodeStatistics(vw.ClipAction(envs))
+    envs = vw.NormalizeObservation(envs)
+    envs = vw.TransformObservation(envs, lambda obs: np.clip(obs, -10, 10))
+    envs = vw.NormalizeReward(envs, gamma=gamma)
+    return vw.TransformReward(envs, lambda reward: np.clip(reward, -10, 10))
+
+
+@pytest.mark.parametrize("kind", ["sync", "native"])
+def test_cleanrl_style_rollouts_log_episode_statistics(kind):
+    envs = gym.vector.SyncVectorEnv([cleanrl_single for _ in range(2)]) if kind == "sync" else cleanrl_native(2)
+    assert isinstance(envs.single_action_space, gym.spaces.Box)
+    next_obs, _ = envs.reset(seed=1)
+    rng = np.random.default_rng(0)
+    returns = []
+    for _ in range(45):  # CleanRL: envs.step(action); "episode" in infos at episode ends
+        action = rng.normal(size=envs.action_space.shape).astype(np.float32)
+        next_obs, reward, terminations, truncations, infos = envs.step(action)
+        assert np.all(np.abs(next_obs) <= 10) and np.all(np.abs(reward) <= 10)
+        if "episode" in infos:
+            returns += list(infos["episode"]["r"][infos["_episode"]])
+    assert len(returns) >= 2
