@@ -146,3 +146,41 @@ def test_a_wake_seed_list_is_covered_by_the_batch_with_list_seeds_too():
     seen.append(info["wake_seed"].tolist())
     assert seen == [wakes[0:3], wakes[3:6]]
     assert info["wake_seed"].dtype == np.int64
+
+
+# RK4 at 0.1 s is far beyond the stability limit of the tether's axial element: episodes diverge.
+DIVERGING = dict(tether={"time_step": 0.1}, initial={"settle_time": 0.0}, limits={"max_distance": 1e4})
+
+
+@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+def test_diverging_episodes_report_as_sync_vector_env_reports_them(mode):
+    native = gym.make_vec(ENV_ID, num_envs=2, autoreset_mode=mode, **DIVERGING)
+    reference = gym.make_vec(ENV_ID, num_envs=2, vectorization_mode="sync", vector_kwargs={"autoreset_mode": mode}, **DIVERGING)
+    assert_same(native.reset(seed=[0, 1]), reference.reset(seed=[0, 1]), "reset")
+    messages = 0
+    for k in range(60):
+        actions = np.zeros((2, 4), np.float32)
+        out_n, out_r = native.step(actions), reference.step(actions)
+        for name, a, b in zip(("obs", "reward", "terminated", "truncated", "info"), out_n, out_r):
+            assert_same(a, b, f"step {k}: {name}")
+        info = out_r[4].get("final_info", out_r[4])
+        messages += sum(isinstance(m, str) and len(m) > 0 for m in info.get("divergence", []))
+    assert messages >= 2
+
+
+def test_diverging_episodes_report_as_dummy_vec_env_reports_them():
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    native = accd_gym.AccdVecEnv(2, **DIVERGING)
+    reference = DummyVecEnv([lambda: gym.make(ENV_ID, **DIVERGING) for _ in range(2)])
+    native.seed(4)
+    reference.seed(4)
+    assert_same(native.reset(), reference.reset(), "reset")
+    messages = 0
+    for k in range(60):
+        actions = np.zeros((2, 4), np.float32)
+        out_n, out_r = native.step(actions), reference.step(actions)
+        for name, a, b in zip(("obs", "rewards", "dones", "infos"), out_n, out_r):
+            assert_same(a, b, f"step {k}: {name}")
+        messages += sum(isinstance(i.get("divergence"), str) for i in out_r[3])
+    assert messages >= 2

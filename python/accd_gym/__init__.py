@@ -24,6 +24,7 @@ Public API:
 * :func:`towed_tether`, :func:`stand_in_body` -- the towed reference case (a stand-in capturing
   device at the tip, 185 m/s, 6000 m).
 * :func:`isa` -- the International Standard Atmosphere.
+* :mod:`accd_gym.zoo` -- rl-zoo3 hyperparameters (``--conf-file accd_gym.zoo.ppo``).
 * :class:`AccdError` and its subclasses :class:`ConfigError`, :class:`StateError`,
   :class:`SimulationError`.
 """

@@ -24,7 +24,7 @@ from typing import Any, Optional, Sequence
 import numpy as np
 
 from accd_gym.errors import ConfigError
-from accd_gym.task import EVENT_NAMES, HELD_OUT_WAKE_SEEDS, OBSERVATION_SCALE
+from accd_gym.task import EVENT_NAMES, HELD_OUT_WAKE_SEEDS, INFO_NAMES, OBSERVATION_SCALE
 
 #: Base seed of evaluation episodes (initial conditions and RLV motion); fixed so runs compare.
 EVAL_BASE_SEED: int = 20_240_607
@@ -200,7 +200,7 @@ def run_episodes(
             if ep_of[i] >= episodes:
                 continue
             step_info = infos["final_info"] if dones[i] else infos
-            info = {k: v[i] for k, v in step_info.items() if not k.startswith("_")}
+            info = {k: step_info[k][i] for k in (*INFO_NAMES, "wake_seed")}
             last = infos["final_obs"][i] if dones[i] else obs[i]
             traj[i].append(-last[0:3] / _POS_SCALE)
             acts[i].append(np.clip(actions[i], -1, 1))

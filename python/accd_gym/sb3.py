@@ -105,8 +105,8 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         dones = terminated | truncated
         infos = [info_dict(info[i], int(wake[i])) for i in range(self.num_envs)]
         for i, d in enumerate(infos):
-            if d["diverged"]:
-                d["divergence"] = self._core.divergence(i)
+            if d["diverged"]:  # a diverged episode ended and was replaced in this step
+                d["divergence"] = self._core.final_divergence(i)
             d["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
         for i in np.flatnonzero(dones):
             infos[i]["terminal_observation"] = final_obs[i].copy()

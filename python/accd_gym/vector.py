@@ -203,15 +203,18 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
                 wake_seed[i] = self._core.episode_seeds(int(i))["wake"]
             infos["final_obs"] = finals
             infos["_final_obs"] = done.copy()
-            infos["final_info"] = self._step_infos(info, wake.astype(np.int64), done)
+            infos["final_info"] = self._step_infos(info, wake.astype(np.int64), done, ended=True)
             infos["_final_info"] = done.copy()
         infos["wake_seed"] = wake_seed
         infos["_wake_seed"] = np.ones(self.num_envs, dtype=bool)
         return obs, reward, terminated, truncated, infos
 
-    def _step_infos(self, info: np.ndarray, wake_seed: np.ndarray, rows: np.ndarray) -> dict[str, Any]:
+    def _step_infos(
+        self, info: np.ndarray, wake_seed: np.ndarray, rows: np.ndarray, ended: bool = False
+    ) -> dict[str, Any]:
         """The step infos of the envs ``rows`` selects, batched as ``SyncVectorEnv`` batches the
-        single env's info dicts (other entries 0 with the mask False; no keys if none)."""
+        single env's info dicts (other entries 0 with the mask False; no keys if none).
+        ``ended``: the rows' episodes ended and were replaced in this step (``SAME_STEP``)."""
         out: dict[str, Any] = {}
         if not rows.any():
             return out
@@ -231,7 +234,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         if diverged.any():
             messages = np.full(self.num_envs, None, dtype=object)
             for i in np.flatnonzero(diverged):
-                messages[i] = self._core.divergence(int(i))
+                messages[i] = (self._core.final_divergence if ended else self._core.divergence)(int(i))
             out["divergence"] = messages
             out["_divergence"] = diverged.copy()
         return out

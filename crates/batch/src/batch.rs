@@ -169,6 +169,9 @@ struct Slot {
     /// The episode ended in the last step: next-step autoreset resets it at the next step,
     /// disabled autoreset waits for `reset`.
     pending_reset: bool,
+    /// Why the episode that ended in the last step diverged, kept past a same-step autoreset
+    /// (which starts the next episode at once); not part of the saved state.
+    final_divergence: Option<String>,
 }
 
 /// N episodes of one config.
@@ -218,6 +221,7 @@ impl BatchEnv {
                 base,
                 index: 0,
                 pending_reset: false,
+                final_divergence: None,
             });
         }
         let pool = rayon::ThreadPoolBuilder::new()
@@ -289,6 +293,13 @@ impl BatchEnv {
     pub fn episode_mut(&mut self, i: usize) -> Result<&mut Episode> {
         self.check_index(i)?;
         Ok(&mut self.slots[i].episode)
+    }
+
+    /// Why env `i`'s episode that ended in the last step (same-step autoreset) diverged, or
+    /// `None` if it did not; for the other modes see [`Episode::divergence`].
+    pub fn final_divergence(&self, i: usize) -> Result<Option<&str>> {
+        self.check_index(i)?;
+        Ok(self.slots[i].final_divergence.as_deref())
     }
 
     fn check_index(&self, i: usize) -> Result<()> {
@@ -425,6 +436,7 @@ impl BatchEnv {
             reset,
         ): Row<'_>| {
             *reset = false;
+            slot.final_divergence = None;
             if slot.pending_reset {
                 slot.pending_reset = false;
                 slot.index += 1;
@@ -458,6 +470,9 @@ impl BatchEnv {
                     Autoreset::NextStep | Autoreset::Disabled => slot.pending_reset = true,
                     Autoreset::SameStep => {
                         final_obs.copy_from_slice(obs);
+                        if o.diverged {
+                            slot.final_divergence = slot.episode.divergence().map(str::to_owned);
+                        }
                         slot.index += 1;
                         restart(slot, position as u64, n64, schedule);
                         obs.copy_from_slice(slot.episode.observation());

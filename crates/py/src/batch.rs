@@ -311,6 +311,16 @@ impl PyBatchEnv {
             .map(str::to_owned))
     }
 
+    /// Why env ``i``'s episode that ended in the last step diverged (``"same_step"`` autoreset,
+    /// whose next episode has already started), or None.
+    fn final_divergence(&self, i: usize) -> PyResult<Option<String>> {
+        Ok(self
+            .inner
+            .final_divergence(i)
+            .map_err(batch_to_py)?
+            .map(str::to_owned))
+    }
+
     /// What a picture of env ``i`` needs (TA frame, m): ``joints`` (n+1, 3), ``accd_position``,
     /// ``capture_point``, ``boom_tip``, ``equilibrium`` (3,), ``attitude`` (w, x, y, z),
     /// ``deflection_deg`` (4,), ``time`` s, ``distance`` m, ``tension`` N.
