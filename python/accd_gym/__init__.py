@@ -24,9 +24,12 @@ Public API:
 * :func:`towed_tether`, :func:`stand_in_body` -- the towed reference case (a stand-in capturing
   device at the tip, 185 m/s, 6000 m).
 * :func:`isa` -- the International Standard Atmosphere.
+* :mod:`accd_gym.zoo` -- rl-zoo3 hyperparameters (``--conf-file accd_gym.zoo.ppo``).
 * :class:`AccdError` and its subclasses :class:`ConfigError`, :class:`StateError`,
   :class:`SimulationError`.
 """
+
+from typing import TYPE_CHECKING, Any, Optional
 
 from accd_gym._core import (
     CaptureSim,
@@ -48,29 +51,43 @@ from accd_gym.vector import InAirCaptureVectorEnv
 
 import gymnasium as _gym
 
+from accd_gym.task import episode_steps as _episode_steps
+
+#: The registered id of the env (``gymnasium.make(ENV_ID)``, ``gymnasium.make_vec(ENV_ID, n)``).
 ENV_ID = "accd_gym/InAirCapture-v0"
 if ENV_ID not in _gym.registry:
     _gym.register(
         id=ENV_ID,
         entry_point="accd_gym.env:InAirCaptureEnv",
         vector_entry_point="accd_gym.vector:InAirCaptureVectorEnv",
+        max_episode_steps=_episode_steps(default_config()),
     )
 
 
-def reward_bounds(config: dict | None = None, **overrides) -> tuple[float, float]:
+def reward_bounds(config: Optional[dict[str, Any]] = None, **overrides: Any) -> tuple[float, float]:
     """Lowest and highest reward of one agent step under a configuration (keyword overrides)."""
     from accd_gym.config import config_json
 
     return _core_reward_bounds(config_json(env_config(config, **overrides)))
 
 
-def __getattr__(name: str):
-    """Imports :class:`AccdVecEnv` (and with it stable-baselines3) on first use."""
-    if name == "AccdVecEnv":
-        from accd_gym.sb3 import AccdVecEnv
+if TYPE_CHECKING:
+    from accd_gym.sb3 import AccdVecEnv
+else:
 
-        return AccdVecEnv
-    raise AttributeError(f"module 'accd_gym' has no attribute {name!r}")
+    def __getattr__(name: str) -> Any:
+        """Imports :class:`AccdVecEnv` (and with it stable-baselines3) on first use; hidden from
+        type checkers, which see the import above and nothing else."""
+        if name == "AccdVecEnv":
+            try:
+                from accd_gym.sb3 import AccdVecEnv
+            except ModuleNotFoundError as e:
+                raise ModuleNotFoundError(
+                    f"accd_gym.AccdVecEnv needs stable-baselines3 ({e}): pip install 'accd-gym[sb3]'", name=e.name
+                ) from e
+            return AccdVecEnv
+        raise AttributeError(f"module 'accd_gym' has no attribute {name!r}")
+
 
 __all__ = [
     "AccdError",

@@ -170,6 +170,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except AccdError as e:
         print(f"accd-gym: error: {e}", file=sys.stderr)
         return 2
+    except ModuleNotFoundError as e:
+        if e.name not in ("stable_baselines3", "torch", "tensorboard", "rich"):
+            raise
+        print(f"accd-gym: error: `accd-gym {args.command}` needs the sb3 extra ({e}): pip install 'accd-gym[sb3]'", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

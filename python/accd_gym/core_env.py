@@ -32,14 +32,18 @@ class CoreEnvMixin:
         return self._core.num_threads
 
     def _reset_core(
-        self, seed: Optional[Union[int, Sequence[int]]], options: Optional[dict[str, Any]]
+        self,
+        seed: Optional[Union[int, Sequence[int]]],
+        options: Optional[dict[str, Any]],
+        mask: Optional[np.ndarray] = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Applies the wake options, seeds the core (from the operating system's entropy on a
-        first reset without a seed) and starts new episodes; returns ``(obs, wake_seeds)``."""
+        first reset without a seed) and starts new episodes (in the envs ``mask`` selects, or
+        all); returns ``(obs, wake_seeds)`` of every env."""
         wake_options(self._core, options)
         if seed is None and not self._seeded:
             seed = random_seed()
-        obs, wake = self._core.reset(seed)
+        obs, wake = self._core.reset(seed, None if mask is None else mask.tolist())
         self._seeded = True
         self._needs_reset = False
         return obs, wake

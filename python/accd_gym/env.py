@@ -13,6 +13,7 @@ from accd_gym.core_env import CoreEnvMixin
 from accd_gym.task import (
     action_space,
     check_actions,
+    check_seed,
     info_dict,
     observation_space,
     random_seed,
@@ -36,7 +37,8 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
 
     ``Box(-1, 1, (4,), float32)``: flap commands, scaled by ``accd.flap_limit_deg`` (15 deg),
     held for one agent step (``agent_step``, 0.1 s). Values outside [-1, 1] are clipped;
-    non-finite values raise ``ValueError``. Pitch moves both horizontal flaps together, yaw both
+    non-finite values, values beyond float32's range, non-real values (bool, complex, str) and
+    any other shape than (4,) raise ``StateError`` (a ``ValueError``). Pitch moves both horizontal flaps together, yaw both
     vertical flaps, roll all four differentially (``accd_gym.mix_flaps`` does the mixing).
 
     | index | flap | unit | positive deflection |
@@ -100,6 +102,10 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
     | the simulation diverged (non-finite or implausible state); the observation is the last good one | terminated | ``diverged`` |
     | ``capture_window`` (70 s, 700 agent steps) elapsed | truncated | - |
 
+    The registered spec has ``max_episode_steps`` = 700 (the default window), so
+    ``gymnasium.make`` adds a ``TimeLimit`` of 700 steps; with another ``capture_window`` pass
+    ``max_episode_steps=capture_window / agent_step`` to ``gymnasium.make`` as well.
+
     ## Info
 
     ``time`` (s), ``distance`` (m), ``relative_speed`` (m/s), ``peak_tension`` (N, highest
@@ -151,7 +157,13 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
     def reset(
         self, *, seed: Optional[int] = None, options: Optional[dict[str, Any]] = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
-        """Starts a new episode; returns ``(observation, info)`` (info: ``wake_seed``)."""
+        """Starts a new episode; returns ``(observation, info)`` (info: ``wake_seed``).
+
+        ``seed``: a Python or numpy integer in [0, 2^64), or None (the next episode of the seeded
+        sequence); bools, floats and strings raise ConfigError.
+        """
+        if seed is not None:
+            seed = check_seed(seed)
         super().reset(seed=seed)
         obs, wake = self._reset_core(seed, options)
         info = {"wake_seed": int(wake[0])}
@@ -163,7 +175,7 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
         """One agent step; returns ``(observation, reward, terminated, truncated, info)``."""
         if self._needs_reset:
             raise gym.error.ResetNeeded("call reset() before step() (at the start and after an episode ends)")
-        a = check_actions(action, 1)
+        a = check_actions(action, 1, single=True)
         obs, reward, terminated, truncated, _final, info, wake, _reset = self._core.step(a)
         term, trunc = bool(terminated[0]), bool(truncated[0])
         self._needs_reset = term or trunc

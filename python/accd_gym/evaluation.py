@@ -24,7 +24,7 @@ from typing import Any, Optional, Sequence
 import numpy as np
 
 from accd_gym.errors import ConfigError
-from accd_gym.task import EVENT_NAMES, HELD_OUT_WAKE_SEEDS, OBSERVATION_SCALE
+from accd_gym.task import EVENT_NAMES, HELD_OUT_WAKE_SEEDS, INFO_NAMES, OBSERVATION_SCALE
 
 #: Base seed of evaluation episodes (initial conditions and RLV motion); fixed so runs compare.
 EVAL_BASE_SEED: int = 20_240_607
@@ -65,7 +65,13 @@ class SB3Policy:
             raise ConfigError(f"invalid config: policy path {str(path)!r}: no model file {str(model_path)!r}")
         self.name = str(path)
         self.algo = _algo_of(model_path)
-        from stable_baselines3 import PPO, SAC
+        try:
+            from stable_baselines3 import PPO, SAC
+        except ModuleNotFoundError as e:
+            raise ModuleNotFoundError(
+                f"loading the trained model {str(path)!r} needs stable-baselines3 ({e}): pip install 'accd-gym[sb3]'",
+                name=e.name,
+            ) from e
 
         cls = {"ppo": PPO, "sac": SAC}[self.algo]
         self.model = cls.load(str(model_path), device=device)
@@ -158,19 +164,19 @@ def run_episodes(
     """Runs ``episodes`` episodes of ``policy``; episode ``k`` uses ``wake_seeds[k]`` when given.
 
     ``wake_seeds=None`` draws training wake seeds (for tuning on training data). Returns the
-    episodes in index order.
+    episodes in index order. Needs no stable-baselines3 (the native gymnasium vector env, with
+    same-step autoreset, runs the episodes).
     """
-    from accd_gym.sb3 import AccdVecEnv
+    from accd_gym.vector import InAirCaptureVectorEnv
 
     if episodes < 1:
         raise ConfigError(f"invalid config: `episodes` = {episodes} is outside the allowed range >= 1")
     if wake_seeds is not None and len(wake_seeds) < episodes:
         raise ConfigError(f"invalid config: {len(wake_seeds)} wake seeds for {episodes} episodes; need at least as many")
     n = max(1, min(int(num_envs), episodes))
-    env = AccdVecEnv(num_envs=n, seed=seed, num_threads=num_threads, **(config or {}))
-    if wake_seeds is not None:
-        env.set_options({"wake_seeds": [int(s) for s in wake_seeds[:episodes]]})
-    obs = env.reset()
+    env = InAirCaptureVectorEnv(n, autoreset_mode="same_step", num_threads=num_threads, **(config or {}))
+    options = None if wake_seeds is None else {"wake_seeds": [int(s) for s in wake_seeds[:episodes]]}
+    obs, _ = env.reset(seed=seed, options=options)
     if hasattr(policy, "reset"):
         policy.reset(None)
     ep_of = np.arange(n)  # index of the episode each env is running
@@ -187,12 +193,15 @@ def run_episodes(
         bar = tqdm(total=episodes, desc=desc, unit="ep")
     while len(done_eps) < episodes:
         actions = np.asarray(policy.predict(obs), dtype=np.float32)
-        obs, reward, dones, infos = env.step(actions)
+        obs, reward, terminated, truncated, infos = env.step(actions)
+        reward = reward.astype(np.float32)  # as stable-baselines3 reports it (returns unchanged)
+        dones = terminated | truncated
         for i in range(n):
             if ep_of[i] >= episodes:
                 continue
-            info = infos[i]
-            last = info["terminal_observation"] if dones[i] else obs[i]
+            step_info = infos["final_info"] if dones[i] else infos
+            info = {k: step_info[k][i] for k in (*INFO_NAMES, "wake_seed")}
+            last = infos["final_obs"][i] if dones[i] else obs[i]
             traj[i].append(-last[0:3] / _POS_SCALE)
             acts[i].append(np.clip(actions[i], -1, 1))
             mind[i] = min(mind[i], info["distance"])

@@ -14,6 +14,7 @@ from accd_gym.errors import ConfigError
 from accd_gym.task import (
     action_space,
     check_actions,
+    check_seed,
     info_dict,
     observation_space,
     random_seed,
@@ -24,18 +25,21 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
     """``num_envs`` In-Air Capturing episodes as a stable-baselines3 ``VecEnv``, stepped by Rust.
 
     The task is that of :class:`accd_gym.env.InAirCaptureEnv` (see its docstring for the
-    observation, action, reward and episode-end tables). SB3 conventions:
+    observation, action, reward and episode-end tables). It behaves as SB3's ``DummyVecEnv`` of
+    single envs (``tests/test_vector_equivalence.py`` compares them step by step):
 
     * same-step autoreset: when an episode ends, ``step_wait`` returns the next episode's first
       observation, ``done=True``, and ``infos[i]["terminal_observation"]`` (a copy of the ended
-      episode's last observation) and ``infos[i]["TimeLimit.truncated"]`` (True when the capture
-      window ran out without a termination);
-    * ``seed(s)`` and ``set_options(...)`` apply at the next ``reset()``; env ``i`` then draws its
-      episodes from ``(s, i, episode)``, automatic resets included; wake options (``wake_seed``,
+      episode's last observation); ``reset_infos[i]`` becomes the new episode's reset info;
+      ``infos[i]["TimeLimit.truncated"]`` is in every info (True when the capture window ran out
+      without a termination);
+    * ``seed(s)`` and ``set_options(...)`` apply at the next ``reset()``; env ``i`` then replays
+      the single env seeded ``s + i``, automatic resets included; wake options (``wake_seed``,
       ``wake_seeds``) persist over later resets;
     * rewards are float32, dones bool, infos a list of dicts (``time``, ``distance``,
       ``relative_speed``, ``peak_tension``, ``captured``, ``overload``, ``envelope_exit``,
-      ``diverged``, ``episode_steps``, ``wake_seed``).
+      ``diverged``, ``episode_steps``, ``wake_seed``, ``TimeLimit.truncated``, and
+      ``divergence`` when the env diverged).
 
     Observations are written by Rust into numpy arrays in place (two sets, used alternately: an
     array stays valid through the next step, as SB3's rollout collection needs); the GIL is
@@ -58,7 +62,7 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
             )
         self.render_mode = render_mode
         self._config = env_config(config)
-        base = random_seed() if seed is None else int(seed)
+        base = random_seed() if seed is None else check_seed(seed)
         self._core = _core.BatchEnv(config_json(self._config), int(num_envs), base, "same_step", int(num_threads))
         self._actions: Optional[np.ndarray] = None
         self._base_seed: Optional[int] = None if seed is None else base
@@ -67,9 +71,10 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         self.metadata["render_fps"] = 1.0 / self._config["agent_step"]
 
     def seed(self, seed: Optional[int] = None) -> Sequence[Optional[int]]:
-        """Seeds the envs at the next ``reset()``: env ``i`` gets base ``seed`` and index ``i``."""
-        self._base_seed = random_seed() if seed is None else int(seed)
-        return [self._base_seed] * self.num_envs
+        """Seeds the envs at the next ``reset()``: env ``i`` gets seed ``seed + i`` (as
+        ``DummyVecEnv``); returns those seeds."""
+        self._base_seed = random_seed() if seed is None else check_seed(seed)
+        return [(self._base_seed + i) % 2**64 for i in range(self.num_envs)]
 
     def set_options(self, options: Optional[Union[list[dict], dict]] = None) -> None:
         """Wake options (``wake_seed``, ``wake_seeds``) applied at the next ``reset()``."""
@@ -99,11 +104,13 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         self._actions = None
         dones = terminated | truncated
         infos = [info_dict(info[i], int(wake[i])) for i in range(self.num_envs)]
+        for i, d in enumerate(infos):
+            if d["diverged"]:  # a diverged episode ended and was replaced in this step
+                d["divergence"] = self._core.final_divergence(i)
+            d["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
         for i in np.flatnonzero(dones):
             infos[i]["terminal_observation"] = final_obs[i].copy()
-            infos[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
-            if infos[i]["diverged"]:
-                infos[i]["divergence"] = self._core.divergence(int(i))
+            self.reset_infos[i] = {"wake_seed": int(self._core.episode_seeds(int(i))["wake"])}
         return obs, reward.astype(np.float32), dones.copy(), infos
 
     def close(self) -> None:

@@ -54,30 +54,68 @@ def info_dict(info_row: np.ndarray, wake_seed: int) -> dict[str, Any]:
     return out
 
 
-def check_actions(actions: Any, num_envs: int) -> np.ndarray:
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
+def check_actions(actions: Any, num_envs: int, *, single: bool = False) -> np.ndarray:
     """Actions as a C-contiguous float32 array of shape (num_envs, ACT_DIM).
 
-    Raises :class:`~accd_gym.StateError` (a ValueError) for values that are not numbers or a
-    wrong shape. Non-finite values are refused by the Rust core, with the env index named.
+    ``single``: the action of a single env, shape (ACT_DIM,) exactly (a batch of one is
+    refused). Raises :class:`~accd_gym.StateError` (a ValueError) for values that are not real
+    numbers (bool, complex, str, objects), finite values outside float32's range and a wrong
+    shape. Non-finite values are refused by the Rust core, with the env index named.
     """
     from accd_gym.errors import StateError
 
+    expected = (ACT_DIM,) if single else (num_envs, ACT_DIM)
     try:
-        a = np.ascontiguousarray(actions, dtype=np.float32)
+        raw = np.asarray(actions)
     except (TypeError, ValueError) as e:
-        raise StateError(f"actions must be numbers, shape ({num_envs}, {ACT_DIM}): {e}") from None
-    if a.shape == (ACT_DIM,) and num_envs == 1:
-        a = a.reshape(1, ACT_DIM)
-    if a.shape != (num_envs, ACT_DIM):
-        raise StateError(f"actions have shape {np.shape(actions)}, expected ({num_envs}, {ACT_DIM})")
-    return a
+        raise StateError(f"actions must be real numbers of shape {expected}: {e}") from None
+    if raw.dtype.kind not in "fiu":
+        raise StateError(f"actions must be real numbers of shape {expected}, got dtype {raw.dtype}")
+    if raw.shape != expected:
+        raise StateError(f"actions have shape {raw.shape}, expected {expected}")
+    if raw.dtype.kind == "f" and raw.dtype.itemsize > 4:
+        too_big = np.isfinite(raw) & (np.abs(raw) > _FLOAT32_MAX)
+        if too_big.any():
+            k = int(np.flatnonzero(too_big.reshape(-1))[0])
+            raise StateError(
+                f"action {raw.reshape(-1)[k]!r} (env {k // ACT_DIM}, component {k % ACT_DIM}) is finite but "
+                f"outside float32's range (|a| <= {_FLOAT32_MAX:.4g}): actions are float32 in [-1, 1] "
+                f"(values outside it are clipped)"
+            )
+    return np.ascontiguousarray(raw, dtype=np.float32).reshape(num_envs, ACT_DIM)
+
+
+def check_seed(seed: Any, what: str = "seed", bound: int = 2**64) -> int:
+    """``seed`` as a Python int in [0, bound): a Python or numpy integer (not a bool).
+
+    Raises :class:`~accd_gym.ConfigError` naming ``what`` for anything else (floats, strings,
+    bools, negative or too large values).
+    """
+    from accd_gym.errors import ConfigError
+
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
+        raise ConfigError(
+            f"invalid config: `{what}` = {seed!r} is outside the allowed range: an int in [0, {bound:#x})"
+        )
+    value = int(seed)
+    if not 0 <= value < bound:
+        raise ConfigError(f"invalid config: `{what}` = {value} is outside the allowed range [0, {bound:#x})")
+    return value
+
+
+#: Wake seeds are reported as int64 (as gymnasium batches Python ints), so they lie in [0, 2^63).
+WAKE_SEED_BOUND: int = 2**63
 
 
 def wake_options(core: Any, options: dict[str, Any] | None) -> None:
     """Applies the wake-seed options of ``reset`` to the core (they persist over later resets).
 
     ``{"wake_seed": int}`` fixes the wake seed, ``{"wake_seeds": [int, ...]}`` cycles through a
-    list, ``{"wake_seed": None}`` returns to training draws. Unknown keys raise ConfigError.
+    list, ``{"wake_seed": None}`` returns to training draws. Seeds are Python or numpy integers
+    in [0, 2^63) (floats, strings and bools are refused). Unknown keys raise ConfigError.
     """
     if not options:
         return
@@ -89,13 +127,41 @@ def wake_options(core: Any, options: dict[str, Any] | None) -> None:
             f"invalid config: reset option(s) {sorted(unknown)} outside the allowed set ['wake_seed', 'wake_seeds']"
         )
     if "wake_seeds" in options and options["wake_seeds"] is not None:
-        core.set_wake_schedule("list", [int(s) for s in options["wake_seeds"]])
+        seeds = options["wake_seeds"]
+        if isinstance(seeds, (str, bytes)) or not hasattr(seeds, "__iter__"):
+            raise ConfigError(f"invalid config: `wake_seeds` = {seeds!r} is outside the allowed range: a list of ints")
+        core.set_wake_schedule("list", [check_seed(s, "wake_seeds", WAKE_SEED_BOUND) for s in seeds])
     elif "wake_seed" in options:
         seed = options["wake_seed"]
         if seed is None:
             core.set_wake_schedule("training", [])
         else:
-            core.set_wake_schedule("fixed", [int(seed)])
+            core.set_wake_schedule("fixed", [check_seed(seed, "wake_seed", WAKE_SEED_BOUND)])
+
+
+def episode_steps(config: dict[str, Any]) -> int:
+    """Agent steps of one episode under a full configuration (``capture_window / agent_step``)."""
+    from accd_gym.config import config_json
+
+    return int(_core.episode_steps(config_json(config)))
+
+
+def check_max_episode_steps(max_episode_steps: Any, config: dict[str, Any]) -> None:
+    """Refuses a ``max_episode_steps`` (gymnasium's TimeLimit length, which ``make_vec`` passes
+    from the registered spec) shorter than the configuration's episode: the capture window ends
+    episodes, and a time limit inside it would change nothing but the truncation step."""
+    if max_episode_steps is None:
+        return
+    from accd_gym.errors import ConfigError
+
+    steps = episode_steps(config)
+    limit = check_seed(max_episode_steps, "max_episode_steps")
+    if limit < steps:
+        raise ConfigError(
+            f"invalid config: `max_episode_steps` = {limit} is outside the allowed range [{steps}, inf): the capture "
+            f"window ({config['capture_window']} s = {steps} agent steps) sets the episode length; pass "
+            f"max_episode_steps={steps} with this capture_window, or shorten capture_window"
+        )
 
 
 def random_seed() -> int:

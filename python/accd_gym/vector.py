@@ -18,39 +18,67 @@ from accd_gym.task import (
     INFO_NAMES,
     action_space,
     check_actions,
+    check_max_episode_steps,
+    check_seed,
     observation_space,
     random_seed,
 )
 
-_MODES = {AutoresetMode.NEXT_STEP: "next_step", AutoresetMode.SAME_STEP: "same_step"}
+_MODES = {
+    AutoresetMode.NEXT_STEP: "next_step",
+    AutoresetMode.SAME_STEP: "same_step",
+    AutoresetMode.DISABLED: "disabled",
+}
 
 
 class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
     """``num_envs`` In-Air Capturing episodes stepped together by the Rust core, on threads.
 
     The task (actions, observations, reward, episode end, seeds) is that of
-    :class:`accd_gym.env.InAirCaptureEnv`; env ``i`` of a vector env seeded ``s`` is identical to
-    env ``i`` of any other batch size or thread count seeded ``s``, and with ``seed=[s0, s1, ...]``
-    env ``i`` replays the single env seeded ``s_i``.
+    :class:`accd_gym.env.InAirCaptureEnv`. The vector env behaves as gymnasium's
+    ``SyncVectorEnv`` of single envs (``gymnasium.make_vec(..., vectorization_mode="sync")``):
+    the same observations, rewards, flags and infos, dtypes included, in every autoreset mode and
+    with partial resets (``tests/test_vector_equivalence.py`` compares them step by step).
 
-    **Autoreset** (``metadata["autoreset_mode"]``): ``NEXT_STEP`` (default, gymnasium's own) or
-    ``SAME_STEP``, chosen with ``autoreset_mode=``. Seeds and wake options given to ``reset``
-    persist: automatic resets continue the seeded episode sequence with the same wake schedule.
+    **Seeds**: ``reset(seed=s)`` gives env ``i`` the seed ``s + i``, ``seed=[s0, s1, ...]`` the
+    seed ``s_i``: env ``i`` then replays the single env with that seed, whatever the batch size
+    or thread count. Python and numpy integers are accepted; bools, floats and strings are not.
 
-    **Infos**: a dict of arrays (num_envs,) with a ``_name`` mask each: ``time``, ``distance``,
-    ``relative_speed``, ``peak_tension``, ``episode_steps``, ``wake_seed`` and the flags
-    ``captured``, ``overload``, ``envelope_exit``, ``diverged``. For an env whose episode ended,
-    they describe the ending step. With ``SAME_STEP``, ``final_obs`` (object array, the ended
-    episodes' last observations) and ``final_info`` (the same arrays, masked to the ended envs)
-    are added, as gymnasium's own vector envs do.
+    **Autoreset** (``metadata["autoreset_mode"]``, chosen with ``autoreset_mode=``, an
+    ``AutoresetMode``, its value or ``"next_step"``/``"same_step"``/``"disabled"``):
+    ``NEXT_STEP`` (default), ``SAME_STEP`` or ``DISABLED`` (a step of a batch with an ended env
+    raises ``StateError``; reset it with ``options={"reset_mask": mask}``). Seeds and wake options
+    given to ``reset`` persist: automatic resets continue the seeded episode sequence with the
+    same wake schedule. ``reset(options={"reset_mask": mask})`` (a (num_envs,) bool array)
+    resets only the selected envs, in every mode.
 
-    **Buffers (copy versus view)**: the arrays ``step`` and ``reset`` return are numpy arrays the
-    Rust core writes in place (no copy per step). Two sets are used alternately, so an array stays
-    valid through the next ``step`` and is overwritten by the one after; copy what you keep
-    longer. ``final_obs`` entries are copies.
+    **Infos**: a dict of arrays (num_envs,) with a ``_name`` mask each, as ``SyncVectorEnv``
+    batches the single env's info dicts: ``time``, ``distance``, ``relative_speed``,
+    ``peak_tension`` (float64), ``captured``, ``overload``, ``envelope_exit``, ``diverged``
+    (bool), ``episode_steps`` (int64), ``divergence`` (object, only when an env diverged) are
+    the step's; ``wake_seed`` (int64) is every env's. An env reset in this step (``NEXT_STEP``:
+    the step after its episode ended; ``SAME_STEP``: the step that ended it) reports only its new
+    episode's ``wake_seed``: its other entries are 0 with the mask False. With ``SAME_STEP``,
+    ``final_obs`` (object array, the ended episodes' last observations) and ``final_info`` (the
+    ended episodes' step infos, masked to the ended envs) are added. ``reset`` returns
+    ``wake_seed`` of the envs it reset.
 
-    ``num_threads``: threads stepping the envs (0: one per core). ``render_mode="rgb_array"``
-    renders env 0 (``render()``) off-screen.
+    **Wake-seed lists** (``options={"wake_seeds": W}``): the batch covers the list, env ``i``'s
+    episode ``e`` (counted from the last seeding) using ``W[(i + e * num_envs) % len(W)]``: a
+    ``SyncVectorEnv`` would give every env the same entry, evaluating each wake ``num_envs``
+    times. Wake options cannot be combined with a partial ``reset_mask`` (the schedule is the
+    batch's).
+
+    **Buffers (copy versus view)**: the observation, reward and flag arrays ``step`` and
+    ``reset`` return are numpy arrays the Rust core writes in place (no copy per step). Two sets
+    are used alternately, so an array stays valid through the next ``step`` and is overwritten by
+    the one after; copy what you keep longer. Info arrays and ``final_obs`` entries are copies.
+
+    ``max_episode_steps`` (passed by ``gymnasium.make_vec`` from the registered spec): at least
+    the configuration's episode length (``capture_window / agent_step``), which ends episodes
+    (truncation); a shorter limit raises ConfigError (pass ``max_episode_steps=`` with a longer
+    ``capture_window``). ``num_threads``: threads stepping the envs (0: one per core). ``render_mode="rgb_array"``:
+    ``render()`` returns a tuple of one RGB frame per env, as ``SyncVectorEnv`` does.
     """
 
     def __init__(
@@ -60,21 +88,28 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         autoreset_mode: Union[AutoresetMode, str] = AutoresetMode.NEXT_STEP,
         num_threads: int = 0,
         render_mode: Optional[str] = None,
+        max_episode_steps: Optional[int] = None,
         **config: Any,
     ) -> None:
-        try:
-            mode = AutoresetMode(autoreset_mode)
-        except ValueError:
-            mode = None
+        by_name = {name: m for m, name in _MODES.items()}
+        if isinstance(autoreset_mode, str) and autoreset_mode in by_name:
+            mode: Optional[AutoresetMode] = by_name[autoreset_mode]
+        else:
+            try:
+                mode = AutoresetMode(autoreset_mode)
+            except ValueError:
+                mode = None
         if mode not in _MODES:
             raise ConfigError(
-                f"invalid config: `autoreset_mode` = {autoreset_mode!r} is outside the allowed range NEXT_STEP or SAME_STEP"
+                f"invalid config: `autoreset_mode` = {autoreset_mode!r} is outside the allowed range: an AutoresetMode, "
+                f"its value ({', '.join(repr(m.value) for m in _MODES)}) or {', '.join(map(repr, by_name))}"
             )
         if render_mode not in (None, "rgb_array"):
             raise ConfigError(
                 f"invalid config: `render_mode` = {render_mode!r} is outside the allowed range 'rgb_array' or None"
             )
         self._config = env_config(config)
+        check_max_episode_steps(max_episode_steps, self._config)
         self._core = _core.BatchEnv(config_json(self._config), int(num_envs), random_seed(), _MODES[mode], int(num_threads))
         self.num_envs = self._core.num_envs
         self.render_mode = render_mode
@@ -94,25 +129,56 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         seed: Optional[Union[int, Sequence[int]]] = None,
         options: Optional[dict[str, Any]] = None,
     ) -> tuple[np.ndarray, dict[str, Any]]:
-        """Starts new episodes in every env; returns ``(observations, infos)``.
+        """Starts new episodes in every env (or those ``options["reset_mask"]`` selects); returns
+        ``(observations, infos)``.
 
-        ``seed``: an int (env ``i``: base seed, index ``i``), a list of ints (one per env) or None
+        ``seed``: an int (env ``i``: seed ``seed + i``), a list of ints (one per env) or None
         (each env's next episode). ``options``: ``{"wake_seed": int | None}`` or
-        ``{"wake_seeds": [int, ...]}`` (persist over later resets).
+        ``{"wake_seeds": [int, ...]}`` (persist over later resets), ``{"reset_mask": mask}``
+        (a (num_envs,) bool numpy array with at least one True: only those envs are reset).
         """
-        if seed is not None:
-            self._np_random, self._np_random_seed = gym.utils.seeding.np_random(
-                seed if isinstance(seed, int) else int(seed[0])
+        options = dict(options) if options else {}
+        mask = self._reset_mask(options.pop("reset_mask")) if "reset_mask" in options else None
+        if mask is not None and options and not mask.all():
+            raise ConfigError(
+                f"invalid config: reset options {sorted(options)} with a partial `reset_mask`: the wake schedule is "
+                "the whole batch's; set it in a reset of every env"
             )
-        if seed is not None and not isinstance(seed, int):
-            seed = [int(s) for s in seed]
+        seeds = self._seeds(seed)
+        if seeds is not None:
+            first = seeds if isinstance(seeds, int) else seeds[0]
+            self._np_random, self._np_random_seed = gym.utils.seeding.np_random(first)
+        obs, wake = self._reset_core(seeds, options or None, mask)
+        selected = np.ones(self.num_envs, dtype=bool) if mask is None else mask.copy()
+        wake_seed = wake.astype(np.int64)
+        wake_seed[~selected] = 0
+        return obs, {"wake_seed": wake_seed, "_wake_seed": selected}
+
+    def _seeds(self, seed: Any) -> Union[None, int, list[int]]:
+        """``reset``'s seed argument, checked: None, an int, or a list of num_envs ints."""
+        if seed is None:
+            return None
+        if isinstance(seed, (list, tuple, np.ndarray)):
             if len(seed) != self.num_envs:
                 raise ConfigError(
                     f"invalid config: `seed` has {len(seed)} values, expected num_envs = {self.num_envs}"
                 )
-        obs, wake = self._reset_core(seed, options)
-        mask = np.ones(self.num_envs, dtype=bool)
-        return obs, {"wake_seed": wake, "_wake_seed": mask}
+            return [check_seed(s) for s in seed]
+        return check_seed(seed)
+
+    def _reset_mask(self, mask: Any) -> np.ndarray:
+        """``options["reset_mask"]``, checked as ``SyncVectorEnv`` checks it."""
+        if not isinstance(mask, np.ndarray):
+            raise TypeError(f"`options['reset_mask']` must be a numpy array, got {type(mask)}")
+        if mask.shape != (self.num_envs,):
+            raise ValueError(f"`options['reset_mask']` must have shape `({self.num_envs},)`, got {mask.shape}")
+        if mask.dtype != np.bool_:
+            raise TypeError(f"`options['reset_mask']` must have `dtype=np.bool_`, got {mask.dtype}")
+        if not mask.any():
+            raise ValueError(
+                f"`options['reset_mask']` must contain a boolean array with at least one True value, got reset_mask={mask}"
+            )
+        return mask
 
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """One agent step of every env; returns ``(obs, rewards, terminations, truncations, infos)``."""
@@ -120,41 +186,67 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
             raise gym.error.ResetNeeded("call reset() before step()")
         a = check_actions(actions, self.num_envs)
         obs, reward, terminated, truncated, final_obs, info, wake, autoreset = self._core.step(a)
-        mask = np.ones(self.num_envs, dtype=bool)
-        infos: dict[str, Any] = {}
-        for k, name in enumerate(INFO_NAMES):
-            column = info[:, k]
-            if name in EVENT_NAMES:
-                column = column > 0.5
-            elif name == "episode_steps":
-                column = column.astype(np.int64)
-            infos[name] = column
-            infos["_" + name] = mask
-        infos["wake_seed"] = wake
-        infos["_wake_seed"] = mask
-        if self.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP:
-            done = terminated | truncated
-            if done.any():
-                finals = np.full(self.num_envs, None, dtype=object)
-                for i in np.flatnonzero(done):
-                    finals[i] = final_obs[i].copy()
-                infos["final_obs"] = finals
-                infos["_final_obs"] = done.copy()
-                final_info: dict[str, Any] = {}
-                for key, value in infos.items():
-                    if key not in ("final_obs", "_final_obs"):
-                        final_info[key] = done.copy() if key.startswith("_") else value
-                infos["final_info"] = final_info
+        mode = self.metadata["autoreset_mode"]
+        wake_seed = wake.astype(np.int64)
+        if mode == AutoresetMode.NEXT_STEP:
+            stepped = ~autoreset
+        elif mode == AutoresetMode.SAME_STEP:
+            stepped = ~(terminated | truncated)
+        else:
+            stepped = np.ones(self.num_envs, dtype=bool)
+        infos = self._step_infos(info, wake_seed, stepped)
+        if mode == AutoresetMode.SAME_STEP and not stepped.all():
+            done = ~stepped
+            finals = np.full(self.num_envs, None, dtype=object)
+            for i in np.flatnonzero(done):
+                finals[i] = final_obs[i].copy()
+                wake_seed[i] = self._core.episode_seeds(int(i))["wake"]
+            infos["final_obs"] = finals
+            infos["_final_obs"] = done.copy()
+            infos["final_info"] = self._step_infos(info, wake.astype(np.int64), done, ended=True)
+            infos["_final_info"] = done.copy()
+        infos["wake_seed"] = wake_seed
+        infos["_wake_seed"] = np.ones(self.num_envs, dtype=bool)
         return obs, reward, terminated, truncated, infos
 
-    def render(self) -> Optional[np.ndarray]:
-        """Env 0 as an RGB array (``render_mode="rgb_array"``)."""
+    def _step_infos(
+        self, info: np.ndarray, wake_seed: np.ndarray, rows: np.ndarray, ended: bool = False
+    ) -> dict[str, Any]:
+        """The step infos of the envs ``rows`` selects, batched as ``SyncVectorEnv`` batches the
+        single env's info dicts (other entries 0 with the mask False; no keys if none).
+        ``ended``: the rows' episodes ended and were replaced in this step (``SAME_STEP``)."""
+        out: dict[str, Any] = {}
+        if not rows.any():
+            return out
+        unselected = ~rows
+        columns = [(name, info[:, k]) for k, name in enumerate(INFO_NAMES)] + [("wake_seed", wake_seed)]
+        for name, column in columns:
+            if name in EVENT_NAMES:
+                value = column > 0.5
+            elif name in ("episode_steps", "wake_seed"):
+                value = column.astype(np.int64)
+            else:
+                value = column.copy()
+            value[unselected] = 0
+            out[name] = value
+            out["_" + name] = rows.copy()
+        diverged = out["diverged"]
+        if diverged.any():
+            messages = np.full(self.num_envs, None, dtype=object)
+            for i in np.flatnonzero(diverged):
+                messages[i] = (self._core.final_divergence if ended else self._core.divergence)(int(i))
+            out["divergence"] = messages
+            out["_divergence"] = diverged.copy()
+        return out
+
+    def render(self) -> Optional[tuple[np.ndarray, ...]]:
+        """One RGB frame per env (``render_mode="rgb_array"``), as ``SyncVectorEnv`` returns them."""
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
             return None
         from accd_gym.render import render_frame
 
-        return render_frame(self._core.render_data(0))
+        return tuple(render_frame(self._core.render_data(i)) for i in range(self.num_envs))
 
     def close_extras(self, **kwargs: Any) -> None:
         """Nothing to release: the Rust core frees its memory and threads when dropped."""

@@ -60,6 +60,9 @@ pub enum Autoreset {
     /// In the next step, whose action is ignored for that env: it returns the new episode's
     /// first observation, reward 0, not done, `autoreset` set (gymnasium `NEXT_STEP`).
     NextStep,
+    /// Never: an ended env must be reset (`reset` with a mask) before it is stepped again; a
+    /// step of a batch with an ended env is refused (gymnasium `DISABLED`).
+    Disabled,
 }
 
 /// Output buffers of one batch step, `N` envs (row-major, env by env).
@@ -137,9 +140,10 @@ impl StepOutputs {
 
 /// Output buffers of a reset.
 pub struct ResetBuffers<'a> {
-    /// `N * OBS_DIM` first observations.
+    /// `N * OBS_DIM` observations: the new episodes' first, and for envs a partial reset left
+    /// alone their current one.
     pub obs: &'a mut [f32],
-    /// `N` wake seeds of the new episodes.
+    /// `N` wake seeds of the envs' (new or current) episodes.
     pub wake_seed: &'a mut [u64],
 }
 
@@ -148,10 +152,11 @@ pub struct ResetBuffers<'a> {
 pub enum SeedSpec {
     /// Keep each env's base seed and start its next episode.
     Next,
-    /// Env `i` gets base seed `s` and index `i`; episode counters restart at 0.
+    /// Env `i` gets base seed `s + i` (wrapping), as gymnasium's `SyncVectorEnv` and SB3's
+    /// `DummyVecEnv` seed their sub-envs; episode counters restart at 0.
     Base(u64),
-    /// Env `i` gets base seed `s_i` and index 0 (so it replays a single env seeded `s_i`);
-    /// episode counters restart at 0.
+    /// Env `i` gets base seed `s_i` (so it replays a single env seeded `s_i`); episode counters
+    /// restart at 0.
     PerEnv(Vec<u64>),
 }
 
@@ -159,11 +164,14 @@ pub enum SeedSpec {
 struct Slot {
     episode: Episode,
     base: u64,
-    env_id: u64,
     /// Index of the current episode under `base`.
     index: u64,
-    /// Next-step autoreset: reset at the next step.
+    /// The episode ended in the last step: next-step autoreset resets it at the next step,
+    /// disabled autoreset waits for `reset`.
     pending_reset: bool,
+    /// Why the episode that ended in the last step diverged, kept past a same-step autoreset
+    /// (which starts the next episode at once); not part of the saved state.
+    final_divergence: Option<String>,
 }
 
 /// N episodes of one config.
@@ -178,7 +186,7 @@ pub struct BatchEnv {
 }
 
 impl BatchEnv {
-    /// `num_envs` envs of `config`, env `i` seeded with base `seed` and index `i`, stepped on
+    /// `num_envs` envs of `config`, env `i` seeded with base `seed + i`, stepped on
     /// `threads` threads of its own pool (0: one per core).
     pub fn new(
         config: EnvConfig,
@@ -206,13 +214,14 @@ impl BatchEnv {
         let mut slots = Vec::with_capacity(num_envs);
         for i in 0..n {
             let mut episode = first.clone();
-            episode.reset(episode_seeds(seed, i, 0, n, &schedule))?;
+            let base = seed.wrapping_add(i);
+            episode.reset(episode_seeds(base, 0, i, n, &schedule))?;
             slots.push(Slot {
                 episode,
-                base: seed,
-                env_id: i,
+                base,
                 index: 0,
                 pending_reset: false,
+                final_divergence: None,
             });
         }
         let pool = rayon::ThreadPoolBuilder::new()
@@ -286,6 +295,13 @@ impl BatchEnv {
         Ok(&mut self.slots[i].episode)
     }
 
+    /// Why env `i`'s episode that ended in the last step (same-step autoreset) diverged, or
+    /// `None` if it did not; for the other modes see [`Episode::divergence`].
+    pub fn final_divergence(&self, i: usize) -> Result<Option<&str>> {
+        self.check_index(i)?;
+        Ok(self.slots[i].final_divergence.as_deref())
+    }
+
     fn check_index(&self, i: usize) -> Result<()> {
         if i >= self.slots.len() {
             return Err(SimError::invalid_config(
@@ -298,26 +314,38 @@ impl BatchEnv {
         Ok(())
     }
 
-    /// Starts new episodes in every env (seeded as `seeds` says) and writes their first
-    /// observations.
-    pub fn reset(&mut self, seeds: SeedSpec, out: ResetBuffers<'_>) -> Result<()> {
+    /// Starts new episodes in the envs `mask` selects (every env for `None`; gymnasium's
+    /// `reset_mask`), seeded as `seeds` says (entries of unselected envs are ignored), and writes
+    /// every env's observation and wake seed: the new episodes' and, for the envs left alone,
+    /// their current ones. A selected env's pending autoreset is cancelled.
+    pub fn reset(
+        &mut self,
+        seeds: SeedSpec,
+        mask: Option<&[bool]>,
+        out: ResetBuffers<'_>,
+    ) -> Result<()> {
         let n = self.slots.len();
         check_len("obs", out.obs.len(), n * OBS_DIM)?;
         check_len("wake_seed", out.wake_seed.len(), n)?;
         if let SeedSpec::PerEnv(list) = &seeds {
             check_len("seed", list.len(), n)?;
         }
+        if let Some(m) = mask {
+            check_len("reset_mask", m.len(), n)?;
+        }
+        let selected = |i: usize| mask.is_none_or(|m| m[i]);
         for (i, slot) in self.slots.iter_mut().enumerate() {
+            if !selected(i) {
+                continue;
+            }
             match &seeds {
                 SeedSpec::Next => slot.index += 1,
                 SeedSpec::Base(s) => {
-                    slot.base = *s;
-                    slot.env_id = i as u64;
+                    slot.base = s.wrapping_add(i as u64);
                     slot.index = 0;
                 }
                 SeedSpec::PerEnv(list) => {
                     slot.base = list[i];
-                    slot.env_id = 0;
                     slot.index = 0;
                 }
             }
@@ -326,15 +354,18 @@ impl BatchEnv {
         let schedule = &self.schedule;
         let results: Vec<Result<()>> = {
             let mut results = vec![Ok(()); n];
-            let job = |(slot, r): (&mut Slot, &mut Result<()>)| {
-                let s = episode_seeds(slot.base, slot.env_id, slot.index, n as u64, schedule);
-                *r = slot.episode.reset(s).map_err(BatchError::from);
+            let job = |(i, (slot, r)): (usize, (&mut Slot, &mut Result<()>))| {
+                if selected(i) {
+                    let s = episode_seeds(slot.base, slot.index, i as u64, n as u64, schedule);
+                    *r = slot.episode.reset(s).map_err(BatchError::from);
+                }
             };
             let slots = &mut self.slots;
             self.pool.install(|| {
                 slots
                     .par_iter_mut()
                     .zip(results.par_iter_mut())
+                    .enumerate()
                     .for_each(job)
             });
             results
@@ -372,11 +403,16 @@ impl BatchEnv {
                 value: actions[k],
             });
         }
+        if self.autoreset == Autoreset::Disabled {
+            if let Some(env) = self.slots.iter().position(|s| s.pending_reset) {
+                return Err(BatchError::ResetNeeded { env });
+            }
+        }
         let mode = self.autoreset;
         let schedule = &self.schedule;
         let n64 = n as u64;
         let rows = (
-            self.slots.par_iter_mut(),
+            self.slots.par_iter_mut().enumerate(),
             actions.par_chunks(ACT_DIM),
             out.obs.par_chunks_mut(OBS_DIM),
             out.final_obs.par_chunks_mut(OBS_DIM),
@@ -388,7 +424,7 @@ impl BatchEnv {
             out.autoreset.par_iter_mut(),
         );
         let job = |(
-            slot,
+            (position, slot),
             action,
             obs,
             final_obs,
@@ -400,10 +436,11 @@ impl BatchEnv {
             reset,
         ): Row<'_>| {
             *reset = false;
+            slot.final_divergence = None;
             if slot.pending_reset {
                 slot.pending_reset = false;
                 slot.index += 1;
-                let outcome = restart(slot, n64, schedule);
+                let outcome = restart(slot, position as u64, n64, schedule);
                 obs.copy_from_slice(slot.episode.observation());
                 *reward = 0.0;
                 *terminated = outcome.is_some();
@@ -430,11 +467,14 @@ impl BatchEnv {
             obs.copy_from_slice(slot.episode.observation());
             if o.terminated || o.truncated {
                 match mode {
-                    Autoreset::NextStep => slot.pending_reset = true,
+                    Autoreset::NextStep | Autoreset::Disabled => slot.pending_reset = true,
                     Autoreset::SameStep => {
                         final_obs.copy_from_slice(obs);
+                        if o.diverged {
+                            slot.final_divergence = slot.episode.divergence().map(str::to_owned);
+                        }
                         slot.index += 1;
-                        restart(slot, n64, schedule);
+                        restart(slot, position as u64, n64, schedule);
                         obs.copy_from_slice(slot.episode.observation());
                     }
                 }
@@ -467,7 +507,6 @@ impl BatchEnv {
         }
         for slot in &self.slots {
             w.u64(slot.base);
-            w.u64(slot.env_id);
             w.u64(slot.index);
             w.bool(slot.pending_reset);
             slot.episode.save(&mut w);
@@ -527,7 +566,6 @@ impl BatchEnv {
         let mut slots = self.slots.clone();
         for slot in &mut slots {
             slot.base = r.u64("base seed")?;
-            slot.env_id = r.u64("env index")?;
             slot.index = r.u64("episode index")?;
             slot.pending_reset = r.bool("pending reset")?;
             slot.episode.load(&mut r)?;
@@ -541,7 +579,7 @@ impl BatchEnv {
 
 /// One env's share of a step: its slot, action and output rows.
 type Row<'a> = (
-    &'a mut Slot,
+    (usize, &'a mut Slot),
     &'a [f32],
     &'a mut [f32],
     &'a mut [f32],
@@ -553,16 +591,16 @@ type Row<'a> = (
     &'a mut bool,
 );
 
-const MAGIC: &[u8; 8] = b"ACCDST01";
+const MAGIC: &[u8; 8] = b"ACCDST02";
 
 fn config_json(config: &EnvConfig) -> String {
     serde_json::to_string(config).unwrap_or_default()
 }
 
-/// Starts the slot's episode `slot.index`; on failure the episode is marked diverged and its
-/// outcome returned.
-fn restart(slot: &mut Slot, n: u64, schedule: &WakeSchedule) -> Option<Outcome> {
-    let seeds = episode_seeds(slot.base, slot.env_id, slot.index, n, schedule);
+/// Starts the slot's episode `slot.index` (the slot is env `env` of `n`); on failure the
+/// episode is marked diverged and its outcome returned.
+fn restart(slot: &mut Slot, env: u64, n: u64, schedule: &WakeSchedule) -> Option<Outcome> {
+    let seeds = episode_seeds(slot.base, slot.index, env, n, schedule);
     match catch_unwind(AssertUnwindSafe(|| slot.episode.reset(seeds))) {
         Ok(Ok(())) => None,
         Ok(Err(_)) | Err(_) => Some(Outcome {

@@ -16,6 +16,12 @@ pub enum BatchError {
         /// The value.
         value: f32,
     },
+    /// A step of a batch whose env `env` ended, with autoreset disabled.
+    #[error("env {env}'s episode ended and autoreset is disabled: reset it (reset with a mask selecting it) before the next step")]
+    ResetNeeded {
+        /// Env index.
+        env: usize,
+    },
     /// A buffer or input has the wrong length.
     #[error("`{what}` has {found} values, expected {expected}")]
     Shape {

@@ -7,17 +7,21 @@
 //! avalanche) and fixed odd constants `A`, `B`:
 //!
 //! ```text
-//! key     = h(h(h(base) ^ h(env + A)) ^ h(episode + B))
+//! key     = h(h(h(base) ^ h(A)) ^ h(episode + B))
 //! initial = h(key ^ "INITIAL ")          (ASCII labels as big-endian u64)
 //! rlv     = h(key ^ "RLV BOOM")
 //! wake    = TRAINING_WAKE_SEEDS.start + h(key ^ "WAKESEED") mod len(TRAINING_WAKE_SEEDS)
 //!           (unless the schedule fixes it)
 //! ```
 //!
-//! The triple (base, env, episode) is hashed as a whole, never added: env 1 of base 7 and env 0
-//! of base 8 share nothing, and neighbouring base seeds give unrelated keys. An env's episodes
-//! depend only on (base, env index, episode index), so results are the same whatever the batch
-//! size or thread count.
+//! The pair (base, episode) is hashed as a whole, never added: neighbouring base seeds give
+//! unrelated keys. A batch seeds env `i` as gymnasium's `SyncVectorEnv` and stable-baselines3's
+//! `DummyVecEnv` seed their sub-envs: an int seed `s` gives env `i` the base `s + i`, a list gives
+//! each env its own base, so env `i` replays the single env seeded with its base. An env's
+//! episodes depend only on (base, episode index), so results are the same whatever the batch
+//! size or thread count. (`h(A)` is the term of an env index that earlier versions hashed too,
+//! at its value 0: episodes of a single env or of per-env list seeds are bitwise the ones
+//! recorded before.)
 //!
 //! # Training and held-out wake seeds
 //! Training draws wake seeds from [`TRAINING_WAKE_SEEDS`] = [0, 10^9). The held-out set
@@ -68,9 +72,9 @@ impl WakeSchedule {
     }
 }
 
-/// The key of episode `episode` of env `env` under base seed `base`.
-pub fn episode_key(base: u64, env: u64, episode: u64) -> u64 {
-    h(h(h(base) ^ h(env.wrapping_add(A))) ^ h(episode.wrapping_add(B)))
+/// The key of episode `episode` under base seed `base`.
+pub fn episode_key(base: u64, episode: u64) -> u64 {
+    h(h(h(base) ^ h(A)) ^ h(episode.wrapping_add(B)))
 }
 
 /// A training wake seed drawn from `key`.
@@ -79,15 +83,16 @@ pub fn training_wake_seed(key: u64) -> u64 {
     TRAINING_WAKE_SEEDS.start + h(key ^ WAKE) % len
 }
 
-/// The seeds of episode `episode` of env `env` (of `num_envs`) under base seed `base`.
+/// The seeds of episode `episode` under base seed `base`, for env `env` of a batch of
+/// `num_envs` (the env's place in the batch only picks its entry of a wake-seed list).
 pub fn episode_seeds(
     base: u64,
-    env: u64,
     episode: u64,
+    env: u64,
     num_envs: u64,
     schedule: &WakeSchedule,
 ) -> Seeds {
-    let key = episode_key(base, env, episode);
+    let key = episode_key(base, episode);
     let wake = match schedule {
         WakeSchedule::Training => training_wake_seed(key),
         WakeSchedule::Fixed(seed) => *seed,
@@ -110,15 +115,18 @@ mod tests {
     use std::collections::HashSet;
 
     #[test]
-    fn neighbouring_bases_envs_and_episodes_share_no_streams() {
+    fn neighbouring_bases_and_episodes_share_no_streams() {
         let mut seen = HashSet::new();
-        for base in 0..20u64 {
-            for env in 0..20u64 {
-                for episode in 0..20u64 {
-                    let s = episode_seeds(base, env, episode, 20, &WakeSchedule::Training);
-                    assert!(seen.insert(s.initial), "initial seed repeated");
-                    assert!(seen.insert(s.rlv), "rlv seed repeated");
-                }
+        for base in 0..400u64 {
+            for episode in 0..20u64 {
+                let s = episode_seeds(base, episode, 0, 1, &WakeSchedule::Training);
+                assert!(seen.insert(s.initial), "initial seed repeated");
+                assert!(seen.insert(s.rlv), "rlv seed repeated");
+                // The env's place in the batch does not change its streams.
+                assert_eq!(
+                    episode_seeds(base, episode, 3, 7, &WakeSchedule::Training),
+                    s
+                );
             }
         }
     }
@@ -127,7 +135,7 @@ mod tests {
     fn training_never_draws_a_held_out_wake_seed() {
         for base in 0..200u64 {
             for env in 0..50u64 {
-                let s = episode_seeds(base, env, base ^ env, 50, &WakeSchedule::Training);
+                let s = episode_seeds(base ^ env, env, env, 50, &WakeSchedule::Training);
                 assert!(TRAINING_WAKE_SEEDS.contains(&s.wake));
                 assert!(!HELD_OUT_WAKE_SEEDS.contains(&s.wake));
             }
@@ -139,7 +147,7 @@ mod tests {
         let list = WakeSchedule::List(vec![10, 11, 12, 13, 14]);
         let got: Vec<u64> = (0..3u64)
             .flat_map(|e| (0..2u64).map(move |i| (i, e)))
-            .map(|(i, e)| episode_seeds(1, i, e, 2, &list).wake)
+            .map(|(i, e)| episode_seeds(1, e, i, 2, &list).wake)
             .collect();
         assert_eq!(got, vec![10, 11, 12, 13, 14, 10]);
         assert_eq!(episode_seeds(1, 0, 0, 1, &WakeSchedule::Fixed(77)).wake, 77);

@@ -44,6 +44,7 @@ impl Runner {
         self.env
             .reset(
                 seeds,
+                None,
                 ResetBuffers {
                     obs: &mut obs,
                     wake_seed: &mut wake,
@@ -173,6 +174,95 @@ fn seeds_reset_and_replay_and_per_env_seeds_match_a_single_env() {
     let per_env = a.reset(SeedSpec::PerEnv(vec![40, 41, 42]));
     let mut single = Runner::new(1, 1, Autoreset::SameStep);
     assert_eq!(single.reset(SeedSpec::Base(41)), row(&per_env, 1, OBS_DIM));
+    // An int seed s gives env i the base s + i, as gymnasium's SyncVectorEnv seeds sub-envs.
+    assert_eq!(a.reset(SeedSpec::Base(40)), per_env);
+}
+
+#[test]
+fn a_masked_reset_restarts_only_the_selected_envs_and_cancels_their_pending_autoreset() {
+    let mut r = Runner::new(3, 2, Autoreset::NextStep);
+    let first = r.reset(SeedSpec::Base(20));
+    let stepped = r.step(&actions(3, 0)).unwrap();
+    let (n, mut obs, mut wake) = (3, vec![0.0; 3 * OBS_DIM], vec![0; 3]);
+    let mask = [false, true, false];
+    r.env
+        .reset(
+            SeedSpec::Base(20),
+            Some(&mask),
+            ResetBuffers {
+                obs: &mut obs,
+                wake_seed: &mut wake,
+            },
+        )
+        .unwrap();
+    assert_eq!(
+        row(&obs, 1, OBS_DIM),
+        row(&first, 1, OBS_DIM),
+        "env 1 restarted"
+    );
+    for i in [0, 2] {
+        assert_eq!(
+            row(&obs, i, OBS_DIM),
+            row(&stepped.obs, i, OBS_DIM),
+            "env {i} left alone"
+        );
+    }
+    assert_eq!(r.env.episode(0).unwrap().steps(), 1);
+    assert_eq!(r.env.episode(1).unwrap().steps(), 0);
+    // Run env 0 to its end, then reset it by mask: no autoreset happens at the next step.
+    for k in 1..20 {
+        r.step(&actions(n, k)).unwrap();
+    }
+    let mask = [true, true, true];
+    r.env
+        .reset(
+            SeedSpec::Next,
+            Some(&mask),
+            ResetBuffers {
+                obs: &mut obs,
+                wake_seed: &mut wake,
+            },
+        )
+        .unwrap();
+    let s = r.step(&actions(n, 0)).unwrap();
+    assert!(!s.autoreset.iter().any(|&a| a));
+    assert!(r
+        .env
+        .reset(
+            SeedSpec::Next,
+            Some(&[true]),
+            ResetBuffers {
+                obs: &mut obs,
+                wake_seed: &mut wake
+            }
+        )
+        .is_err());
+}
+
+#[test]
+fn disabled_autoreset_refuses_to_step_an_ended_env_until_it_is_reset() {
+    let mut r = Runner::new(2, 1, Autoreset::Disabled);
+    r.reset(SeedSpec::Base(4));
+    for k in 0..20 {
+        let s = r.step(&actions(2, k)).unwrap();
+        assert_eq!(s.truncated[0], k == 19);
+        assert!(!s.autoreset[0]);
+    }
+    let e = r.step(&actions(2, 20)).unwrap_err().to_string();
+    assert!(e.contains("env 0") && e.contains("disabled"), "{e}");
+    let (mut obs, mut wake) = (vec![0.0; 2 * OBS_DIM], vec![0; 2]);
+    r.env
+        .reset(
+            SeedSpec::Next,
+            Some(&[true, true]),
+            ResetBuffers {
+                obs: &mut obs,
+                wake_seed: &mut wake,
+            },
+        )
+        .unwrap();
+    let s = r.step(&actions(2, 0)).unwrap();
+    assert_eq!(s.info[info::EPISODE_STEPS], 1.0);
 }
 
 #[test]
@@ -191,6 +281,7 @@ fn wake_schedules_fix_or_cycle_the_wake_seed() {
     r.env
         .reset(
             SeedSpec::Base(3),
+            None,
             ResetBuffers {
                 obs: &mut obs,
                 wake_seed: &mut wake,
@@ -208,6 +299,7 @@ fn wake_schedules_fix_or_cycle_the_wake_seed() {
     r.env
         .reset(
             SeedSpec::Next,
+            None,
             ResetBuffers {
                 obs: &mut obs,
                 wake_seed: &mut wake,

@@ -20,7 +20,7 @@ use crate::errors::{raise, Kind};
 fn batch_to_py(error: BatchError) -> PyErr {
     match error {
         BatchError::Sim(e) => sim_to_py(e),
-        BatchError::Action { .. } | BatchError::Shape { .. } => {
+        BatchError::Action { .. } | BatchError::Shape { .. } | BatchError::ResetNeeded { .. } => {
             raise(Kind::State, error.to_string())
         }
         BatchError::Env { .. } | BatchError::Threads(_) => {
@@ -73,9 +73,10 @@ fn parse_autoreset(mode: &str) -> PyResult<Autoreset> {
     match mode {
         "same_step" => Ok(Autoreset::SameStep),
         "next_step" => Ok(Autoreset::NextStep),
+        "disabled" => Ok(Autoreset::Disabled),
         other => Err(raise(
             Kind::Config,
-            format!("invalid config: `autoreset_mode` = {other:?} is outside the allowed range \"same_step\" or \"next_step\""),
+            format!("invalid config: `autoreset_mode` = {other:?} is outside the allowed range \"same_step\", \"next_step\" or \"disabled\""),
         )),
     }
 }
@@ -83,7 +84,7 @@ fn parse_autoreset(mode: &str) -> PyResult<Autoreset> {
 #[pymethods]
 impl PyBatchEnv {
     /// ``num_envs`` episodes of the config ``config_json`` (an ``EnvConfig`` as JSON), env ``i``
-    /// seeded with base ``seed`` and index ``i``; autoreset ``"same_step"`` or ``"next_step"``;
+    /// seeded with base ``seed + i``; autoreset ``"same_step"``, ``"next_step"`` or ``"disabled"``;
     /// ``num_threads`` threads of its own (0: one per core).
     #[new]
     #[pyo3(signature = (config_json, num_envs, seed, autoreset_mode = "same_step", num_threads = 0))]
@@ -125,16 +126,18 @@ impl PyBatchEnv {
         serde_json::to_string(self.inner.config()).map_err(|e| raise(Kind::Config, e.to_string()))
     }
 
-    /// Starts new episodes in every env and returns ``(obs, wake_seed)``: observations
-    /// (num_envs, OBS_DIM) float32 and the episodes' wake seeds (num_envs,) uint64.
-    /// ``seed``: None (each env's next episode), an int (env ``i``: base ``seed``, index ``i``) or
-    /// a list of num_envs ints (env ``i``: base ``seed[i]``, index 0: the same as a single env
-    /// seeded ``seed[i]``).
-    #[pyo3(signature = (seed = None))]
+    /// Starts new episodes in every env, or in those ``mask`` selects ((num_envs,) bool), and
+    /// returns ``(obs, wake_seed)``: every env's observation (num_envs, OBS_DIM) float32 and its
+    /// episode's wake seed (num_envs,) uint64 (new episodes', and the current ones of envs the
+    /// mask leaves alone). ``seed``: None (each env's next episode), an int (env ``i``: base
+    /// ``seed + i``) or a list of num_envs ints (env ``i``: base ``seed[i]``); a single env
+    /// seeded with env ``i``'s base replays it.
+    #[pyo3(signature = (seed = None, mask = None))]
     fn reset<'py>(
         &mut self,
         py: Python<'py>,
         seed: Option<&Bound<'py, PyAny>>,
+        mask: Option<Vec<bool>>,
     ) -> PyResult<Bound<'py, PyTuple>> {
         let spec = match seed {
             None => SeedSpec::Next,
@@ -161,6 +164,7 @@ impl PyBatchEnv {
             py.detach(|| {
                 inner.reset(
                     spec,
+                    mask.as_deref(),
                     ResetBuffers {
                         obs: o,
                         wake_seed: w,
@@ -307,6 +311,16 @@ impl PyBatchEnv {
             .map(str::to_owned))
     }
 
+    /// Why env ``i``'s episode that ended in the last step diverged (``"same_step"`` autoreset,
+    /// whose next episode has already started), or None.
+    fn final_divergence(&self, i: usize) -> PyResult<Option<String>> {
+        Ok(self
+            .inner
+            .final_divergence(i)
+            .map_err(batch_to_py)?
+            .map(str::to_owned))
+    }
+
     /// What a picture of env ``i`` needs (TA frame, m): ``joints`` (n+1, 3), ``accd_position``,
     /// ``capture_point``, ``boom_tip``, ``equilibrium`` (3,), ``attitude`` (w, x, y, z),
     /// ``deflection_deg`` (4,), ``time`` s, ``distance`` m, ``tension`` N.
@@ -354,6 +368,14 @@ pub fn reward_bounds(config_json: &str) -> PyResult<(f64, f64)> {
     Ok(config.reward.bounds(config.episode_steps()))
 }
 
+/// Agent steps of one episode under a configuration (JSON): ``capture_window / agent_step``,
+/// rounded.
+#[pyfunction]
+pub fn episode_steps(config_json: &str) -> PyResult<u64> {
+    let config = EnvConfig::from_json(config_json).map_err(sim_to_py)?;
+    Ok(config.episode_steps())
+}
+
 /// The observation table: a list of ``(name, unit, scale, description)``, in index order.
 #[pyfunction]
 pub fn observation_table() -> Vec<(&'static str, &'static str, f64, &'static str)> {
@@ -369,6 +391,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(default_env_config_json, m)?)?;
     m.add_function(wrap_pyfunction!(env_config_json, m)?)?;
     m.add_function(wrap_pyfunction!(reward_bounds, m)?)?;
+    m.add_function(wrap_pyfunction!(episode_steps, m)?)?;
     m.add_function(wrap_pyfunction!(observation_table, m)?)?;
     m.add("OBS_DIM", OBS_DIM)?;
     m.add("ACT_DIM", ACT_DIM)?;

@@ -1,0 +1,186 @@
+"""The native vector envs are indistinguishable from the reference implementations.
+
+``InAirCaptureVectorEnv`` against gymnasium's own ``SyncVectorEnv`` of single envs, and
+``AccdVecEnv`` against stable-baselines3's ``DummyVecEnv``: step by step, with gymnasium's own
+``data_equivalence`` (exact), observations, rewards, flags and infos (dtypes included), across
+automatic resets (captures, envelope exits and truncations at different steps), in every
+autoreset mode gymnasium defines, with partial resets (``reset_mask``).
+"""
+
+import numpy as np
+import pytest
+import gymnasium as gym
+from gymnasium.utils.env_checker import data_equivalence
+from gymnasium.vector import AutoresetMode, SyncVectorEnv
+
+import accd_gym
+from accd_gym import ENV_ID
+
+N = 4
+# Short episodes, and a tight envelope so that random flaps end episodes at different steps
+# (envelope exits) while others run to the end of the window (truncations).
+CONFIG = dict(capture_window=2.5, initial={"settle_time": 20.0}, limits={"max_distance": 16.0})
+
+
+def assert_same(native, reference, what):
+    assert data_equivalence(native, reference, exact=True), f"{what}:\nnative    {native!r}\nreference {reference!r}"
+
+
+def pair(mode):
+    native = gym.make_vec(ENV_ID, num_envs=N, vectorization_mode="vector_entry_point", autoreset_mode=mode, **CONFIG)
+    reference = gym.make_vec(
+        ENV_ID, num_envs=N, vectorization_mode="sync", vector_kwargs={"autoreset_mode": mode}, **CONFIG
+    )
+    assert isinstance(native, accd_gym.InAirCaptureVectorEnv) and isinstance(reference, SyncVectorEnv)
+    assert native.metadata["autoreset_mode"] == reference.metadata["autoreset_mode"] == mode
+    return native, reference
+
+
+@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP, AutoresetMode.DISABLED])
+def test_native_vector_env_steps_exactly_as_sync_vector_env(mode):
+    native, reference = pair(mode)
+    rng = np.random.default_rng(3)
+    ended = {"terminated": 0, "truncated": 0, "partial": 0}
+    resets = [
+        dict(seed=[11, 12, 13, 14]),
+        dict(seed=21, options={"wake_seed": 77}),
+        dict(seed=None, options={"wake_seed": None}),
+    ]
+    for reset in resets:
+        out_n, out_r = native.reset(**reset), reference.reset(**reset)
+        assert_same(out_n, out_r, f"reset {reset}")
+        done = np.zeros(N, dtype=bool)
+        for k in range(60):
+            actions = rng.uniform(-1.0, 1.0, size=(N, 4)).astype(np.float32)
+            if mode == AutoresetMode.DISABLED and done.any():
+                mask = done.copy()
+                out_n = native.reset(options={"reset_mask": mask.copy()})
+                out_r = reference.reset(options={"reset_mask": mask.copy()})
+                assert_same(out_n, out_r, f"step {k}: reset_mask {mask}")
+            elif k % 29 == 28:
+                # A partial reset in the middle of episodes (and of a pending autoreset), with
+                # per-env seeds of which only the selected envs' count.
+                mask = rng.random(N) < 0.5
+                mask[k % N] = True
+                seeds = [int(s) for s in rng.integers(0, 1000, N)]
+                out_n = native.reset(seed=seeds, options={"reset_mask": mask.copy()})
+                out_r = reference.reset(seed=seeds, options={"reset_mask": mask.copy()})
+                assert_same(out_n, out_r, f"step {k}: partial reset {mask}")
+                ended["partial"] += 1
+            out_n, out_r = native.step(actions), reference.step(actions)
+            for name, a, b in zip(("obs", "reward", "terminated", "truncated", "info"), out_n, out_r):
+                assert_same(a, b, f"reset {reset}, step {k}: {name}")
+            done = out_r[2] | out_r[3]
+            ended["terminated"] += int(out_r[2].sum())
+            ended["truncated"] += int(out_r[3].sum())
+    assert ended["terminated"] >= 3 and ended["truncated"] >= 3, ended
+    native.close()
+    reference.close()
+
+
+def test_disabled_autoreset_refuses_to_step_an_ended_env_like_sync_vector_env():
+    native, reference = pair(AutoresetMode.DISABLED)
+    native.reset(seed=5)
+    reference.reset(seed=5)
+    zeros = np.zeros((N, 4), np.float32)
+    done = np.zeros(N, dtype=bool)
+    while not done.any():
+        _, _, term, trunc, _ = native.step(zeros)
+        reference.step(zeros)
+        done = term | trunc
+    with pytest.raises(accd_gym.StateError, match="reset"):
+        native.step(zeros)
+    with pytest.raises(AssertionError):
+        reference.step(zeros)
+
+
+def test_reset_mask_is_checked_as_sync_vector_env_checks_it():
+    native, reference = pair(AutoresetMode.NEXT_STEP)
+    for bad, error in [
+        ([True] * N, TypeError),
+        (np.ones(N + 1, dtype=bool), ValueError),
+        (np.ones(N, dtype=np.int8), TypeError),
+        (np.zeros(N, dtype=bool), ValueError),
+    ]:
+        for env in (native, reference):
+            with pytest.raises(error):
+                env.reset(options={"reset_mask": bad})
+
+
+def dummy_vec_env():
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    return DummyVecEnv([lambda: gym.make(ENV_ID, **CONFIG) for _ in range(N)])
+
+
+def test_accd_vec_env_steps_exactly_as_dummy_vec_env():
+    native = accd_gym.AccdVecEnv(N, **CONFIG)
+    reference = dummy_vec_env()
+    rng = np.random.default_rng(8)
+    dones_seen = 0
+    for seed, options in [(31, None), (None, {"wake_seed": 123}), (40, {"wake_seeds": [5]})]:
+        for env in (native, reference):
+            if seed is not None:
+                assert_same(native.seed(seed), reference.seed(seed), "seed()")
+            env.set_options(options)
+        assert_same(native.reset(), reference.reset(), f"reset {seed}")
+        assert_same(native.reset_infos, reference.reset_infos, f"reset_infos {seed}")
+        for k in range(60):
+            actions = rng.uniform(-1.0, 1.0, size=(N, 4)).astype(np.float32)
+            out_n = native.step(actions)
+            out_r = reference.step(actions)
+            for name, a, b in zip(("obs", "rewards", "dones", "infos"), out_n, out_r):
+                assert_same(a, b, f"seed {seed}, step {k}: {name}")
+            assert_same(native.reset_infos, reference.reset_infos, f"seed {seed}, step {k}: reset_infos")
+            dones_seen += int(out_r[2].sum())
+    assert dones_seen >= 10
+
+
+def test_a_wake_seed_list_is_covered_by_the_batch_with_list_seeds_too():
+    """Issue 14, item 2: with per-env seeds every env took the same entry, skipping most of it."""
+    vec = accd_gym.InAirCaptureVectorEnv(3, **CONFIG)
+    wakes = list(range(1_000_000_000, 1_000_000_009))
+    _, info = vec.reset(seed=[10, 11, 12], options={"wake_seeds": wakes})
+    seen = [info["wake_seed"].tolist()]
+    _, info = vec.reset()
+    seen.append(info["wake_seed"].tolist())
+    assert seen == [wakes[0:3], wakes[3:6]]
+    assert info["wake_seed"].dtype == np.int64
+
+
+# RK4 at 0.1 s is far beyond the stability limit of the tether's axial element: episodes diverge.
+DIVERGING = dict(tether={"time_step": 0.1}, initial={"settle_time": 0.0}, limits={"max_distance": 1e4})
+
+
+@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+def test_diverging_episodes_report_as_sync_vector_env_reports_them(mode):
+    native = gym.make_vec(ENV_ID, num_envs=2, autoreset_mode=mode, **DIVERGING)
+    reference = gym.make_vec(ENV_ID, num_envs=2, vectorization_mode="sync", vector_kwargs={"autoreset_mode": mode}, **DIVERGING)
+    assert_same(native.reset(seed=[0, 1]), reference.reset(seed=[0, 1]), "reset")
+    messages = 0
+    for k in range(60):
+        actions = np.zeros((2, 4), np.float32)
+        out_n, out_r = native.step(actions), reference.step(actions)
+        for name, a, b in zip(("obs", "reward", "terminated", "truncated", "info"), out_n, out_r):
+            assert_same(a, b, f"step {k}: {name}")
+        info = out_r[4].get("final_info", out_r[4])
+        messages += sum(isinstance(m, str) and len(m) > 0 for m in info.get("divergence", []))
+    assert messages >= 2
+
+
+def test_diverging_episodes_report_as_dummy_vec_env_reports_them():
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    native = accd_gym.AccdVecEnv(2, **DIVERGING)
+    reference = DummyVecEnv([lambda: gym.make(ENV_ID, **DIVERGING) for _ in range(2)])
+    native.seed(4)
+    reference.seed(4)
+    assert_same(native.reset(), reference.reset(), "reset")
+    messages = 0
+    for k in range(60):
+        actions = np.zeros((2, 4), np.float32)
+        out_n, out_r = native.step(actions), reference.step(actions)
+        for name, a, b in zip(("obs", "rewards", "dones", "infos"), out_n, out_r):
+            assert_same(a, b, f"step {k}: {name}")
+        messages += sum(isinstance(i.get("divergence"), str) for i in out_r[3])
+    assert messages >= 2
