@@ -184,3 +184,19 @@ def test_diverging_episodes_report_as_dummy_vec_env_reports_them():
             assert_same(a, b, f"step {k}: {name}")
         messages += sum(isinstance(i.get("divergence"), str) for i in out_r[3])
     assert messages >= 2
+
+
+def test_np_random_seed_reports_each_envs_seed_as_sync_vector_env_does():
+    native, reference = pair(AutoresetMode.NEXT_STEP)
+    assert len(native.np_random_seed) == N
+    for kwargs in (
+        {"seed": 11},
+        {},
+        {"seed": [3, 9, 27, 81]},
+        {"seed": 40, "options": {"reset_mask": np.array([True, False, True, False])}},
+    ):
+        native.reset(**kwargs)
+        reference.reset(**kwargs)
+        assert native.np_random_seed == reference.np_random_seed, kwargs
+    native.close()
+    reference.close()

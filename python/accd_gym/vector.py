@@ -148,11 +148,28 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         if seeds is not None:
             first = seeds if isinstance(seeds, int) else seeds[0]
             self._np_random, self._np_random_seed = gym.utils.seeding.np_random(first)
+            per_env = [seeds + i for i in range(self.num_envs)] if isinstance(seeds, int) else list(seeds)
+            current = list(self.np_random_seed)
+            for i in range(self.num_envs):
+                if mask is None or mask[i]:
+                    current[i] = per_env[i]
+            self._env_seeds = tuple(current)
         obs, wake = self._reset_core(seeds, options or None, mask)
         selected = np.ones(self.num_envs, dtype=bool) if mask is None else mask.copy()
         wake_seed = wake.astype(np.int64)
         wake_seed[~selected] = 0
         return obs, {"wake_seed": wake_seed, "_wake_seed": selected}
+
+    @property
+    def np_random_seed(self) -> tuple[int, ...]:  # type: ignore[override]
+        """The seed of each env's episodes, as ``SyncVectorEnv`` reports its envs' seeds: ``s + i``
+        after ``reset(seed=s)``, the list entries after a list, unchanged by unseeded resets; a
+        random seed per env before the first seeded reset."""
+        seeds = getattr(self, "_env_seeds", None)
+        if seeds is None:
+            seeds = tuple(int(gym.utils.seeding.np_random(None)[1]) for _ in range(self.num_envs))
+            self._env_seeds = seeds
+        return seeds
 
     def _seeds(self, seed: Any) -> Union[None, int, list[int]]:
         """``reset``'s seed argument, checked: None, an int, or a list of num_envs ints."""
