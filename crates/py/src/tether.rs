@@ -10,6 +10,7 @@ use pyo3::types::{PyDict, PyFloat};
 
 use crate::arrays::{floats_from_py, vector_from_py, vector_to_py, vectors_from_py, vectors_to_py};
 use crate::errors::{raise, IntoPy, Kind};
+use crate::signals::SignalCheck;
 
 /// A config from a preset name and a dict of overrides (unknown keys and bad values raise
 /// `ConfigError`).
@@ -468,16 +469,25 @@ impl PyTether {
         Ok(d)
     }
 
-    /// Advances ``steps`` fixed RK4 steps (the GIL is released meanwhile).
+    /// Advances ``steps`` fixed steps (the GIL is released meanwhile). Each step takes as many
+    /// RK4 substeps as the chain's fastest mode needs at the current tension (one for Table 3).
     ///
     /// Raises:
+    ///     KeyboardInterrupt: Ctrl+C (signal handlers run every 50 ms); the tether keeps the
+    ///         state of the last whole step.
     ///     SimulationError: the state diverged (non-finite, a joint folded completely, or a segment
     ///         reached the chart's lateral singularity); the tether keeps the last good state.
     #[pyo3(signature = (steps = 1))]
     fn step(&mut self, py: Python<'_>, steps: usize) -> PyResult<()> {
         let flow = self.flow;
         let inner = &mut self.inner;
-        py.detach(|| inner.step_many(steps, &flow)).py_err()
+        let mut check = SignalCheck::new();
+        let result =
+            py.detach(|| inner.step_many_interruptible(steps, &flow, &mut || check.interrupted()));
+        if let Some(e) = check.take() {
+            return Err(e);
+        }
+        result.py_err()
     }
 
     /// Advances by ``duration`` seconds, rounded to whole steps; returns the number of steps.

@@ -151,12 +151,26 @@ impl AccdConfig {
         V3::new(-(self.length - self.cg_from_nose), 0.0, 0.0)
     }
 
-    /// The aerodynamic model this config names.
+    /// The aerodynamic model this config names; a flap limit beyond the table's deflection
+    /// range (where the table would hold its edge values) is an error.
     pub fn aero_model(&self) -> Result<AeroModel> {
-        match &self.aero_table {
-            None => Ok(AeroModel::accd()),
-            Some(path) => AeroModel::from_path(std::path::Path::new(path)),
+        let model = match &self.aero_table {
+            None => AeroModel::accd(),
+            Some(path) => AeroModel::from_path(std::path::Path::new(path))?,
+        };
+        let (lo, hi) = model.deflection_range_deg();
+        let reach = (-lo).min(hi);
+        // Degrees and radians round trip within a few ulps.
+        if self.flap_limit_deg > reach + 1e-9 {
+            return Err(SimError::invalid_config(
+                "accd.flap_limit_deg",
+                self.flap_limit_deg,
+                &format!(
+                    "(0, {reach}] deg: the aerodynamic table covers deflections [{lo}, {hi}] deg"
+                ),
+            ));
         }
+        Ok(model)
     }
 }
 

@@ -67,6 +67,15 @@ impl Default for TetherConfig {
     }
 }
 
+/// The largest `|lambda| dt` a step may take, where `lambda` is the fastest eigenvalue of the
+/// linearised chain ([`TetherConfig::fastest_rate`]). Classical RK4 is stable up to 2.83 on the
+/// imaginary axis and 2.79 on the negative real axis; 2.5 leaves a margin for the estimate.
+pub const RK4_STABILITY_LIMIT: f64 = 2.5;
+
+/// The most RK4 substeps one step of [`TetherConfig::time_step`] is split into; a configuration
+/// needing more is refused with the largest stable step in the message.
+pub const MAX_SUBSTEPS: usize = 64;
+
 /// The checks of one numeric field: name, value, lower bound (inclusive?), upper bound, unit.
 struct Range {
     field: &'static str,
@@ -350,7 +359,8 @@ impl TetherConfig {
                 unit: "s",
             },
         ];
-        ranges.iter().try_for_each(Range::check)
+        ranges.iter().try_for_each(Range::check)?;
+        self.check_stability(self.static_tension(), 0.0, 0.0)
     }
 
     /// Segment length l = L / n, m.
@@ -381,6 +391,72 @@ impl TetherConfig {
     /// Number of generalized coordinates, 2n + 1.
     pub fn dofs(&self) -> usize {
         2 * self.segments + 1
+    }
+
+    /// Magnitude of the fastest eigenvalue of the linearised chain, 1/s, with `tension` (N) the
+    /// largest tension along it, in air of `density` (kg/m^3) flowing past at `airspeed` (m/s).
+    ///
+    /// The fastest mode is the zig-zag of the rods (neighbours turning opposite ways about their
+    /// centres). For one rod of mass `m = mu l` and inertia `I = m l^2 / 12` the tension at both
+    /// ends restores it with `T l`, the two bending springs (`EI / l` each, joint angle twice the
+    /// rod's) with `4 EI / l`, so
+    ///
+    /// ```text
+    /// omega^2 = 12 T / (mu l^2) + 48 EI / (mu l^4)
+    /// sigma   = 48 c1 / l^2 + rho C_n d V / mu        (joint damping, linearised cross-flow drag)
+    /// |lambda| = sigma / 2 + sqrt(sigma^2 / 4 + omega^2)
+    /// ```
+    ///
+    /// At n = 300 (Table 3 otherwise) and 3.4 kN this gives about 480 rad/s: RK4 at 0.01 s is
+    /// outside its stability region there, at n = 30 (about 45 rad/s) far inside.
+    pub fn fastest_rate(&self, tension: f64, density: f64, airspeed: f64) -> f64 {
+        let l = self.segment_length();
+        let mu = self.mass_per_length;
+        let omega2 =
+            12.0 * tension.abs() / (mu * l * l) + 48.0 * self.flexural_rigidity / (mu * l.powi(4));
+        let sigma = 48.0 * self.joint_damping_per_mass / (l * l)
+            + density.abs() * self.normal_drag_coefficient * self.diameter * airspeed.abs() / mu;
+        0.5 * sigma + (0.25 * sigma * sigma + omega2).sqrt()
+    }
+
+    /// RK4 substeps per [`TetherConfig::time_step`] that keep `|lambda| dt / k` within
+    /// [`RK4_STABILITY_LIMIT`] (at least 1; see [`TetherConfig::fastest_rate`] for the
+    /// arguments). Not capped: compare with [`MAX_SUBSTEPS`].
+    pub fn substeps_for(&self, tension: f64, density: f64, airspeed: f64) -> usize {
+        let r = self.fastest_rate(tension, density, airspeed) * self.time_step;
+        if !r.is_finite() {
+            return usize::MAX;
+        }
+        ((r / RK4_STABILITY_LIMIT).ceil() as usize).max(1)
+    }
+
+    /// Checks that the step can be kept stable by substepping at a largest tension `tension` (N)
+    /// in air of `density` at `airspeed`: at most [`MAX_SUBSTEPS`] substeps. The error names
+    /// the largest step that would be stable without substeps.
+    pub fn check_stability(&self, tension: f64, density: f64, airspeed: f64) -> Result<()> {
+        let k = self.substeps_for(tension, density, airspeed);
+        if k <= MAX_SUBSTEPS {
+            return Ok(());
+        }
+        let stable = RK4_STABILITY_LIMIT / self.fastest_rate(tension, density, airspeed);
+        Err(TetherError::invalid_config(
+            "time_step",
+            self.time_step,
+            &format!(
+                "(0, {:.3e}] s for {} segments of {:.3} m at an estimated peak tension of {:.3e} N \
+                 (the chain's fastest mode needs {k} RK4 substeps, at most {MAX_SUBSTEPS} are taken; \
+                 the largest stable step is {stable:.3e} s): use fewer segments or a shorter time_step",
+                stable * MAX_SUBSTEPS as f64,
+                self.segments,
+                self.segment_length(),
+                tension
+            ),
+        ))
+    }
+
+    /// A bound of the tension the tether carries hanging still: its weight and the tip's, N.
+    pub fn static_tension(&self) -> f64 {
+        (self.total_mass() + self.tip_mass) * self.gravity
     }
 }
 
