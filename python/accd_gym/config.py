@@ -49,6 +49,18 @@ def _plain(value: Any) -> Any:
     raise TypeError(f"{type(value).__name__} is not a configuration value")
 
 
+def _check_finite(value: Any, path: str) -> None:
+    """ConfigError naming the dotted field of the first NaN or infinite number in ``value``."""
+    if isinstance(value, Mapping):
+        for k, v in value.items():
+            _check_finite(v, f"{path}.{k}" if path else str(k))
+    elif isinstance(value, (list, tuple, np.ndarray)):
+        for i, v in enumerate(value):
+            _check_finite(v, f"{path}[{i}]")
+    elif isinstance(value, (float, np.floating)) and not np.isfinite(value):
+        raise ConfigError(f"invalid config: `{path}` = {value} is outside the allowed range: a finite number")
+
+
 def default_config() -> dict[str, Any]:
     """The default environment configuration, every key filled in (SI units unless named)."""
     return json.loads(_core.default_env_config_json())
@@ -65,9 +77,10 @@ def env_config(config: Optional[Mapping[str, Any]] = None, **overrides: Any) -> 
     tether = merged.get("tether")
     if isinstance(tether, str):
         merged["tether"] = _core.tether_config(tether)
+    _check_finite(merged, "")
     try:
-        text = json.dumps(merged, default=_plain, allow_nan=True)
-    except TypeError as e:
+        text = json.dumps(merged, default=_plain, allow_nan=False)
+    except (TypeError, ValueError) as e:
         raise ConfigError(f"invalid config: {e}") from None
     return json.loads(_core.env_config_json(text))
 

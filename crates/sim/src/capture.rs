@@ -728,17 +728,20 @@ impl CaptureSim {
         Ok((att, w))
     }
 
-    /// RK4 substeps of the next step ([`TetherConfig::substeps_for`]): from the larger of the
-    /// attachment tension and the weight of tether and ACCD, with sea-level density (an upper
-    /// bound) at the aircraft's airspeed. One for the default configuration.
+    /// RK4 substeps of the next step ([`TetherConfig::substeps_for`]) under the load of the
+    /// current state ([`accd_tether::config::StepLoad::of_state`], the ACCD as tip mass), with
+    /// sea-level density (an upper bound) at the aircraft's airspeed. One for the default
+    /// configuration.
     pub fn substeps(&self) -> usize {
         let c = &self.config.tether;
-        let elastic = c.axial_stiffness * self.tether.q[0];
-        let tension = elastic
-            .abs()
-            .max((elastic + c.axial_damping() * self.tether.qd[0]).abs())
-            .max((c.total_mass() + self.config.accd.mass) * c.gravity);
-        c.substeps_for(tension, SEA_LEVEL_DENSITY, self.config.aircraft.airspeed)
+        let load = accd_tether::config::StepLoad::of_state(
+            c,
+            &self.tether,
+            self.config.accd.mass,
+            SEA_LEVEL_DENSITY,
+            self.config.aircraft.airspeed,
+        );
+        c.substeps_for(&load)
     }
 
     /// Steps `steps` times with the same commands.

@@ -539,7 +539,7 @@ pub fn check_cross_fields(config: &CaptureConfig) -> Result<()> {
     let (tension, density, airspeed) = estimated_peak_load(config);
     config
         .tether
-        .check_stability(tension, density, airspeed)
+        .check_stability(tension, density, airspeed, config.accd.mass)
         .map_err(|e| match e {
             accd_tether::TetherError::InvalidConfig {
                 field,

@@ -2,7 +2,7 @@
 
 use nalgebra::Vector3;
 
-use crate::config::TetherConfig;
+use crate::config::{StepLoad, TetherConfig};
 use crate::dynamics::{Energy, TetherModel};
 use crate::error::{Result, TetherError};
 use crate::integrator::Rk4;
@@ -76,20 +76,15 @@ impl Tether {
         self.config().time_step
     }
 
-    /// RK4 substeps the next step takes: from the larger of the attachment tension and the
-    /// hanging weight, and the air at the attachment ([`TetherConfig::substeps_for`]).
+    /// RK4 substeps the next step takes, from the state and the air at the attachment
+    /// ([`StepLoad::of_state`], [`TetherConfig::substeps_for`]).
     pub fn substeps<S: Surroundings + ?Sized>(&self, surroundings: &S) -> usize {
         let c = self.config();
         let s = &self.state;
         let origin = Vector3::zeros();
-        let elastic = c.axial_stiffness * s.q[0];
-        let tension = elastic
-            .abs()
-            .max((elastic + c.axial_damping() * s.qd[0]).abs())
-            .max(c.static_tension());
         let airspeed = surroundings.air_velocity(s.time, &origin).norm();
         let density = surroundings.air_density(s.time, &origin);
-        c.substeps_for(tension, density, airspeed)
+        c.substeps_for(&StepLoad::of_state(c, s, c.tip_mass, density, airspeed))
     }
 
     /// One step of the configured length (see [`Tether::substeps`]). On error the state is
