@@ -247,3 +247,76 @@ def test_env_config_errors_name_the_field(overrides, words):
     for w in words:
         assert w in str(info.value), str(info.value)
     assert "line 1 column" not in str(info.value)
+
+
+# 7. Self-contained configurations -----------------------------------------------------------
+
+
+def test_a_config_with_a_user_aero_table_can_carry_the_table(tmp_path):
+    from accd_gym.config import self_contained
+
+    path = tmp_path / "table.json"
+    path.write_text(accd_gym.default_aero_table_json())
+    by_path = accd_gym.env_config(accd={"aero_table": str(path)}, **SHORT)
+    inline = self_contained(by_path)
+    assert inline["accd"]["aero_table"].startswith("{") and by_path["accd"]["aero_table"] == str(path)
+    path.unlink()  # the inline config needs no file
+    a = accd_gym.CaptureSim({"accd": {"aero_table": inline["accd"]["aero_table"]}}, calm=True, seed=2)
+    b = accd_gym.CaptureSim(calm=True, seed=2)
+    sa, sb = a.step([3.0, -3.0, 1.0, 0.0], steps=30), b.step([3.0, -3.0, 1.0, 0.0], steps=30)
+    assert np.allclose(sa["position"], sb["position"], rtol=0, atol=1e-9)
+    with pytest.raises(ConfigError, match="aero_table"):
+        self_contained(by_path)
+
+
+def test_an_inline_table_that_is_broken_names_the_table():
+    with pytest.raises(ConfigError, match="inline"):
+        accd_gym.CaptureSim({"accd": {"aero_table": '{"alpha_deg": [1]}'}}, calm=True)
+
+
+# 8. The command line ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["train", "--config", "{cfg_array}", "--out", "{tmp}/run"], ["JSON list", "object"]),
+        (["train", "--config", "{cfg_kwarg}", "--out", "{tmp}/run"], ["algo_kwargs", "learning_rat"]),
+        (["train", "--config", "{cfg_seed}", "--out", "{tmp}/run"], ["`seed`"]),
+        (["train", "--config", "{cfg_ok}", "--out", "/proc/no/such/dir"], ["--out", "/proc/no/such/dir"]),
+        (["train", "--resume", "{tmp}/nothing"], ["not a run folder"]),
+        (["train", "--config", "{tmp}/missing.json", "--out", "{tmp}/run"], ["does not exist"]),
+        (["evaluate", "--policy", "zero", "--episodes", "1", "--out", "/proc/no/such/dir", "--quiet"], ["/proc/no"]),
+        (["rollout", "--policy", "zero", "--env", "[1, 2]", "--quiet"], ["--env", "JSON object"]),
+        (["rollout", "--policy", "zero", "--env", '{"capture_window": "x"}', "--quiet"], ["capture_window"]),
+        (["rollout", "--policy", "zero", "--num-envs", "100000", "--episodes", "100000", "--quiet"], ["num_envs"]),
+        (["evaluate", "--policy", "{tmp}", "--episodes", "1", "--quiet"], ["no final model"]),
+    ],
+)
+def test_cli_user_errors_exit_2_on_one_line(argv, words, tmp_path, capsys):
+    import json as _json
+
+    from accd_gym.cli import main
+
+    files = {"cfg_array": [1, 2], "cfg_kwarg": {"algo_kwargs": {"learning_rat": 1}},
+             "cfg_seed": {"seed": True}, "cfg_ok": {"total_timesteps": 8}}
+    for name, doc in files.items():
+        (tmp_path / f"{name}.json").write_text(_json.dumps(doc))
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    argv = [str(tmp_path / f"{a[1:-1]}.json") if a[1:-1] in files else a for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and err.startswith("accd-gym: error:"), err
+    for w in words:
+        assert w in err, err
+
+
+@pytest.mark.parametrize("argv", [["evaluate", "--policy", "zero", "--num-threads", "-1"],
+                                  ["rollout", "--policy", "zero", "--seed", "-5"]])
+def test_cli_bad_option_values_are_argparse_errors(argv, capsys):
+    from accd_gym.cli import main
+
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    assert info.value.code == 2
+    assert "outside the allowed range" in capsys.readouterr().err

@@ -85,9 +85,25 @@ def env_config(config: Optional[Mapping[str, Any]] = None, **overrides: Any) -> 
     return json.loads(_core.env_config_json(text))
 
 
+def self_contained(config: Mapping[str, Any]) -> dict[str, Any]:
+    """A copy of a complete configuration that needs no file: a user aerodynamic table given by
+    path (``accd.aero_table``) is replaced by the table's contents (JSON text, which the core
+    reads as the table itself). For pickles and saved envs that must load on another machine.
+    Raises ConfigError when the file cannot be read."""
+    out = json.loads(json.dumps(config, default=_plain))
+    table = (out.get("accd") or {}).get("aero_table")
+    if isinstance(table, str) and not table.lstrip().startswith("{"):
+        try:
+            with open(table) as f:
+                out["accd"]["aero_table"] = json.dumps(json.load(f))
+        except (OSError, ValueError) as e:
+            raise ConfigError(f"invalid config: `accd.aero_table` = {table!r} cannot be read ({e})") from None
+    return out
+
+
 def config_json(config: Mapping[str, Any]) -> str:
     """A configuration as the JSON text the Rust core reads."""
     return json.dumps(config, default=_plain)
 
 
-__all__ = ["default_config", "env_config", "config_json"]
+__all__ = ["default_config", "env_config", "config_json", "self_contained"]
