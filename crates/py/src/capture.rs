@@ -93,15 +93,8 @@ fn build(
         .map_err(|e| raise(Kind::Config, format!("invalid config: {e}")))?;
     let mut merged = serde_json::to_value(&base).expect("a config serializes");
     merge(&mut merged, &patch);
-    let config: CaptureConfig = serde_json::from_value(merged).map_err(|e| {
-        let message = e.to_string();
-        let message = message
-            .split(" at line ")
-            .next()
-            .unwrap_or(&message)
-            .to_string();
-        raise(Kind::Config, format!("invalid config: {message}"))
-    })?;
+    let config: CaptureConfig =
+        accd_sim::task::parse_named(&merged.to_string()).map_err(sim_to_py)?;
     config.validate().map_err(sim_to_py)?;
     Ok(config)
 }

@@ -55,7 +55,15 @@ fn build_config(
                 .next()
                 .unwrap_or(&message)
                 .to_string();
-            raise(Kind::Config, format!("invalid tether config: {message}"))
+            match accd_sim::task::locate_parse_error::<TetherConfig>(&merged) {
+                Some((field, value)) => raise(
+                    Kind::Config,
+                    format!(
+                        "invalid tether config: `{field}` = {value} is outside the allowed range: {message}"
+                    ),
+                ),
+                None => raise(Kind::Config, format!("invalid tether config: {message}")),
+            }
         }
         other => crate::errors::to_py(other),
     })

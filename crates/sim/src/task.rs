@@ -548,7 +548,11 @@ pub fn check_cross_fields(config: &CaptureConfig) -> Result<()> {
             } => SimError::InvalidConfig {
                 field: format!("tether.{field}"),
                 value,
-                allowed,
+                allowed: format!(
+                    "{allowed} (the tension estimated from the weight of tether and accd.mass = {} kg \
+                     and the drag at aircraft.airspeed = {} m/s)",
+                    config.accd.mass, config.aircraft.airspeed
+                ),
             },
             other => other.into(),
         })
@@ -649,7 +653,13 @@ pub fn locate_parse_error<T: serde::de::DeserializeOwned>(
             path.push(k.clone());
             let alone = wrap(path, v.clone());
             if serde_json::from_value::<T>(alone).is_err() {
-                if let Some(inner) = v.as_object() {
+                // Narrow into an object only where the field takes one (`{}` reads as defaults).
+                let takes_object = serde_json::from_value::<T>(wrap(
+                    path,
+                    serde_json::Value::Object(serde_json::Map::new()),
+                ))
+                .is_ok();
+                if let (Some(inner), true) = (v.as_object(), takes_object) {
                     if let Some(found) = walk::<T>(path, inner) {
                         return Some(found);
                     }

@@ -535,12 +535,22 @@ impl TetherConfig {
             "time_step",
             self.time_step,
             &format!(
-                "(0, {:.3e}] s for {} segments of {:.3} m at an estimated peak tension of {:.3e} N \
-                 (the chain's fastest mode needs {k} RK4 substeps, at most {MAX_SUBSTEPS} are taken; \
-                 the largest stable step is {stable:.3e} s): use fewer segments or a shorter time_step",
+                "(0, {:.3e}] s for this discretization: segments = {} and length = {} m make \
+                 segments of {:.3} m, which with mass_per_length = {} kg/m, flexural_rigidity = {} \
+                 N m^2, joint_damping_per_mass = {}, axial_stiffness = {} N/m, \
+                 axial_damping_per_mass = {} and an estimated peak tension of {:.3e} N give a \
+                 fastest mode needing {k} RK4 substeps (at most {MAX_SUBSTEPS} are taken; the \
+                 largest stable step is {stable:.3e} s): use fewer segments, a longer tether or a \
+                 shorter time_step",
                 stable * MAX_SUBSTEPS as f64,
                 self.segments,
+                self.length,
                 self.segment_length(),
+                self.mass_per_length,
+                self.flexural_rigidity,
+                self.joint_damping_per_mass,
+                self.axial_stiffness,
+                self.axial_damping_per_mass,
                 tension
             ),
         ))
