@@ -47,7 +47,7 @@ fn build_config(
             target.insert(k.clone(), v.clone());
         }
     }
-    TetherConfig::from_json(&merged.to_string()).map_err(|e| match e {
+    let config = TetherConfig::from_json(&merged.to_string()).map_err(|e| match e {
         // Positions in the merged document mean nothing to the caller: keep the message only.
         accd_tether::TetherError::ConfigParse { message } => {
             let message = message
@@ -66,7 +66,10 @@ fn build_config(
             }
         }
         other => crate::errors::to_py(other),
-    })
+    })?;
+    // The configs of this module are for stepping: the same rule as `Tether::new`.
+    config.validate_for_stepping().py_err()?;
+    Ok(config)
 }
 
 fn config_to_dict<'py>(py: Python<'py>, config: &TetherConfig) -> PyResult<Bound<'py, PyAny>> {

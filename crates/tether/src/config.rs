@@ -429,7 +429,15 @@ impl TetherConfig {
                 unit: "s",
             },
         ];
-        ranges.iter().try_for_each(Range::check)?;
+        ranges.iter().try_for_each(Range::check)
+    }
+
+    /// [`TetherConfig::validate`] and the rule a configuration to be stepped must also meet: a
+    /// step that substepping can keep stable for the chain hanging still
+    /// ([`TetherConfig::check_stability`] at [`TetherConfig::static_tension`]). The model alone
+    /// (linearisations, mass matrices) needs only the first.
+    pub fn validate_for_stepping(&self) -> Result<()> {
+        self.validate()?;
         self.check_stability(self.static_tension(), 0.0, 0.0, self.tip_mass)
     }
 

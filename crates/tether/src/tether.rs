@@ -29,8 +29,9 @@ pub struct Tether {
 }
 
 impl Tether {
-    /// Builds a tether from a config (validated).
+    /// Builds a tether from a config (validated, [`TetherConfig::validate_for_stepping`]).
     pub fn new(config: &TetherConfig) -> Result<Self> {
+        config.validate_for_stepping()?;
         let model = TetherModel::new(config)?;
         let state = TetherState::straight(config.segments, Vector3::new(-1.0, 0.0, 0.0), 0.0)?;
         Ok(Tether {

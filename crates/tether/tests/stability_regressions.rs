@@ -76,7 +76,9 @@ fn an_unstable_discretization_is_refused_with_the_largest_stable_step() {
         time_step: 1.0,
         ..TetherConfig::table3()
     };
-    let message = cfg.validate().unwrap_err().to_string();
+    cfg.validate().unwrap(); // the model alone may be built (linearisations need no step)
+    let message = cfg.validate_for_stepping().unwrap_err().to_string();
+    assert_eq!(Tether::new(&cfg).unwrap_err().to_string(), message);
     assert!(
         message.contains("`time_step`") && message.contains("largest stable step"),
         "{message}"
