@@ -44,12 +44,61 @@ def _export_aero(args: argparse.Namespace) -> int:
 def _train(args: argparse.Namespace) -> int:
     from accd_gym import training
 
-    cfg = training.load_config(args.config, seed=args.seed)
-    meta = training.train(cfg, args.out, timesteps=args.timesteps, progress=not args.quiet)
+    if args.resume:
+        if args.config is not None or args.timesteps is not None or args.seed is not None:
+            raise _usage("--resume continues a run with its own config; drop --config, --timesteps and --seed")
+        out = Path(args.resume)
+        meta = training.resume(out, progress=not args.quiet)
+    else:
+        if args.out is None:
+            raise _usage("train needs --out RUN (or --resume RUN)")
+        out = Path(args.out)
+        cfg = training.load_config(args.config or "training/ppo.json", seed=args.seed)
+        meta = training.train(cfg, out, timesteps=args.timesteps, progress=not args.quiet)
+    if meta["status"] == "interrupted":
+        print(f"accd-gym: training interrupted ({meta['interrupted_by']}) at {meta['timesteps']} of "
+              f"{meta['config']['total_timesteps']} steps; checkpoint {meta['checkpoint']} written; "
+              f"continue with: accd-gym train --resume {out}", file=sys.stderr)
+        return 130
     print(f"trained {meta['algo'].upper()} for {meta['timesteps']} steps in {meta['wall_time_s']} s "
-          f"({meta['steps_per_s']} steps/s); wrote {Path(args.out) / 'final_model.zip'}, "
-          f"{Path(args.out) / 'vecnormalize.pkl'}, TensorBoard logs in {Path(args.out) / 'tb'}")
+          f"({meta['steps_per_s']} steps/s); wrote {out / 'final_model.zip'}, "
+          f"{out / 'vecnormalize.pkl'}, TensorBoard logs in {out / 'tb'}")
     return 0
+
+
+class _UsageError(Exception):
+    """A misuse of the command line found after parsing (exit code 2, one line)."""
+
+
+def _usage(message: str) -> _UsageError:
+    """A :class:`_UsageError` with ``message``."""
+    return _UsageError(message)
+
+
+def _nonnegative(name: str):
+    """An argparse type: an integer >= 0, with an error naming the option."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} = {text!r} is not an integer") from None
+        if value < 0:
+            raise argparse.ArgumentTypeError(f"{name} = {value} is outside the allowed range >= 0")
+        return value
+
+    return parse
+
+
+def _seed(text: str) -> int:
+    """An argparse type: a seed, an integer in [0, 2^64)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--seed = {text!r} is not an integer") from None
+    if not 0 <= value < 2**64:
+        raise argparse.ArgumentTypeError(f"--seed = {value} is outside the allowed range [0, 2^64)")
+    return value
 
 
 def _positive(name: str):
@@ -86,7 +135,11 @@ def _evaluate(args: argparse.Namespace) -> int:
     from accd_gym import evaluation
 
     results = evaluation.evaluate(args.policy, args.episodes, args.out, num_envs=args.num_envs, num_threads=args.num_threads,
-                                  config=_env_overrides(args.env), progress=not args.quiet)
+                                  config=_env_overrides(args.env), progress=not args.quiet,
+                                  allow_unnormalized=args.allow_unnormalized)
+    for spec, doc in results["policies"].items():
+        if doc.get("note"):
+            print(f"note: {doc['note']}", file=sys.stderr)
     print((Path(args.out) / "summary.md").read_text())
     print(f"wrote {Path(args.out) / 'results.json'}, summary.md, trajectories.png, miss_distance_cdf.png")
     return 0 if results["policies"] else 1
@@ -95,7 +148,9 @@ def _evaluate(args: argparse.Namespace) -> int:
 def _rollout(args: argparse.Namespace) -> int:
     from accd_gym import evaluation
 
-    policy = evaluation.load_policy(args.policy, seed=args.seed)
+    policy = evaluation.load_policy(args.policy, seed=args.seed, allow_unnormalized=args.allow_unnormalized)
+    if getattr(policy, "note", None):
+        print(f"note: {policy.note}", file=sys.stderr)
     eps = evaluation.run_episodes(policy, args.episodes, seed=args.seed, num_envs=args.num_envs, num_threads=args.num_threads,
                                   config=_env_overrides(args.env), progress=not args.quiet, desc=args.policy)
     s = evaluation.summarize(eps)
@@ -131,10 +186,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="accd-aero.json", help="output file (default: accd-aero.json)")
     p.set_defaults(func=_export_aero)
     p = sub.add_parser("train", help="train PPO or SAC on the capture task (stable-baselines3)")
-    p.add_argument("--config", default="training/ppo.json", help="training config, JSON (default: training/ppo.json)")
-    p.add_argument("--out", required=True, help="run folder: model, VecNormalize statistics, checkpoints, TensorBoard logs")
+    p.add_argument("--config", help="training config, JSON (default: training/ppo.json)")
+    p.add_argument("--out", help="run folder: model, VecNormalize statistics, checkpoints, TensorBoard logs")
+    p.add_argument("--resume", metavar="RUN",
+                   help="continue the interrupted run in folder RUN from its latest checkpoint to its total")
     p.add_argument("--timesteps", type=_positive("--timesteps"), help="override the config's total_timesteps")
-    p.add_argument("--seed", type=int, help="override the config's seed")
+    p.add_argument("--seed", type=_seed, help="override the config's seed")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_train)
     p = sub.add_parser("evaluate", help="evaluate policies on held-out wake seeds: JSON, plots, markdown")
@@ -143,17 +200,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--episodes", type=_positive("--episodes"), default=100, help="episodes per policy (default 100)")
     p.add_argument("--out", default="runs/eval", help="output folder (default: runs/eval)")
     p.add_argument("--num-envs", type=_positive("--num-envs"), default=16, help="parallel episodes (default 16)")
-    p.add_argument("--num-threads", type=int, default=0, help="threads stepping the envs (default 0: one per core)")
+    p.add_argument("--num-threads", type=_nonnegative("--num-threads"), default=0,
+                   help="threads stepping the envs (default 0: one per core)")
     p.add_argument("--env", help="environment config overrides as JSON, e.g. '{\"capture_window\": 30}'")
+    p.add_argument("--allow-unnormalized", action="store_true",
+                   help="evaluate a model without its vecnormalize.pkl (observations passed raw)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_evaluate)
     p = sub.add_parser("rollout", help="run a policy for a few episodes headless and print a summary")
     p.add_argument("--policy", required=True, help="a baseline (zero, random, guidance) or a trained model")
     p.add_argument("--episodes", type=_positive("--episodes"), default=8, help="episodes (default 8)")
-    p.add_argument("--seed", type=int, default=0, help="base seed (training wake seeds are drawn from it)")
+    p.add_argument("--seed", type=_seed, default=0, help="base seed (training wake seeds are drawn from it)")
     p.add_argument("--num-envs", type=_positive("--num-envs"), default=8, help="parallel episodes (default 8)")
-    p.add_argument("--num-threads", type=int, default=0, help="threads stepping the envs (default 0: one per core)")
+    p.add_argument("--num-threads", type=_nonnegative("--num-threads"), default=0,
+                   help="threads stepping the envs (default 0: one per core)")
     p.add_argument("--env", help="environment config overrides as JSON")
+    p.add_argument("--allow-unnormalized", action="store_true",
+                   help="run a model without its vecnormalize.pkl (observations passed raw)")
     p.add_argument("--json", action="store_true", help="also print every episode's metrics as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_rollout)
@@ -167,14 +230,26 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except AccdError as e:
-        print(f"accd-gym: error: {e}", file=sys.stderr)
+    except (AccdError, _UsageError) as e:
+        print(f"accd-gym: error: {_one_line(e)}", file=sys.stderr)
         return 2
     except ModuleNotFoundError as e:
         if e.name not in ("stable_baselines3", "torch", "tensorboard", "rich"):
             raise
         print(f"accd-gym: error: `accd-gym {args.command}` needs the sb3 extra ({e}): pip install 'accd-gym[sb3]'", file=sys.stderr)
         return 2
+    except OSError as e:  # a file or folder the user named cannot be read or written
+        where = f" {e.filename!r}" if e.filename else ""
+        print(f"accd-gym: error: cannot access{where}: {e.strerror or e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("accd-gym: interrupted", file=sys.stderr)
+        return 130
+
+
+def _one_line(error: Exception) -> str:
+    """An exception's message on one line."""
+    return " ".join(str(error).split())
 
 
 if __name__ == "__main__":

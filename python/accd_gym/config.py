@@ -49,6 +49,18 @@ def _plain(value: Any) -> Any:
     raise TypeError(f"{type(value).__name__} is not a configuration value")
 
 
+def _check_finite(value: Any, path: str) -> None:
+    """ConfigError naming the dotted field of the first NaN or infinite number in ``value``."""
+    if isinstance(value, Mapping):
+        for k, v in value.items():
+            _check_finite(v, f"{path}.{k}" if path else str(k))
+    elif isinstance(value, (list, tuple, np.ndarray)):
+        for i, v in enumerate(value):
+            _check_finite(v, f"{path}[{i}]")
+    elif isinstance(value, (float, np.floating)) and not np.isfinite(value):
+        raise ConfigError(f"invalid config: `{path}` = {value} is outside the allowed range: a finite number")
+
+
 def default_config() -> dict[str, Any]:
     """The default environment configuration, every key filled in (SI units unless named)."""
     return json.loads(_core.default_env_config_json())
@@ -65,11 +77,28 @@ def env_config(config: Optional[Mapping[str, Any]] = None, **overrides: Any) -> 
     tether = merged.get("tether")
     if isinstance(tether, str):
         merged["tether"] = _core.tether_config(tether)
+    _check_finite(merged, "")
     try:
-        text = json.dumps(merged, default=_plain, allow_nan=True)
-    except TypeError as e:
+        text = json.dumps(merged, default=_plain, allow_nan=False)
+    except (TypeError, ValueError) as e:
         raise ConfigError(f"invalid config: {e}") from None
     return json.loads(_core.env_config_json(text))
+
+
+def self_contained(config: Mapping[str, Any]) -> dict[str, Any]:
+    """A copy of a complete configuration that needs no file: a user aerodynamic table given by
+    path (``accd.aero_table``) is replaced by the table's contents (JSON text, which the core
+    reads as the table itself). For pickles and saved envs that must load on another machine.
+    Raises ConfigError when the file cannot be read."""
+    out = json.loads(json.dumps(config, default=_plain))
+    table = (out.get("accd") or {}).get("aero_table")
+    if isinstance(table, str) and not table.lstrip().startswith("{"):
+        try:
+            with open(table) as f:
+                out["accd"]["aero_table"] = json.dumps(json.load(f))
+        except (OSError, ValueError) as e:
+            raise ConfigError(f"invalid config: `accd.aero_table` = {table!r} cannot be read ({e})") from None
+    return out
 
 
 def config_json(config: Mapping[str, Any]) -> str:
@@ -77,4 +106,4 @@ def config_json(config: Mapping[str, Any]) -> str:
     return json.dumps(config, default=_plain)
 
 
-__all__ = ["default_config", "env_config", "config_json"]
+__all__ = ["default_config", "env_config", "config_json", "self_contained"]

@@ -45,16 +45,40 @@ def wilson_interval(successes: int, n: int, z: float = 1.959963984540054) -> tup
 class SB3Policy:
     """A trained stable-baselines3 model (PPO or SAC) with its VecNormalize statistics, deterministic.
 
-    ``path``: a run folder (``final_model.zip`` and ``vecnormalize.pkl`` in it), a model ``.zip``
-    (its statistics: ``vecnormalize.pkl`` beside it, or for a checkpoint
-    ``<prefix>_vecnormalize_<steps>_steps.pkl``). The algorithm is read from the run's
+    ``path``: a run folder (``final_model.zip`` and ``vecnormalize.pkl`` in it; for a run that was
+    interrupted or is still training, its latest checkpoint, which :attr:`note` and a warning
+    say), or a model ``.zip`` (its statistics: ``vecnormalize.pkl`` beside it, or for a
+    checkpoint ``<prefix>_vecnormalize_<steps>_steps.pkl``). The algorithm is read from the run's
     ``run.json`` when there is one, else from the zip's stored policy class.
+
+    A model trained with VecNormalize acts on normalised observations: without its statistics it
+    would see raw ones and act wrongly, so a missing statistics file is a ConfigError unless
+    ``allow_unnormalized=True`` (then observations are passed raw, with a warning).
     """
 
-    def __init__(self, path: str | Path, device: str = "cpu") -> None:
+    def __init__(self, path: str | Path, device: str = "cpu", *, allow_unnormalized: bool = False) -> None:
+        import warnings
+
         p = Path(path)
+        #: How the model was found, e.g. that a run's latest checkpoint stands in for its final model.
+        self.note: Optional[str] = None
         if p.is_dir():
             model_path, stats_path = p / "final_model.zip", p / "vecnormalize.pkl"
+            if not model_path.is_file():
+                from accd_gym.training import latest_checkpoint
+
+                ckpt = latest_checkpoint(p)
+                status = _run_status(p)
+                if ckpt is None:
+                    raise ConfigError(
+                        f"invalid config: policy path {str(path)!r}: no final model and no checkpoint in "
+                        f"{str(p / 'checkpoints')!r} (run status: {status})"
+                    )
+                model_path = ckpt["model"]
+                stats_path = ckpt["vecnormalize"] or model_path.with_name("vecnormalize.pkl")
+                self.note = (f"run {str(path)!r} has no final model (status: {status}); evaluating its latest "
+                             f"checkpoint {model_path.name} ({ckpt['steps']} steps)")
+                warnings.warn(self.note, stacklevel=2)
         else:
             model_path = p
             stats_path = p.with_name("vecnormalize.pkl")
@@ -63,6 +87,12 @@ class SB3Policy:
                 stats_path = p.with_name(f"{prefix}_vecnormalize_{steps}_steps.pkl")
         if not model_path.is_file():
             raise ConfigError(f"invalid config: policy path {str(path)!r}: no model file {str(model_path)!r}")
+        if not stats_path.is_file() and not allow_unnormalized:
+            raise ConfigError(
+                f"invalid config: policy {str(path)!r}: its VecNormalize statistics {str(stats_path)!r} are missing; "
+                "the model would see unnormalised observations (pass allow_unnormalized=True, or "
+                "--allow-unnormalized on the command line, if it was trained without VecNormalize)"
+            )
         self.name = str(path)
         self.algo = _algo_of(model_path)
         try:
@@ -80,6 +110,9 @@ class SB3Policy:
             with open(stats_path, "rb") as f:
                 self.normalizer = pickle.load(f)
             self.normalizer.training = False
+        else:
+            warnings.warn(f"policy {str(path)!r}: no VecNormalize statistics; observations are passed unnormalised",
+                          stacklevel=2)
 
     def predict(self, obs: Any) -> np.ndarray:
         """Deterministic actions (N, 4) for raw observations (N, 25), normalised as in training."""
@@ -91,6 +124,14 @@ class SB3Policy:
 
     def reset(self, mask: Optional[np.ndarray] = None) -> None:
         """Feed-forward policies keep no state."""
+
+
+def _run_status(run: Path) -> str:
+    """The ``status`` of a run folder's run.json ("unknown" without one)."""
+    try:
+        return str(json.loads((run / "run.json").read_text()).get("status", "unknown"))
+    except (OSError, ValueError, AttributeError):
+        return "unknown"
 
 
 def _algo_of(model_path: Path) -> str:
@@ -111,9 +152,10 @@ def _algo_of(model_path: Path) -> str:
     raise ConfigError(f"invalid config: cannot tell the algorithm of {str(model_path)!r} (allowed: PPO, SAC)")
 
 
-def load_policy(spec: str, seed: int = 0) -> Any:
+def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False) -> Any:
     """A policy from a baseline name (``zero``, ``random``, ``guidance``), a guidance tuning file
-    (``training/guidance_tuning*.json``: the controller with its winning gains) or a model path."""
+    (``training/guidance_tuning*.json``: the controller with its winning gains) or a model path
+    (see :class:`SB3Policy` for ``allow_unnormalized``)."""
     from accd_gym.baselines import BASELINES, guidance_from_tuning, make_baseline
 
     if spec in BASELINES:
@@ -121,7 +163,7 @@ def load_policy(spec: str, seed: int = 0) -> Any:
     if spec.endswith(".json") and Path(spec).is_file():
         return guidance_from_tuning(spec)
     if Path(spec).exists():
-        return SB3Policy(spec)
+        return SB3Policy(spec, allow_unnormalized=allow_unnormalized)
     return make_baseline(spec, seed)  # raises ConfigError naming the allowed names
 
 
@@ -288,6 +330,7 @@ def evaluate(
     config: Optional[dict[str, Any]] = None,
     progress: bool = True,
     dpi: int = 90,
+    allow_unnormalized: bool = False,
 ) -> dict[str, Any]:
     """Evaluates each policy spec on the same episodes; writes results.json, summary.md and plots.
 
@@ -301,7 +344,7 @@ def evaluate(
             f"invalid config: `episodes` = {episodes} is outside the allowed range 1..{len(HELD_OUT_WAKE_SEEDS)} (held-out wake seeds)"
         )
     seeds = list(wake_seeds) if wake_seeds is not None else list(HELD_OUT_WAKE_SEEDS[:episodes])
-    loaded = [(spec, load_policy(spec)) for spec in policies]  # fail early on a bad spec
+    loaded = [(spec, load_policy(spec, allow_unnormalized=allow_unnormalized)) for spec in policies]  # fail early
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     results: dict[str, Any] = {
@@ -319,6 +362,8 @@ def evaluate(
                            num_threads=num_threads, config=config, progress=progress, desc=_label(spec))
         runs[spec] = eps
         results["policies"][spec] = {"summary": summarize(eps), "episodes": [e.metrics() for e in eps]}
+        if getattr(policy, "note", None):
+            results["policies"][spec]["note"] = policy.note
     (out / "results.json").write_text(json.dumps(results, indent=1))
     np.savez_compressed(out / "trajectories.npz", **{f"{_label(s)}__{e.index}": e.trajectory for s, eps in runs.items() for e in eps})
     plot_trajectories(runs, out / "trajectories.png", dpi=dpi)
@@ -367,6 +412,9 @@ def summary_markdown(results: dict[str, Any]) -> str:
             f"| {s['peak_tension_N']['median'] / 1e3:.2f} / {s['peak_tension_N']['max'] / 1e3:.2f} "
             f"| {s['mean_abs_action']:.3f} | {s['mean_abs_delta_action']:.3f} | {outcomes} |"
         )
+    notes = [f"- {_label(spec)}: {doc['note']}" for spec, doc in results["policies"].items() if doc.get("note")]
+    if notes:
+        lines += ["", "Notes:", *notes]
     lines += ["", "Plots: `trajectories.png` (capture point minus boom tip, side and top views), "
               "`miss_distance_cdf.png` (minimum distance over each episode)."]
     return "\n".join(lines) + "\n"

@@ -23,13 +23,25 @@ device             PyTorch device (default ``"cpu"``: the networks are small)
 ================== ================================================================================
 
 Outputs in ``out``: ``final_model.zip``, ``vecnormalize.pkl``, ``run.json`` (the full config,
-timing and steps per second), ``checkpoints/`` and ``tb/`` (TensorBoard: SB3's losses, episode
-returns, and ``accd/capture_rate`` etc. over the episodes that ended in each rollout).
+timing and steps per second, ``status``), ``checkpoints/`` and ``tb/`` (TensorBoard: SB3's
+losses, episode returns, and ``accd/capture_rate`` etc. over the episodes that ended in each
+rollout).
+
+Interruption: SIGINT (Ctrl+C) or SIGTERM writes a checkpoint (model, VecNormalize statistics,
+the envs' exact state, SAC's replay buffer) to ``checkpoints/`` and marks ``run.json``
+``"status": "interrupted"``; ``accd-gym train --resume OUT`` (:func:`resume`) continues from the
+latest checkpoint to the same total with the same config. ``accd-gym evaluate OUT`` of an
+unfinished run evaluates its latest checkpoint and says so.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
+import re
+import signal
+import threading
 import time
 from pathlib import Path
 from typing import Any, Optional
@@ -66,6 +78,10 @@ def load_config(path: str | Path, **overrides: Any) -> dict[str, Any]:
         raw = json.loads(p.read_text())
     except json.JSONDecodeError as e:
         raise ConfigError(f"invalid config: {str(path)!r} is not valid JSON ({e})") from None
+    if not isinstance(raw, dict):
+        raise ConfigError(
+            f"invalid config: {str(path)!r} holds a JSON {type(raw).__name__}; a training config must be a JSON object"
+        )
     raw.update({k: v for k, v in overrides.items() if v is not None})
     return validate_config(raw)
 
@@ -81,12 +97,21 @@ def validate_config(raw: dict[str, Any]) -> dict[str, Any]:
     cfg.update(raw)
     if cfg["algo"] not in _ALGOS:
         raise ConfigError(f"invalid config: `algo` = {cfg['algo']!r} is outside the allowed range {list(_ALGOS)}")
-    for key, low in (("total_timesteps", 1), ("num_envs", 1), ("num_threads", 0), ("torch_threads", 1), ("checkpoint_every", 1)):
+    for key, low, high in (("total_timesteps", 1, 10**12), ("num_envs", 1, 65_536), ("num_threads", 0, 1024),
+                           ("torch_threads", 1, 1024), ("checkpoint_every", 1, 10**12), ("seed", 0, 2**64 - 1)):
         v = cfg[key]
-        if not isinstance(v, int) or isinstance(v, bool) or v < low:
-            raise ConfigError(f"invalid config: `{key}` = {v!r} is outside the allowed range: an integer >= {low}")
-    if not isinstance(cfg["seed"], int) or cfg["seed"] < 0:
-        raise ConfigError(f"invalid config: `seed` = {cfg['seed']!r} is outside the allowed range: an integer >= 0")
+        if not isinstance(v, int) or isinstance(v, bool) or not low <= v <= high:
+            raise ConfigError(f"invalid config: `{key}` = {v!r} is outside the allowed range: an integer in [{low}, {high}]")
+    for key in ("env", "vec_normalize", "algo_kwargs", "policy_kwargs"):
+        if not isinstance(cfg[key], dict):
+            raise ConfigError(f"invalid config: `{key}` = {cfg[key]!r} is outside the allowed range: a JSON object")
+    if not isinstance(cfg["device"], str):
+        raise ConfigError(f"invalid config: `device` = {cfg['device']!r} is outside the allowed range: a device name such as 'cpu'")
+    _check_algo_kwargs(cfg["algo"], cfg["algo_kwargs"])
+    bad_policy = set(cfg["policy_kwargs"]) - {"net_arch", "activation_fn", "log_std_init"}
+    if bad_policy:
+        raise ConfigError(f"invalid config: policy_kwargs key(s) {sorted(bad_policy)} outside the allowed set "
+                          "['activation_fn', 'log_std_init', 'net_arch']")
     vn = dict(DEFAULTS["vec_normalize"], **cfg["vec_normalize"])
     bad = set(vn) - set(DEFAULTS["vec_normalize"])
     if bad:
@@ -110,6 +135,26 @@ def validate_config(raw: dict[str, Any]) -> dict[str, Any]:
             f"held-out wake seeds [{HELD_OUT_WAKE_SEEDS.start}, {HELD_OUT_WAKE_SEEDS.stop})"
         )
     return cfg
+
+
+#: Keyword arguments of the algorithms that the training pipeline sets itself.
+_RESERVED_ALGO_KWARGS = ("policy", "env", "seed", "device", "tensorboard_log", "policy_kwargs", "verbose", "_init_setup_model")
+
+
+def _check_algo_kwargs(algo: str, kwargs: dict[str, Any]) -> None:
+    """ConfigError for a key of ``algo_kwargs`` that PPO/SAC does not take (or that is set by the
+    pipeline), naming the allowed keys."""
+    import inspect
+
+    try:
+        from stable_baselines3 import PPO, SAC
+    except ImportError:  # without the sb3 extra the keys cannot be checked here; training needs it anyway
+        return
+    params = inspect.signature({"ppo": PPO, "sac": SAC}[algo].__init__).parameters
+    allowed = sorted(set(params) - {"self", *_RESERVED_ALGO_KWARGS})
+    bad = sorted(set(kwargs) - set(allowed))
+    if bad:
+        raise ConfigError(f"invalid config: algo_kwargs key(s) {bad} outside the allowed set for {algo.upper()}: {allowed}")
 
 
 def _policy_kwargs(cfg: dict[str, Any]) -> dict[str, Any]:
@@ -168,6 +213,102 @@ def _capture_callback():
     return CaptureStats()
 
 
+@contextlib.contextmanager
+def _terminate_raises_interrupt():
+    """While active (main thread only), SIGTERM raises KeyboardInterrupt as SIGINT does."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt(f"signal {signal.Signals(signum).name}")
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+@contextlib.contextmanager
+def _signals_deferred():
+    """While active (main thread only), SIGINT and SIGTERM are held back, so that a checkpoint
+    being written is not cut short; a signal that arrived meanwhile is ignored."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {sig: signal.signal(sig, signal.SIG_IGN) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def _prefix(cfg: dict[str, Any]) -> str:
+    """File-name prefix of a run's checkpoints (as CheckpointCallback names them)."""
+    return f"{cfg['algo']}_accd"
+
+
+def _base_env(env: Any) -> Any:
+    """The AccdVecEnv under the VecMonitor and VecNormalize wrappers."""
+    while hasattr(env, "venv"):
+        env = env.venv
+    return env
+
+
+def latest_checkpoint(run: str | Path) -> Optional[dict[str, Any]]:
+    """The newest checkpoint of a run folder: ``{"steps", "model", "vecnormalize", "env_state",
+    "replay_buffer"}`` (paths; the last two None when absent), or None without checkpoints."""
+    folder = Path(run) / "checkpoints"
+    best: Optional[tuple[int, Path]] = None
+    for p in folder.glob("*_steps.zip"):
+        m = re.fullmatch(r"(.+)_(\d+)_steps", p.stem)
+        if m and (best is None or int(m.group(2)) > best[0]):
+            best = (int(m.group(2)), p)
+    if best is None:
+        return None
+    steps, model = best
+    prefix = model.stem[: -len(f"_{steps}_steps")]
+
+    def beside(kind: str, ext: str) -> Optional[Path]:
+        q = folder / f"{prefix}_{kind}_{steps}_steps.{ext}"
+        return q if q.is_file() else None
+
+    return {
+        "steps": steps,
+        "model": model,
+        "vecnormalize": beside("vecnormalize", "pkl"),
+        "env_state": beside("envstate", "bin"),
+        "replay_buffer": beside("replay_buffer", "pkl"),
+    }
+
+
+def _save_checkpoint(model: Any, env: Any, cfg: dict[str, Any], out: Path) -> dict[str, Any]:
+    """Writes the model, the VecNormalize statistics, the envs' exact state and (SAC) the replay
+    buffer as a checkpoint named like CheckpointCallback's; returns :func:`latest_checkpoint`'s
+    record of it."""
+    folder = out / "checkpoints"
+    folder.mkdir(parents=True, exist_ok=True)
+    steps = int(model.num_timesteps)
+    stem = f"{_prefix(cfg)}_{{}}{steps}_steps"
+    model.save(str(folder / (stem.format("") + ".zip")))
+    env.save(str(folder / (stem.format("vecnormalize_") + ".pkl")))
+    (folder / (stem.format("envstate_") + ".bin")).write_bytes(_base_env(env).get_state())
+    if hasattr(model, "save_replay_buffer") and cfg["algo"] == "sac":
+        model.save_replay_buffer(str(folder / (stem.format("replay_buffer_") + ".pkl")))
+    record = latest_checkpoint(out)
+    assert record is not None and record["steps"] == steps
+    return record
+
+
+def _write_meta(out: Path, meta: dict[str, Any]) -> None:
+    """Writes run.json atomically (a crash never leaves half a file)."""
+    tmp = out / "run.json.tmp"
+    tmp.write_text(json.dumps(meta, indent=1, default=str))
+    os.replace(tmp, out / "run.json")
+
+
 def train(
     config: dict[str, Any],
     out: str | Path,
@@ -177,19 +318,21 @@ def train(
 ) -> dict[str, Any]:
     """Trains per ``config`` (from :func:`load_config`); writes the model, statistics and logs to ``out``.
 
-    Returns the run summary (also ``out/run.json``): config, steps, wall time, steps per second.
+    Returns the run summary (also ``out/run.json``): config, steps, wall time, steps per second,
+    and ``status``: ``"done"``, or ``"interrupted"`` when SIGINT (Ctrl+C) or SIGTERM stopped the
+    training. An interrupted run has written a checkpoint (model, VecNormalize statistics, the
+    envs' state; SAC: the replay buffer) to ``out/checkpoints`` and continues with
+    :func:`resume` (``accd-gym train --resume OUT``) to the same total.
     """
     import torch
     from stable_baselines3 import PPO, SAC
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
 
     cfg = validate_config(dict(config))
     if timesteps is not None:
         if timesteps < 1:
             raise ConfigError(f"invalid config: `timesteps` = {timesteps} is outside the allowed range >= 1")
         cfg["total_timesteps"] = int(timesteps)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = _writable_folder(out)
     torch.set_num_threads(cfg["torch_threads"])
     env = make_training_env(cfg)
     cls = {"ppo": PPO, "sac": SAC}[cfg["algo"]]
@@ -203,34 +346,123 @@ def train(
         verbose=0,
         **cfg["algo_kwargs"],
     )
-    meta = {"algo": cfg["algo"], "config": cfg, "status": "training"}
-    (out / "run.json").write_text(json.dumps(meta, indent=1))
+    meta = {"algo": cfg["algo"], "config": cfg, "status": "training", "total_timesteps": cfg["total_timesteps"]}
+    _write_meta(out, meta)
+    return _learn(model, env, cfg, out, meta, progress=progress, fresh=True)
+
+
+def resume(run: str | Path, *, progress: bool = True) -> dict[str, Any]:
+    """Continues an interrupted run (or one killed while training) from its latest checkpoint to
+    the total of its config, with the same config and seeds (the envs continue from their saved
+    state; SAC's replay buffer is restored when it was saved). Returns the run summary.
+
+    Raises ConfigError when ``run`` is not a run folder, has finished, or has no checkpoint.
+    """
+    import torch
+    from stable_baselines3 import PPO, SAC
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    out = Path(run)
+    meta_path = out / "run.json"
+    if not meta_path.is_file():
+        raise ConfigError(f"invalid config: --resume {str(run)!r} is not a run folder (no run.json)")
+    try:
+        meta = json.loads(meta_path.read_text())
+        cfg = validate_config(meta["config"])
+    except (json.JSONDecodeError, KeyError, TypeError) as e:
+        raise ConfigError(f"invalid config: {str(meta_path)!r} is not a run summary ({e})") from None
+    if meta.get("status") == "done":
+        raise ConfigError(f"invalid config: run {str(run)!r} is complete ({meta.get('timesteps')} steps); nothing to resume")
+    ckpt = latest_checkpoint(out)
+    if ckpt is None:
+        raise ConfigError(f"invalid config: run {str(run)!r} has no checkpoint in {str(out / 'checkpoints')!r} to resume from")
+    if ckpt["vecnormalize"] is None:
+        raise ConfigError(f"invalid config: checkpoint {str(ckpt['model'])!r} has no VecNormalize statistics beside it")
+    torch.set_num_threads(cfg["torch_threads"])
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from accd_gym.sb3 import AccdVecEnv
+
+    base = AccdVecEnv(num_envs=cfg["num_envs"], seed=cfg["seed"], num_threads=cfg["num_threads"], **cfg["env"])
+    if ckpt["env_state"] is not None:
+        base.set_state(ckpt["env_state"].read_bytes())
+        base._base_seed = None  # continue the saved episode sequence instead of reseeding
+    env = VecNormalize.load(str(ckpt["vecnormalize"]), VecMonitor(base, info_keywords=("captured",)))
+    env.training = True
+    cls = {"ppo": PPO, "sac": SAC}[cfg["algo"]]
+    model = cls.load(str(ckpt["model"]), env=env, device=cfg["device"], tensorboard_log=str(out / "tb"))
+    if ckpt["replay_buffer"] is not None and hasattr(model, "load_replay_buffer"):
+        model.load_replay_buffer(str(ckpt["replay_buffer"]))
+    meta.setdefault("resumed", []).append({"from_steps": ckpt["steps"], "checkpoint": str(ckpt["model"])})
+    meta["status"] = "training"
+    _write_meta(out, meta)
+    return _learn(model, env, cfg, out, meta, progress=progress, fresh=False)
+
+
+def _learn(model: Any, env: Any, cfg: dict[str, Any], out: Path, meta: dict[str, Any], *, progress: bool,
+           fresh: bool) -> dict[str, Any]:
+    """Runs ``model.learn`` to the config's total with checkpoints; on SIGINT/SIGTERM writes a
+    checkpoint and marks the run interrupted, else writes the final model. Returns ``meta``."""
+    import torch
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
+
     checkpoints = CheckpointCallback(
         save_freq=max(1, cfg["checkpoint_every"] // cfg["num_envs"]),
         save_path=str(out / "checkpoints"),
-        name_prefix=f"{cfg['algo']}_accd",
+        name_prefix=_prefix(cfg),
         save_vecnormalize=True,
     )
+    remaining = cfg["total_timesteps"] - (0 if fresh else int(model.num_timesteps))
     t0 = time.time()
-    model.learn(
-        total_timesteps=cfg["total_timesteps"],
-        callback=CallbackList([checkpoints, _capture_callback()]),
-        progress_bar=progress,
-        tb_log_name=cfg["algo"],
-    )
+    start_steps = 0 if fresh else int(model.num_timesteps)
+    interrupted: Optional[str] = None
+    try:
+        with _terminate_raises_interrupt():
+            if remaining > 0:
+                model.learn(
+                    total_timesteps=remaining,
+                    callback=CallbackList([checkpoints, _capture_callback()]),
+                    progress_bar=progress,
+                    tb_log_name=cfg["algo"],
+                    reset_num_timesteps=fresh,
+                )
+    except KeyboardInterrupt as e:
+        interrupted = str(e) or "SIGINT"
     wall = time.time() - t0
-    model.save(str(out / "final_model.zip"))
-    env.save(str(out / "vecnormalize.pkl"))
-    meta.update(
-        status="done",
-        timesteps=int(model.num_timesteps),
-        wall_time_s=round(wall, 1),
-        steps_per_s=round(model.num_timesteps / wall, 1),
-        torch_version=torch.__version__,
-    )
-    (out / "run.json").write_text(json.dumps(meta, indent=1))
+    with _signals_deferred():
+        done = int(model.num_timesteps)
+        meta.update(
+            timesteps=done,
+            wall_time_s=round(meta.get("wall_time_s", 0.0) + wall, 1),
+            steps_per_s=round((done - start_steps) / wall, 1) if wall > 0 else None,
+            torch_version=torch.__version__,
+        )
+        if interrupted is not None:
+            ckpt = _save_checkpoint(model, env, cfg, out)
+            meta.update(status="interrupted", interrupted_by=interrupted, checkpoint=str(ckpt["model"]),
+                        vecnormalize=str(ckpt["vecnormalize"]))
+        else:
+            model.save(str(out / "final_model.zip"))
+            env.save(str(out / "vecnormalize.pkl"))
+            meta.update(status="done")
+            for key in ("checkpoint", "vecnormalize", "interrupted_by"):
+                meta.pop(key, None)
+        _write_meta(out, meta)
     env.close()
     return meta
 
 
-__all__ = ["DEFAULTS", "load_config", "make_training_env", "train", "validate_config"]
+def _writable_folder(out: str | Path) -> Path:
+    """``out`` created if needed; ConfigError naming it when it cannot be created or written."""
+    p = Path(out)
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+        probe = p / ".accd-write-test"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as e:
+        raise ConfigError(f"invalid config: --out {str(out)!r} is not a writable folder ({e.strerror or e})") from None
+    return p
+
+
+__all__ = ["DEFAULTS", "latest_checkpoint", "load_config", "make_training_env", "resume", "train", "validate_config"]

@@ -183,6 +183,9 @@ pub struct BatchEnv {
     autoreset: Autoreset,
     pool: rayon::ThreadPool,
     threads: usize,
+    /// Set when a step or reset panicked (a bug): the envs may be half-stepped, so every later
+    /// call fails with [`BatchError::Internal`].
+    poisoned: Option<String>,
 }
 
 impl BatchEnv {
@@ -195,6 +198,21 @@ impl BatchEnv {
         autoreset: Autoreset,
         threads: usize,
     ) -> Result<BatchEnv> {
+        BatchEnv::new_interruptible(config, num_envs, seed, autoreset, threads, &mut || false)
+    }
+
+    /// [`BatchEnv::new`], asking `interrupted()` after every physics step of the settling and
+    /// after every env built, and stopping with [`SimError::Interrupted`] when it returns true.
+    /// The envs' estimated memory ([`EnvConfig::bytes_per_env`]) must fit the budget of
+    /// [`crate::memory::budget_bytes`].
+    pub fn new_interruptible(
+        config: EnvConfig,
+        num_envs: usize,
+        seed: u64,
+        autoreset: Autoreset,
+        threads: usize,
+        interrupted: &mut dyn FnMut() -> bool,
+    ) -> Result<BatchEnv> {
         if !(1..=65_536).contains(&num_envs) {
             return Err(SimError::invalid_config("num_envs", num_envs, "[1, 65536]").into());
         }
@@ -202,8 +220,9 @@ impl BatchEnv {
             return Err(SimError::invalid_config("num_threads", threads, "[0, 1024]").into());
         }
         config.validate()?;
+        crate::memory::check_budget(&config, num_envs)?;
         let config = Arc::new(config);
-        let equilibrium = Arc::new(Equilibrium::settle(&config)?);
+        let equilibrium = Arc::new(Equilibrium::settle_interruptible(&config, interrupted)?);
         let schedule = WakeSchedule::from_config(&config);
         let n = num_envs as u64;
         let first = Episode::new(
@@ -216,6 +235,13 @@ impl BatchEnv {
             let mut episode = first.clone();
             let base = seed.wrapping_add(i);
             episode.reset(episode_seeds(base, 0, i, n, &schedule))?;
+            if interrupted() {
+                return Err(SimError::Interrupted {
+                    time: 0.0,
+                    what: format!("building env {i} of {num_envs}"),
+                }
+                .into());
+            }
             slots.push(Slot {
                 episode,
                 base,
@@ -237,6 +263,7 @@ impl BatchEnv {
             autoreset,
             pool,
             threads,
+            poisoned: None,
         })
     }
 
@@ -324,6 +351,7 @@ impl BatchEnv {
         mask: Option<&[bool]>,
         out: ResetBuffers<'_>,
     ) -> Result<()> {
+        self.check_poisoned()?;
         let n = self.slots.len();
         check_len("obs", out.obs.len(), n * OBS_DIM)?;
         check_len("wake_seed", out.wake_seed.len(), n)?;
@@ -361,13 +389,16 @@ impl BatchEnv {
                 }
             };
             let slots = &mut self.slots;
-            self.pool.install(|| {
-                slots
-                    .par_iter_mut()
-                    .zip(results.par_iter_mut())
-                    .enumerate()
-                    .for_each(job)
-            });
+            let pool = &self.pool;
+            run(&mut self.poisoned, || {
+                pool.install(|| {
+                    slots
+                        .par_iter_mut()
+                        .zip(results.par_iter_mut())
+                        .enumerate()
+                        .for_each(job)
+                })
+            })?;
             results
         };
         for (i, r) in results.into_iter().enumerate() {
@@ -386,6 +417,7 @@ impl BatchEnv {
     /// One agent step of every env with `actions` (`N * ACT_DIM` flap commands in [-1, 1],
     /// clipped). A non-finite action is an error naming the env; no env is stepped then.
     pub fn step(&mut self, actions: &[f32], out: StepBuffers<'_>) -> Result<()> {
+        self.check_poisoned()?;
         let n = self.slots.len();
         check_len("actions", actions.len(), n * ACT_DIM)?;
         check_len("obs", out.obs.len(), n * OBS_DIM)?;
@@ -451,10 +483,11 @@ impl BatchEnv {
                 return;
             }
             *wake = slot.episode.seeds().wake;
-            let o = match catch_unwind(AssertUnwindSafe(|| slot.episode.step(action))) {
-                Ok(Ok(o)) => o,
-                // Actions were checked; a remaining error (or a panic) is a divergence.
-                Ok(Err(_)) | Err(_) => Outcome {
+            let o = match slot.episode.step(action) {
+                Ok(o) => o,
+                // Actions were checked; a remaining error is a divergence (a panic is a bug:
+                // it poisons the batch, see `run`).
+                Err(_) => Outcome {
                     terminated: true,
                     diverged: true,
                     ..Outcome::default()
@@ -480,8 +513,18 @@ impl BatchEnv {
                 }
             }
         };
-        self.pool.install(|| rows.into_par_iter().for_each(job));
-        Ok(())
+        let pool = &self.pool;
+        run(&mut self.poisoned, || {
+            pool.install(|| rows.into_par_iter().for_each(job))
+        })
+    }
+
+    /// Fails with [`BatchError::Internal`] once a step or reset has panicked.
+    fn check_poisoned(&self) -> Result<()> {
+        match &self.poisoned {
+            Some(message) => Err(BatchError::Internal(message.clone())),
+            None => Ok(()),
+        }
     }
 
     /// Saves every env's state (episodes, seeds, counters, random streams) with the config, for
@@ -601,14 +644,32 @@ fn config_json(config: &EnvConfig) -> String {
 /// episode is marked diverged and its outcome returned.
 fn restart(slot: &mut Slot, env: u64, n: u64, schedule: &WakeSchedule) -> Option<Outcome> {
     let seeds = episode_seeds(slot.base, slot.index, env, n, schedule);
-    match catch_unwind(AssertUnwindSafe(|| slot.episode.reset(seeds))) {
-        Ok(Ok(())) => None,
-        Ok(Err(_)) | Err(_) => Some(Outcome {
+    match slot.episode.reset(seeds) {
+        Ok(()) => None,
+        Err(_) => Some(Outcome {
             terminated: true,
             diverged: true,
             ..Outcome::default()
         }),
     }
+}
+
+/// Runs a parallel job; a panic in it (a bug, never a divergence) poisons the batch and becomes
+/// [`BatchError::Internal`] with the panic's message.
+fn run(poisoned: &mut Option<String>, job: impl FnOnce()) -> Result<()> {
+    if let Err(payload) = catch_unwind(AssertUnwindSafe(job)) {
+        let what = payload
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "a panic without a message".into());
+        let message = format!(
+            "internal error (a bug, please report it): {what}; this batch can no longer be used"
+        );
+        *poisoned = Some(message.clone());
+        return Err(BatchError::Internal(message));
+    }
+    Ok(())
 }
 
 fn write_info(info: &mut [f64], o: &Outcome, steps: u64) {

@@ -40,6 +40,9 @@ pub enum BatchError {
         /// The error.
         source: Box<BatchError>,
     },
+    /// A step or reset panicked: a bug, reported instead of hidden (never a divergence).
+    #[error("{0}")]
+    Internal(String),
     /// The thread pool could not be built.
     #[error("cannot start the thread pool: {0}")]
     Threads(String),

@@ -8,6 +8,7 @@
 
 pub mod batch;
 pub mod error;
+pub mod memory;
 pub mod seeds;
 
 pub use batch::{info, Autoreset, BatchEnv, ResetBuffers, SeedSpec, StepBuffers, StepOutputs};

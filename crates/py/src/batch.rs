@@ -14,6 +14,7 @@ use pyo3::types::{PyBytes, PyDict, PyTuple};
 use crate::arrays::{vector_to_py, vectors_to_py};
 use crate::capture::sim_to_py;
 use crate::errors::{raise, Kind};
+use crate::signals::SignalCheck;
 
 /// Maps batch errors to the Python exception tree (bad actions and shapes are `StateError`, a
 /// `ValueError`).
@@ -26,6 +27,7 @@ fn batch_to_py(error: BatchError) -> PyErr {
         BatchError::Env { .. } | BatchError::Threads(_) => {
             raise(Kind::Simulation, error.to_string())
         }
+        BatchError::Internal(message) => pyo3::exceptions::PyRuntimeError::new_err(message),
     }
 }
 
@@ -54,6 +56,19 @@ impl Buffers {
             autoreset: PyArray1::from_vec(py, vec![false; n]).unbind(),
         }
     }
+
+    /// Whether Rust may write every array now: a caller may have made one read-only
+    /// (``flags.writeable = False``) or hold a borrow of it.
+    fn writable(&self, py: Python<'_>) -> bool {
+        self.obs.bind(py).try_readwrite().is_ok()
+            && self.final_obs.bind(py).try_readwrite().is_ok()
+            && self.reward.bind(py).try_readwrite().is_ok()
+            && self.terminated.bind(py).try_readwrite().is_ok()
+            && self.truncated.bind(py).try_readwrite().is_ok()
+            && self.info.bind(py).try_readwrite().is_ok()
+            && self.wake_seed.bind(py).try_readwrite().is_ok()
+            && self.autoreset.bind(py).try_readwrite().is_ok()
+    }
 }
 
 /// N In-Air Capturing episodes stepped by one call (internal; use ``accd_gym.AccdVecEnv`` or
@@ -61,12 +76,26 @@ impl Buffers {
 ///
 /// ``step`` and ``reset`` return numpy arrays owned by this object, written in place by Rust.
 /// Two sets are used alternately: an array returned by one call stays valid through the next
-/// call and is overwritten by the call after it. Copy what you keep longer.
+/// call and is overwritten by the call after it. Copy what you keep longer. An array the caller
+/// made read-only (or holds a borrow of) is left alone: that set is replaced by new arrays.
 #[pyclass(name = "BatchEnv", module = "accd_gym._core")]
 pub struct PyBatchEnv {
     inner: BatchEnv,
     buffers: [Buffers; 2],
     next: usize,
+}
+
+impl PyBatchEnv {
+    /// The next buffer set, replaced by new arrays if the caller made one of its arrays
+    /// read-only; flips the alternation.
+    fn next_buffers(&mut self, py: Python<'_>) -> &Buffers {
+        let i = self.next;
+        self.next = 1 - self.next;
+        if !self.buffers[i].writable(py) {
+            self.buffers[i] = Buffers::new(py, self.inner.num_envs());
+        }
+        &self.buffers[i]
+    }
 }
 
 fn parse_autoreset(mode: &str) -> PyResult<Autoreset> {
@@ -98,9 +127,16 @@ impl PyBatchEnv {
     ) -> PyResult<Self> {
         let mode = parse_autoreset(autoreset_mode)?;
         let config = EnvConfig::from_json(config_json).map_err(sim_to_py)?;
-        let inner = py
-            .detach(|| BatchEnv::new(config, num_envs, seed, mode, num_threads))
-            .map_err(batch_to_py)?;
+        let mut check = SignalCheck::new();
+        let built = py.detach(|| {
+            BatchEnv::new_interruptible(config, num_envs, seed, mode, num_threads, &mut || {
+                check.interrupted()
+            })
+        });
+        if let Some(e) = check.take() {
+            return Err(e);
+        }
+        let inner = built.map_err(batch_to_py)?;
         let n = inner.num_envs();
         Ok(PyBatchEnv {
             inner,
@@ -152,8 +188,7 @@ impl PyBatchEnv {
                 })?),
             },
         };
-        let b = &self.buffers[self.next];
-        self.next = 1 - self.next;
+        let b = self.next_buffers(py);
         let obs = b.obs.bind(py).clone();
         let wake = b.wake_seed.bind(py).clone();
         {
@@ -196,7 +231,7 @@ impl PyBatchEnv {
         let a = actions
             .as_slice()
             .map_err(|_| raise(Kind::State, "actions must be a C-contiguous float32 array"))?;
-        let b = &self.buffers[self.next];
+        let b = self.next_buffers(py);
         let arrays = (
             b.obs.bind(py).clone(),
             b.reward.bind(py).clone(),
@@ -229,7 +264,6 @@ impl PyBatchEnv {
             let inner = &mut self.inner;
             py.detach(|| inner.step(a, buffers)).map_err(batch_to_py)?;
         }
-        self.next = 1 - self.next;
         PyTuple::new(
             py,
             [

@@ -5,10 +5,11 @@ use accd_sim::{CaptureConfig, CaptureSim, Seeds, SimError};
 use accd_tether::TetherConfig;
 use nalgebra::Vector3;
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyFloat};
+use pyo3::types::{PyBool, PyDict, PyFloat};
 
 use crate::arrays::{vector_to_py, vectors_to_py};
 use crate::errors::{raise, IntoPy, Kind};
+use crate::signals::SignalCheck;
 
 /// Maps every simulation error to its Python class.
 pub fn sim_to_py(error: SimError) -> PyErr {
@@ -17,7 +18,9 @@ pub fn sim_to_py(error: SimError) -> PyErr {
         SimError::InvalidConfig { .. } | SimError::InvalidTable { .. } | SimError::Io { .. } => {
             raise(Kind::Config, error.to_string())
         }
-        SimError::Diverged { .. } => raise(Kind::Simulation, error.to_string()),
+        SimError::Diverged { .. } | SimError::Interrupted { .. } => {
+            raise(Kind::Simulation, error.to_string())
+        }
     }
 }
 
@@ -90,15 +93,8 @@ fn build(
         .map_err(|e| raise(Kind::Config, format!("invalid config: {e}")))?;
     let mut merged = serde_json::to_value(&base).expect("a config serializes");
     merge(&mut merged, &patch);
-    let config: CaptureConfig = serde_json::from_value(merged).map_err(|e| {
-        let message = e.to_string();
-        let message = message
-            .split(" at line ")
-            .next()
-            .unwrap_or(&message)
-            .to_string();
-        raise(Kind::Config, format!("invalid config: {message}"))
-    })?;
+    let config: CaptureConfig =
+        accd_sim::task::parse_named(&merged.to_string()).map_err(sim_to_py)?;
     config.validate().map_err(sim_to_py)?;
     Ok(config)
 }
@@ -106,9 +102,88 @@ fn build(
 /// Flap deflections (right, left, top, bottom) from pitch, yaw and roll commands, in the unit of
 /// the inputs (paper Fig. 5): pitch (nose up) moves both horizontal flaps, yaw (nose right) both
 /// vertical flaps, roll (right side down) all four differentially.
+///
+/// Raises ``StateError`` for a non-finite command.
 #[pyfunction]
-pub fn mix_flaps(pitch: f64, yaw: f64, roll: f64) -> [f64; 4] {
-    mix(pitch, yaw, roll)
+pub fn mix_flaps(pitch: f64, yaw: f64, roll: f64) -> PyResult<[f64; 4]> {
+    for (name, v) in [("pitch", pitch), ("yaw", yaw), ("roll", roll)] {
+        if !v.is_finite() {
+            return Err(raise(
+                Kind::State,
+                format!("`{name}` = {v} must be a finite number"),
+            ));
+        }
+    }
+    Ok(mix(pitch, yaw, roll))
+}
+
+/// A seed argument: a Python or numpy integer in [0, 2^64); bools, floats and strings are
+/// refused (`ConfigError` naming the argument).
+pub fn seed_from_py(name: &str, value: &Bound<'_, PyAny>) -> PyResult<u64> {
+    let bad = || {
+        raise(
+            Kind::Config,
+            format!(
+                "invalid config: `{name}` = {} is outside the allowed range: an integer in [0, 2^64)",
+                value.repr().map(|r| r.to_string()).unwrap_or_default()
+            ),
+        )
+    };
+    if value.is_instance_of::<PyBool>() || value.is_instance_of::<PyFloat>() {
+        return Err(bad());
+    }
+    // Integers and numpy integers implement __index__; floats, strings and numpy floats do not.
+    let index = value.call_method0("__index__").map_err(|_| bad())?;
+    index.extract::<u64>().map_err(|_| bad())
+}
+
+/// Flap commands: a sequence of 4 real numbers (Python or numpy floats and ints); bools,
+/// complex numbers, strings and non-finite values are refused (`StateError`).
+fn commands_from_py(name: &str, value: &Bound<'_, PyAny>) -> PyResult<[f64; 4]> {
+    let items: Vec<Bound<'_, PyAny>> = value
+        .try_iter()
+        .map_err(|_| {
+            raise(
+                Kind::State,
+                format!("`{name}` must be a sequence of 4 real numbers"),
+            )
+        })?
+        .collect::<PyResult<_>>()?;
+    if items.len() != 4 {
+        return Err(raise(
+            Kind::State,
+            format!("`{name}` has {} values, expected 4", items.len()),
+        ));
+    }
+    let mut out = [0.0; 4];
+    for (i, item) in items.iter().enumerate() {
+        let real = !item.is_instance_of::<PyBool>()
+            && !item.is_instance_of::<pyo3::types::PyString>()
+            && !item.is_instance_of::<pyo3::types::PyComplex>()
+            && item
+                .getattr("dtype")
+                .and_then(|d| d.getattr("kind"))
+                .map(|k| k.to_string() == "f" || k.to_string() == "i" || k.to_string() == "u")
+                .unwrap_or(true);
+        let v = if real {
+            item.extract::<f64>().ok()
+        } else {
+            None
+        };
+        match v {
+            Some(v) if v.is_finite() => out[i] = v,
+            _ => {
+                return Err(raise(
+                    Kind::State,
+                    format!(
+                        "`{name}[{i}]` = {} must be a finite real number",
+                        item.repr().map(|r| r.to_string()).unwrap_or_default()
+                    ),
+                ))
+            }
+        }
+    }
+    Ok(out)
 }
 
 /// The default aerodynamic tables of the ACCD as JSON in the documented file format (see
@@ -145,18 +220,48 @@ pub struct PyCaptureSim {
     seeds: Seeds,
 }
 
+impl PyCaptureSim {
+    /// `steps` physics steps with `command` (rad), the GIL released, Python's signal handlers
+    /// run every 50 ms (a raised `KeyboardInterrupt` stops after the current step).
+    fn run(&mut self, py: Python<'_>, steps: usize, command: [f64; 4]) -> PyResult<()> {
+        let inner = &mut self.inner;
+        let mut check = SignalCheck::new();
+        let result = py.detach(|| {
+            for _ in 0..steps {
+                inner.step(command)?;
+                if check.interrupted() {
+                    break;
+                }
+            }
+            Ok::<(), SimError>(())
+        });
+        if let Some(e) = check.take() {
+            return Err(e);
+        }
+        result.map_err(sim_to_py)
+    }
+}
+
 #[pymethods]
 impl PyCaptureSim {
     #[new]
-    #[pyo3(signature = (config = None, *, tether_preset = "table3", calm = false, seed = 0, wake_seed = None))]
+    #[pyo3(signature = (config = None, *, tether_preset = "table3", calm = false, seed = None, wake_seed = None))]
     fn new(
         py: Python<'_>,
         config: Option<&Bound<'_, PyDict>>,
         tether_preset: &str,
         calm: bool,
-        seed: u64,
-        wake_seed: Option<u64>,
+        seed: Option<&Bound<'_, PyAny>>,
+        wake_seed: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
+        let seed = seed
+            .map(|s| seed_from_py("seed", s))
+            .transpose()?
+            .unwrap_or(0);
+        let wake_seed = wake_seed
+            .filter(|w| !w.is_none())
+            .map(|w| seed_from_py("wake_seed", w))
+            .transpose()?;
         let config = build(py, tether_preset, calm, config)?;
         let seeds = Seeds {
             initial: seed,
@@ -209,30 +314,16 @@ impl PyCaptureSim {
     fn step<'py>(
         &mut self,
         py: Python<'py>,
-        flap_commands_deg: Option<Vec<f64>>,
+        flap_commands_deg: Option<&Bound<'py, PyAny>>,
         steps: usize,
     ) -> PyResult<Bound<'py, PyDict>> {
         let command = match flap_commands_deg {
-            None => [0.0; 4],
-            Some(v) => {
-                let arr: [f64; 4] = v.clone().try_into().map_err(|_| {
-                    raise(
-                        Kind::State,
-                        format!("`flap_commands_deg` has {} values, expected 4", v.len()),
-                    )
-                })?;
-                if let Some(i) = arr.iter().position(|x| !x.is_finite()) {
-                    return Err(raise(
-                        Kind::State,
-                        format!("`flap_commands_deg[{i}]` = {} must be finite", arr[i]),
-                    ));
-                }
-                arr.map(f64::to_radians)
+            Some(v) if !v.is_none() => {
+                commands_from_py("flap_commands_deg", v)?.map(f64::to_radians)
             }
+            _ => [0.0; 4],
         };
-        let inner = &mut self.inner;
-        py.detach(|| inner.step_many(steps, command))
-            .map_err(sim_to_py)?;
+        self.run(py, steps, command)?;
         self.state(py)
     }
 
@@ -246,7 +337,8 @@ impl PyCaptureSim {
             ));
         }
         let steps = (duration / self.inner.time_step()).round() as usize;
-        self.step(py, None, steps)
+        self.run(py, steps, [0.0; 4])?;
+        self.state(py)
     }
 
     /// The full state as a dict (SI units, TA frame):

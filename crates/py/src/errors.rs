@@ -7,6 +7,9 @@
 //!  +-- SimulationError (also RuntimeError) the simulation diverged
 //! ```
 //!
+//! An interrupted loop raises what the signal handler raised (see [`crate::signals`]); a bug
+//! (a panic) is a `RuntimeError`, never one of these.
+//!
 //! The classes are defined in Python (multiple inheritance from the built-ins) and looked up here
 //! when an error is raised, which is rare, so no caching is needed.
 
@@ -52,7 +55,7 @@ pub fn to_py(error: TetherError) -> PyErr {
     let kind = match &error {
         TetherError::InvalidConfig { .. } | TetherError::ConfigParse { .. } => Kind::Config,
         TetherError::WrongSize { .. } | TetherError::InvalidState { .. } => Kind::State,
-        TetherError::Diverged { .. } => Kind::Simulation,
+        TetherError::Diverged { .. } | TetherError::Interrupted { .. } => Kind::Simulation,
     };
     raise(kind, error.to_string())
 }

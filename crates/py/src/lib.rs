@@ -7,11 +7,22 @@
 //! code runs, so other Python threads proceed, but a second call on the *same* object from another
 //! thread during that time raises `RuntimeError: Already borrowed`. Different objects step in
 //! parallel freely. `BatchEnv` steps its envs on a thread pool of its own (rayon).
+//!
+//! # Signals
+//! Loops that may run long with the GIL released (`Tether.step`/`advance`,
+//! `CaptureSim.step`/`settle`, building a `BatchEnv`) check Python's signal handlers every
+//! 50 ms ([`signals`]) and raise what they raise (`KeyboardInterrupt` on Ctrl+C) after the
+//! current whole step, the object keeping that step's state.
+//!
+//! # Panics
+//! A panic is a bug. None is caught and re-labelled: `BatchEnv` reports one from its worker
+//! threads as `RuntimeError` ("internal error") and refuses further use.
 
 mod arrays;
 mod batch;
 mod capture;
 mod errors;
+mod signals;
 mod tether;
 
 use pyo3::prelude::*;

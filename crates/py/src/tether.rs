@@ -10,6 +10,7 @@ use pyo3::types::{PyDict, PyFloat};
 
 use crate::arrays::{floats_from_py, vector_from_py, vector_to_py, vectors_from_py, vectors_to_py};
 use crate::errors::{raise, IntoPy, Kind};
+use crate::signals::SignalCheck;
 
 /// A config from a preset name and a dict of overrides (unknown keys and bad values raise
 /// `ConfigError`).
@@ -46,7 +47,7 @@ fn build_config(
             target.insert(k.clone(), v.clone());
         }
     }
-    TetherConfig::from_json(&merged.to_string()).map_err(|e| match e {
+    let config = TetherConfig::from_json(&merged.to_string()).map_err(|e| match e {
         // Positions in the merged document mean nothing to the caller: keep the message only.
         accd_tether::TetherError::ConfigParse { message } => {
             let message = message
@@ -54,10 +55,21 @@ fn build_config(
                 .next()
                 .unwrap_or(&message)
                 .to_string();
-            raise(Kind::Config, format!("invalid tether config: {message}"))
+            match accd_sim::task::locate_parse_error::<TetherConfig>(&merged) {
+                Some((field, value)) => raise(
+                    Kind::Config,
+                    format!(
+                        "invalid tether config: `{field}` = {value} is outside the allowed range: {message}"
+                    ),
+                ),
+                None => raise(Kind::Config, format!("invalid tether config: {message}")),
+            }
         }
         other => crate::errors::to_py(other),
-    })
+    })?;
+    // The configs of this module are for stepping: the same rule as `Tether::new`.
+    config.validate_for_stepping().py_err()?;
+    Ok(config)
 }
 
 fn config_to_dict<'py>(py: Python<'py>, config: &TetherConfig) -> PyResult<Bound<'py, PyAny>> {
@@ -468,16 +480,25 @@ impl PyTether {
         Ok(d)
     }
 
-    /// Advances ``steps`` fixed RK4 steps (the GIL is released meanwhile).
+    /// Advances ``steps`` fixed steps (the GIL is released meanwhile). Each step takes as many
+    /// RK4 substeps as the chain's fastest mode needs at the current tension (one for Table 3).
     ///
     /// Raises:
+    ///     KeyboardInterrupt: Ctrl+C (signal handlers run every 50 ms); the tether keeps the
+    ///         state of the last whole step.
     ///     SimulationError: the state diverged (non-finite, a joint folded completely, or a segment
     ///         reached the chart's lateral singularity); the tether keeps the last good state.
     #[pyo3(signature = (steps = 1))]
     fn step(&mut self, py: Python<'_>, steps: usize) -> PyResult<()> {
         let flow = self.flow;
         let inner = &mut self.inner;
-        py.detach(|| inner.step_many(steps, &flow)).py_err()
+        let mut check = SignalCheck::new();
+        let result =
+            py.detach(|| inner.step_many_interruptible(steps, &flow, &mut || check.interrupted()));
+        if let Some(e) = check.take() {
+            return Err(e);
+        }
+        result.py_err()
     }
 
     /// Advances by ``duration`` seconds, rounded to whole steps; returns the number of steps.

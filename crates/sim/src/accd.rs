@@ -48,8 +48,10 @@ pub struct AccdConfig {
     pub actuator_time_constant: f64,
     /// Rate limit of the flap actuators, degrees per second (0, 5000]. Default 300.
     pub actuator_rate_limit_deg_s: f64,
-    /// Path of an aerodynamic table file (see [`crate::aero`]); `None` uses the default finned
-    /// body ([`crate::aero::FinnedBody::accd`]).
+    /// Path of an aerodynamic table file (see [`crate::aero`]), or the table itself as a JSON
+    /// object in the file format (text starting with `{`: a configuration that carries its
+    /// table, for pickles and saved envs); `None` uses the default finned body
+    /// ([`crate::aero::FinnedBody::accd`]).
     pub aero_table: Option<String>,
 }
 
@@ -151,12 +153,29 @@ impl AccdConfig {
         V3::new(-(self.length - self.cg_from_nose), 0.0, 0.0)
     }
 
-    /// The aerodynamic model this config names.
+    /// The aerodynamic model this config names; a flap limit beyond the table's deflection
+    /// range (where the table would hold its edge values) is an error.
     pub fn aero_model(&self) -> Result<AeroModel> {
-        match &self.aero_table {
-            None => Ok(AeroModel::accd()),
-            Some(path) => AeroModel::from_path(std::path::Path::new(path)),
+        let model = match &self.aero_table {
+            None => AeroModel::accd(),
+            Some(text) if text.trim_start().starts_with('{') => {
+                AeroModel::from_json(text, "accd.aero_table (inline)")?
+            }
+            Some(path) => AeroModel::from_path(std::path::Path::new(path))?,
+        };
+        let (lo, hi) = model.deflection_range_deg();
+        let reach = (-lo).min(hi);
+        // Degrees and radians round trip within a few ulps.
+        if self.flap_limit_deg > reach + 1e-9 {
+            return Err(SimError::invalid_config(
+                "accd.flap_limit_deg",
+                self.flap_limit_deg,
+                &format!(
+                    "(0, {reach}] deg: the aerodynamic table covers deflections [{lo}, {hi}] deg"
+                ),
+            ));
         }
+        Ok(model)
     }
 }
 

@@ -240,7 +240,17 @@ impl FinnedBody {
     }
 }
 
+/// The largest flap deflection of the default tables ([`AeroModel::from_finned_body`]), deg.
+pub const DEFAULT_DEFLECTION_LIMIT_DEG: f64 = 15.0;
+
 impl AeroModel {
+    /// The deflection axis's range, deg: beyond it the tables hold their edge values.
+    pub fn deflection_range_deg(&self) -> (f64, f64) {
+        let first = self.deflection.first().copied().unwrap_or(0.0);
+        let last = self.deflection.last().copied().unwrap_or(0.0);
+        (first.to_degrees(), last.to_degrees())
+    }
+
     /// Tabulates `body` on alpha, beta in [-30, 30] degrees every 2.5 degrees and deflections in
     /// [-15, 15] degrees every 2.5 degrees.
     pub fn from_finned_body(body: &FinnedBody) -> Self {
@@ -252,7 +262,11 @@ impl AeroModel {
         };
         let alpha = axis(-30.0, 30.0, 2.5);
         let beta = alpha.clone();
-        let deflection = axis(-15.0, 15.0, 2.5);
+        let deflection = axis(
+            -DEFAULT_DEFLECTION_LIMIT_DEG,
+            DEFAULT_DEFLECTION_LIMIT_DEG,
+            2.5,
+        );
         let mut base = Vec::with_capacity(alpha.len() * beta.len());
         for &a in &alpha {
             for &b in &beta {

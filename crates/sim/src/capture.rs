@@ -30,6 +30,9 @@ use crate::wake_field::WakeField;
 
 type V3 = Vector3<f64>;
 
+/// ISA sea-level density, kg/m^3: the densest air an episode meets, for stability estimates.
+const SEA_LEVEL_DENSITY: f64 = 1.225;
+
 /// Disturbances of the air relative to the free stream (wake, turbulence), anywhere in the TA
 /// frame. `velocity` must be a pure function during a step; `advance` moves time-dependent
 /// parts (turbulence) forward once per step.
@@ -127,7 +130,8 @@ impl CaptureConfig {
         self.aircraft.validate()?;
         self.boom.validate()?;
         self.wake.validate()?;
-        self.turbulence.validate()
+        self.turbulence.validate()?;
+        crate::task::check_cross_fields(self)
     }
 
     /// The paper's open-loop setting (section 4): no wake, no turbulence ("no wake unless stated").
@@ -167,12 +171,8 @@ fn capture_point(position: &V3, velocity: &V3, accd: &AccdState, offset: &V3) ->
 
 /// Parses a JSON config document; serde's message (unknown field, wrong type, with the line and
 /// column) becomes an [`SimError::InvalidConfig`] for `what`.
-pub(crate) fn parse_json<T: serde::de::DeserializeOwned>(text: &str, what: &str) -> Result<T> {
-    serde_json::from_str(text).map_err(|e| SimError::InvalidConfig {
-        field: what.into(),
-        value: String::new(),
-        allowed: e.to_string(),
-    })
+pub(crate) fn parse_json<T: serde::de::DeserializeOwned>(text: &str, _what: &str) -> Result<T> {
+    crate::task::parse_named(text)
 }
 
 /// The seeds of an episode's independent random streams.
@@ -254,6 +254,9 @@ struct Buffers {
     qd: Vec<f64>,
     qd_k: [Vec<f64>; 3],
     a_k: [Vec<f64>; 4],
+    /// The state between substeps (see [`TetherConfig::substeps_for`]).
+    spare_q: Vec<f64>,
+    spare_qd: Vec<f64>,
 }
 
 /// What the stepper derives from the current state once and uses several times (the boom before
@@ -439,6 +442,8 @@ impl CaptureSim {
                 qd: z(),
                 qd_k: [z(), z(), z()],
                 a_k: [z(), z(), z(), z()],
+                spare_q: z(),
+                spare_qd: z(),
             },
             derived: Derived {
                 centres: vec![V3::zeros(); tether_config.segments],
@@ -707,10 +712,42 @@ impl CaptureSim {
         };
         self.boom.advance(t, dt, capture_x);
         self.disturbance.advance(t, dt)?;
+        // Substeps for the chain's fastest mode (one at the default discretization).
+        let k = self.substeps();
+        if k > accd_tether::config::MAX_SUBSTEPS {
+            return Err(SimError::Diverged {
+                time: t,
+                reason: format!(
+                    "the tether's fastest mode needs {k} RK4 substeps per step (at most {})",
+                    accd_tether::config::MAX_SUBSTEPS
+                ),
+            });
+        }
         // The state is read while the stage buffers are written: lend it out for the step.
         let q0 = std::mem::take(&mut self.tether.q);
         let qd0 = std::mem::take(&mut self.tether.qd);
-        let result = self.integrate(t, dt, &q0, &qd0);
+        let h = dt / k as f64;
+        let mut result = self.integrate(t, h, &q0, &qd0);
+        if k > 1 {
+            let accd0 = self.accd;
+            let mut q = std::mem::take(&mut self.buffers.spare_q);
+            let mut qd = std::mem::take(&mut self.buffers.spare_qd);
+            for j in 1..k {
+                let Ok((attitude, omega)) = result else { break };
+                self.accd = AccdState {
+                    attitude: UnitQuaternion::new_normalize(attitude),
+                    omega,
+                };
+                std::mem::swap(&mut q, &mut self.buffers.q);
+                std::mem::swap(&mut qd, &mut self.buffers.qd);
+                result = self.integrate(t + j as f64 * h, h, &q, &qd);
+            }
+            self.buffers.spare_q = q;
+            self.buffers.spare_qd = qd;
+            if result.is_err() {
+                self.accd = accd0;
+            }
+        }
         match result {
             Ok((attitude, omega)) => {
                 // The new state is in the buffers; the old vectors become the next buffers.
@@ -825,6 +862,22 @@ impl CaptureSim {
             });
         }
         Ok((att, w))
+    }
+
+    /// RK4 substeps of the next step ([`TetherConfig::substeps_for`]) under the load of the
+    /// current state ([`accd_tether::config::StepLoad::of_state`], the ACCD as tip mass), with
+    /// sea-level density (an upper bound) at the aircraft's airspeed. One for the default
+    /// configuration.
+    pub fn substeps(&self) -> usize {
+        let c = &self.config.tether;
+        let load = accd_tether::config::StepLoad::of_state(
+            c,
+            &self.tether,
+            self.config.accd.mass,
+            SEA_LEVEL_DENSITY,
+            self.config.aircraft.airspeed,
+        );
+        c.substeps_for(&load)
     }
 
     /// Steps `steps` times with the same commands.

@@ -35,12 +35,29 @@ pub struct Equilibrium {
 impl Equilibrium {
     /// Settles the config's system open loop (turbulence off).
     pub fn settle(config: &EnvConfig) -> Result<Equilibrium> {
+        Equilibrium::settle_interruptible(config, &mut || false)
+    }
+
+    /// [`Equilibrium::settle`], asking `interrupted()` after every physics step and stopping
+    /// with [`SimError::Interrupted`] when it returns true.
+    pub fn settle_interruptible(
+        config: &EnvConfig,
+        interrupted: &mut dyn FnMut() -> bool,
+    ) -> Result<Equilibrium> {
         let mut capture = config.capture();
         capture.turbulence.wake_turbulence = false;
         capture.turbulence.ambient = AmbientTurbulence::None;
         let mut sim = CaptureSim::new(&capture, Seeds::default())?;
         let steps = (config.initial.settle_time / sim.time_step()).round() as usize;
-        sim.step_many(steps, [0.0; 4])?;
+        for _ in 0..steps {
+            sim.step([0.0; 4])?;
+            if interrupted() {
+                return Err(SimError::Interrupted {
+                    time: sim.time(),
+                    what: "settling the open-loop equilibrium".into(),
+                });
+            }
+        }
         let position = sim.snapshot()?.position;
         let mut tether = sim.tether_state().clone();
         tether.time = 0.0;

@@ -39,6 +39,14 @@ pub enum SimError {
         /// What was detected.
         reason: String,
     },
+    /// A long loop was stopped by its interruption check (e.g. Ctrl+C between steps).
+    #[error("interrupted at t = {time:.4} s ({what})")]
+    Interrupted {
+        /// Simulation time reached, s.
+        time: f64,
+        /// What was running.
+        what: String,
+    },
     /// The tether model reported an error.
     #[error(transparent)]
     Tether(#[from] accd_tether::TetherError),

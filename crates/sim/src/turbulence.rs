@@ -208,6 +208,37 @@ fn lane_count(range: [f64; 2], spacing: f64) -> usize {
 }
 
 impl TurbulenceConfig {
+    /// Number of wake-turbulence lanes (0 when wake turbulence is off).
+    pub fn lanes(&self) -> usize {
+        if !self.wake_turbulence {
+            return 0;
+        }
+        let spacing = self.wake_length_scale_m;
+        lane_count(self.lanes_y_m, spacing) * lane_count(self.lanes_z_m, spacing)
+    }
+
+    /// Channels per grid time: 3 per lane, then 3 ambient when on.
+    pub fn channels(&self) -> usize {
+        3 * self.lanes() + if self.ambient.is_on() { 3 } else { 0 }
+    }
+
+    /// Grid times the history keeps at `airspeed_mps` (one when there are no channels: nothing
+    /// to keep, and filling an empty history of 4e10 grid times at 1e-6 m/s took hours).
+    pub fn history_slots(&self, airspeed_mps: f64) -> usize {
+        if self.channels() == 0 {
+            return 1;
+        }
+        let max_delay = self.history_distance_m / airspeed_mps;
+        (max_delay / self.time_step_s).ceil() as usize + 3
+    }
+
+    /// Bytes of one episode's gust history at `airspeed_mps` (f32 per channel and grid time).
+    pub fn history_bytes(&self, airspeed_mps: f64) -> usize {
+        self.history_slots(airspeed_mps)
+            .saturating_mul(self.channels())
+            .saturating_mul(std::mem::size_of::<f32>())
+    }
+
     /// Checks every value; errors name the field as `turbulence.<field>`.
     pub fn validate(&self) -> Result<()> {
         let l = self.wake_length_scale_m;
@@ -386,15 +417,11 @@ impl Turbulence {
             inv_spacing: 1.0 / spacing,
             count: lane_count(config.lanes_z_m, spacing),
         };
-        let lanes = if config.wake_turbulence {
-            lanes_y.count * lanes_z.count
-        } else {
-            0
-        };
+        let lanes = config.lanes();
         let ambient = config.ambient.is_on();
-        let channels = 3 * lanes + if ambient { 3 } else { 0 };
+        let channels = config.channels();
         let max_delay = config.history_distance_m / airspeed_mps;
-        let slots = (max_delay / dt).ceil() as usize + 3;
+        let slots = config.history_slots(airspeed_mps);
         if slots * channels > MAX_RING_ENTRIES {
             return Err(SimError::invalid_config(
                 "turbulence.history_distance_m",

@@ -4,6 +4,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, TetherError};
 use crate::material::Material;
+use crate::state::TetherState;
 
 /// Standard gravity, m/s^2 (ISO 80000-3).
 pub const STANDARD_GRAVITY: f64 = 9.80665;
@@ -64,6 +65,84 @@ pub struct TetherConfig {
 impl Default for TetherConfig {
     fn default() -> Self {
         TetherConfig::table3()
+    }
+}
+
+/// The largest `|lambda| dt` a step may take, where `lambda` is the fastest eigenvalue of the
+/// linearised chain ([`TetherConfig::fastest_rate`]). Classical RK4 is stable up to 2.83 on the
+/// imaginary axis and 2.79 on the negative real axis; 2.5 leaves a margin for the estimate.
+pub const RK4_STABILITY_LIMIT: f64 = 2.5;
+
+/// The most RK4 substeps one step of [`TetherConfig::time_step`] is split into; a configuration
+/// needing more is refused with the largest stable step in the message.
+pub const MAX_SUBSTEPS: usize = 64;
+
+/// What the stability estimate of a step ([`TetherConfig::fastest_rate`]) reads from the state
+/// and the surroundings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepLoad {
+    /// The largest tension along the chain, N.
+    pub tension: f64,
+    /// Air density, kg/m^3.
+    pub density: f64,
+    /// Speed of the air past the tether, m/s.
+    pub airspeed: f64,
+    /// The fastest segment's angular rate, rad/s.
+    pub max_rate: f64,
+    /// Mass the axial element moves, kg: the whole tether and tip for a straight chain (less
+    /// where a kink lets the chain beyond it swing instead of following).
+    pub axial_mass: f64,
+}
+
+impl StepLoad {
+    /// A straight chain at rest carrying `tension` in air of `density` at `airspeed`, with
+    /// `tip_mass` (kg) at its end.
+    pub fn at_rest(
+        config: &TetherConfig,
+        tension: f64,
+        density: f64,
+        airspeed: f64,
+        tip_mass: f64,
+    ) -> StepLoad {
+        StepLoad {
+            tension,
+            density,
+            airspeed,
+            max_rate: 0.0,
+            axial_mass: config.total_mass() + tip_mass,
+        }
+    }
+
+    /// The load of `state`: the tension is the larger of the axial element's (`k s` and
+    /// `k s + c_s s'`) and the hanging weight, the fastest rate the largest angular rate; the
+    /// axial mass that of a straight chain. (The point-mass apparent mass along segment 1,
+    /// `m_1 + cos^2(theta_12) (m_2 + ...)`, was tried and does not foresee the divergence of a
+    /// 50 kg/m tether either, at n trigonometric evaluations a step; see issue 13.)
+    pub fn of_state(
+        config: &TetherConfig,
+        state: &TetherState,
+        tip_mass: f64,
+        density: f64,
+        airspeed: f64,
+    ) -> StepLoad {
+        let elastic = config.axial_stiffness * state.q[0];
+        let tension = elastic
+            .abs()
+            .max((elastic + config.axial_damping() * state.qd[0]).abs())
+            .max((config.total_mass() + tip_mass) * config.gravity);
+        let max_rate = state
+            .qd
+            .iter()
+            .skip(1)
+            .fold(0.0, |m: f64, v| m.max(v.abs()));
+        let axial_mass = config.total_mass() + tip_mass;
+        StepLoad {
+            tension,
+            density,
+            airspeed,
+            max_rate,
+            axial_mass,
+        }
     }
 }
 
@@ -353,6 +432,15 @@ impl TetherConfig {
         ranges.iter().try_for_each(Range::check)
     }
 
+    /// [`TetherConfig::validate`] and the rule a configuration to be stepped must also meet: a
+    /// step that substepping can keep stable for the chain hanging still
+    /// ([`TetherConfig::check_stability`] at [`TetherConfig::static_tension`]). The model alone
+    /// (linearisations, mass matrices) needs only the first.
+    pub fn validate_for_stepping(&self) -> Result<()> {
+        self.validate()?;
+        self.check_stability(self.static_tension(), 0.0, 0.0, self.tip_mass)
+    }
+
     /// Segment length l = L / n, m.
     pub fn segment_length(&self) -> f64 {
         self.length / self.segments as f64
@@ -381,6 +469,104 @@ impl TetherConfig {
     /// Number of generalized coordinates, 2n + 1.
     pub fn dofs(&self) -> usize {
         2 * self.segments + 1
+    }
+
+    /// Magnitude of the fastest eigenvalue of the linearised chain under `load`, 1/s.
+    ///
+    /// Two modes bound it. The zig-zag of the rods (neighbours turning opposite ways about
+    /// their centres): for one rod of mass `m = mu l` and inertia `I = m l^2 / 12`, the tension
+    /// `T` at both ends restores it with `T l`, the two bending springs (`EI / l` each, the joint
+    /// angle twice the rod's) with `4 EI / l`, joint damping and the linearised cross-flow drag
+    /// damp it. The axial element (`k`, `c_s`) moving the chain's apparent mass `M_a` along
+    /// segment 1. For each, `|lambda| = sigma / 2 + sqrt(sigma^2 / 4 + omega^2)`, with
+    ///
+    /// ```text
+    /// zig-zag: omega^2 = 12 T / (mu l^2) + 48 EI / (mu l^4),  sigma = 48 c1 / l^2 + rho C_n d V / mu
+    /// axial:   omega^2 = k / M_a,                              sigma = c_s / M_a
+    /// ```
+    ///
+    /// and `2 Omega` is added for a segment turning at `Omega` (a whipping end: centrifugal and
+    /// gyroscopic terms grow perturbations at rates of order `Omega`).
+    ///
+    /// At n = 300 (Table 3 otherwise) and 3.4 kN the zig-zag gives about 480 rad/s: RK4 at
+    /// 0.01 s is outside its stability region there, at n = 30 (about 45 rad/s) far inside.
+    /// Known gap: a 50 kg/m tether (axial damping 1.25e6 N s/m) diverges through its axial mode
+    /// about 15 s after the straight start at 0.01 s (it runs at 0.0025 s) although this estimate
+    /// stays low: the mass the axial element moves must drop far below the straight chain's.
+    pub fn fastest_rate(&self, load: &StepLoad) -> f64 {
+        let l = self.segment_length();
+        let mu = self.mass_per_length;
+        let mode = |omega2: f64, sigma: f64| 0.5 * sigma + (0.25 * sigma * sigma + omega2).sqrt();
+        let zigzag = mode(
+            12.0 * load.tension.abs() / (mu * l * l)
+                + 48.0 * self.flexural_rigidity / (mu * l.powi(4)),
+            48.0 * self.joint_damping_per_mass / (l * l)
+                + load.density.abs()
+                    * self.normal_drag_coefficient
+                    * self.diameter
+                    * load.airspeed.abs()
+                    / mu,
+        );
+        let m_a = load.axial_mass.max(self.segment_mass());
+        let axial = mode(self.axial_stiffness / m_a, self.axial_damping() / m_a);
+        zigzag.max(axial) + 2.0 * load.max_rate.abs()
+    }
+
+    /// RK4 substeps per [`TetherConfig::time_step`] that keep `|lambda| dt / k` within
+    /// [`RK4_STABILITY_LIMIT`] under `load` (at least 1). Not capped: compare with
+    /// [`MAX_SUBSTEPS`].
+    pub fn substeps_for(&self, load: &StepLoad) -> usize {
+        let r = self.fastest_rate(load) * self.time_step;
+        if !r.is_finite() {
+            return usize::MAX;
+        }
+        ((r / RK4_STABILITY_LIMIT).ceil() as usize).max(1)
+    }
+
+    /// Checks that the step can be kept stable by substepping for a straight chain at rest
+    /// carrying `tension` (N) in air of `density` at `airspeed`, with `tip_mass`: at most
+    /// [`MAX_SUBSTEPS`] substeps. The error names the largest step stable without substeps.
+    pub fn check_stability(
+        &self,
+        tension: f64,
+        density: f64,
+        airspeed: f64,
+        tip_mass: f64,
+    ) -> Result<()> {
+        let load = StepLoad::at_rest(self, tension, density, airspeed, tip_mass);
+        let k = self.substeps_for(&load);
+        if k <= MAX_SUBSTEPS {
+            return Ok(());
+        }
+        let stable = RK4_STABILITY_LIMIT / self.fastest_rate(&load);
+        Err(TetherError::invalid_config(
+            "time_step",
+            self.time_step,
+            &format!(
+                "(0, {:.3e}] s for this discretization: segments = {} and length = {} m make \
+                 segments of {:.3} m, which with mass_per_length = {} kg/m, flexural_rigidity = {} \
+                 N m^2, joint_damping_per_mass = {}, axial_stiffness = {} N/m, \
+                 axial_damping_per_mass = {} and an estimated peak tension of {:.3e} N give a \
+                 fastest mode needing {k} RK4 substeps (at most {MAX_SUBSTEPS} are taken; the \
+                 largest stable step is {stable:.3e} s): use fewer segments, a longer tether or a \
+                 shorter time_step",
+                stable * MAX_SUBSTEPS as f64,
+                self.segments,
+                self.length,
+                self.segment_length(),
+                self.mass_per_length,
+                self.flexural_rigidity,
+                self.joint_damping_per_mass,
+                self.axial_stiffness,
+                self.axial_damping_per_mass,
+                tension
+            ),
+        ))
+    }
+
+    /// A bound of the tension the tether carries hanging still: its weight and the tip's, N.
+    pub fn static_tension(&self) -> f64 {
+        (self.total_mass() + self.tip_mass) * self.gravity
     }
 }
 

@@ -49,6 +49,17 @@ pub enum TetherError {
         /// What was detected (non-finite state, coordinate singularity, mass matrix not positive definite).
         reason: String,
     },
+    /// A long loop was stopped by its interruption check (e.g. Ctrl+C); the state is the one
+    /// reached after the last whole step.
+    #[error("interrupted at t = {time:.4} s after {done} of {requested} steps")]
+    Interrupted {
+        /// Simulation time reached, s.
+        time: f64,
+        /// Whole steps taken.
+        done: usize,
+        /// Steps asked for.
+        requested: usize,
+    },
 }
 
 impl TetherError {

@@ -6,13 +6,19 @@ use crate::error::{Result, TetherError};
 use crate::state::TetherState;
 use crate::surroundings::Surroundings;
 
-/// Whether any entry is infinite or NaN (a loop the compiler vectorizes: exponent bits all set).
+/// The largest magnitude a coordinate (m, rad) or rate (m/s, rad/s) may reach: beyond it a state
+/// is a divergence, even where it is still finite (a state of 1e63 gives infinite energies).
+pub const STATE_BOUND: f64 = 1e6;
+
+/// Whether any entry is NaN or beyond `bound` in magnitude (for positive `bound`, the bits of
+/// `|x|` compare as the values do; NaN and infinity compare above every finite bound).
 #[inline]
-fn any_non_finite(v: &[f64]) -> bool {
-    const EXPONENT: u64 = 0x7FF0_0000_0000_0000;
+fn any_beyond(v: &[f64], bound: f64) -> bool {
+    const MAGNITUDE: u64 = 0x7FFF_FFFF_FFFF_FFFF;
+    let limit = bound.to_bits();
     let mut any = 0u64;
     for x in v {
-        any |= u64::from(x.to_bits() & EXPONENT == EXPONENT);
+        any |= u64::from(x.to_bits() & MAGNITUDE > limit);
     }
     any != 0
 }
@@ -95,16 +101,22 @@ impl Rk4 {
                 qd[i] + w * (self.a1[i] + 2.0 * (self.a2[i] + self.a3[i]) + self.a4[i]);
         }
         let new_time = t + dt;
-        if any_non_finite(&self.q_stage) || any_non_finite(&self.qd_stage) {
-            let i = self
+        if any_beyond(&self.q_stage, STATE_BOUND) || any_beyond(&self.qd_stage, STATE_BOUND) {
+            let (i, v) = self
                 .q_stage
                 .iter()
                 .chain(self.qd_stage.iter())
-                .position(|v| !v.is_finite())
-                .unwrap_or(0);
+                .copied()
+                .enumerate()
+                .find(|(_, v)| v.is_nan() || v.abs() > STATE_BOUND)
+                .unwrap_or((0, f64::NAN));
+            let what = if i < dim { "q" } else { "qd" };
             return Err(TetherError::Diverged {
                 time: new_time,
-                reason: format!("state entry {i} became non-finite"),
+                reason: format!(
+                    "{what}[{}] = {v:e} is non-finite or beyond {STATE_BOUND:e}",
+                    i % dim
+                ),
             });
         }
         std::mem::swap(&mut state.q, &mut self.q_stage);

@@ -2,7 +2,7 @@
 
 use nalgebra::Vector3;
 
-use crate::config::TetherConfig;
+use crate::config::{StepLoad, TetherConfig};
 use crate::dynamics::{Energy, TetherModel};
 use crate::error::{Result, TetherError};
 use crate::integrator::Rk4;
@@ -13,23 +13,32 @@ use crate::surroundings::Surroundings;
 ///
 /// A new tether trails straight back from the aircraft (all segments along -x), at rest and
 /// unstretched, at t = 0: the paper's initial condition of section 4.
+///
+/// Each [`Tether::step`] of [`TetherConfig::time_step`] is split into as many RK4 substeps as the
+/// chain's fastest mode needs at the current attachment tension and air
+/// ([`TetherConfig::substeps_for`]): one for Table 3's n = 30 at 0.01 s, so its steps are plain
+/// RK4 steps; two or more for fine discretizations (n = 300) that a single step would blow up.
 #[derive(Debug, Clone)]
 pub struct Tether {
     model: TetherModel,
     state: TetherState,
+    /// The state before a substepped step, restored when a substep fails.
+    backup: TetherState,
     rk4: Rk4,
     qdd: Vec<f64>,
 }
 
 impl Tether {
-    /// Builds a tether from a config (validated).
+    /// Builds a tether from a config (validated, [`TetherConfig::validate_for_stepping`]).
     pub fn new(config: &TetherConfig) -> Result<Self> {
+        config.validate_for_stepping()?;
         let model = TetherModel::new(config)?;
         let state = TetherState::straight(config.segments, Vector3::new(-1.0, 0.0, 0.0), 0.0)?;
         Ok(Tether {
             rk4: Rk4::new(model.dofs()),
             qdd: vec![0.0; model.dofs()],
             model,
+            backup: state.clone(),
             state,
         })
     }
@@ -68,11 +77,54 @@ impl Tether {
         self.config().time_step
     }
 
-    /// One RK4 step of the configured length. On error the state is unchanged.
+    /// RK4 substeps the next step takes, from the state and the air at the attachment
+    /// ([`StepLoad::of_state`], [`TetherConfig::substeps_for`]).
+    pub fn substeps<S: Surroundings + ?Sized>(&self, surroundings: &S) -> usize {
+        let c = self.config();
+        let s = &self.state;
+        let origin = Vector3::zeros();
+        let airspeed = surroundings.air_velocity(s.time, &origin).norm();
+        let density = surroundings.air_density(s.time, &origin);
+        c.substeps_for(&StepLoad::of_state(c, s, c.tip_mass, density, airspeed))
+    }
+
+    /// One step of the configured length (see [`Tether::substeps`]). On error the state is
+    /// unchanged. A step that would need more than [`crate::config::MAX_SUBSTEPS`] substeps is
+    /// a divergence.
     pub fn step<S: Surroundings + ?Sized>(&mut self, surroundings: &S) -> Result<()> {
         let dt = self.model.config().time_step;
-        self.rk4
-            .step(&mut self.model, &mut self.state, surroundings, dt)
+        let k = self.substeps(surroundings);
+        if k == 1 {
+            return self
+                .rk4
+                .step(&mut self.model, &mut self.state, surroundings, dt);
+        }
+        if k > crate::config::MAX_SUBSTEPS {
+            return Err(TetherError::Diverged {
+                time: self.state.time,
+                reason: format!(
+                    "the chain's fastest mode needs {k} RK4 substeps per step (at most {}): the \
+                     tension or the rates are beyond what this discretization can follow",
+                    crate::config::MAX_SUBSTEPS
+                ),
+            });
+        }
+        let t0 = self.state.time;
+        self.backup.time = t0;
+        self.backup.q.copy_from_slice(&self.state.q);
+        self.backup.qd.copy_from_slice(&self.state.qd);
+        let h = dt / k as f64;
+        for _ in 0..k {
+            if let Err(e) = self
+                .rk4
+                .step(&mut self.model, &mut self.state, surroundings, h)
+            {
+                std::mem::swap(&mut self.state, &mut self.backup);
+                return Err(e);
+            }
+        }
+        self.state.time = t0 + dt;
+        Ok(())
     }
 
     /// Steps `steps` times, stopping at the first error.
@@ -81,8 +133,27 @@ impl Tether {
         steps: usize,
         surroundings: &S,
     ) -> Result<()> {
-        for _ in 0..steps {
+        self.step_many_interruptible(steps, surroundings, &mut || false)
+    }
+
+    /// Steps `steps` times, stopping at the first error, and after any whole step at which
+    /// `interrupted()` returns true ([`TetherError::Interrupted`]; the state is that step's).
+    /// Long loops of the bindings pass a check of the caller's signals here.
+    pub fn step_many_interruptible<S: Surroundings + ?Sized>(
+        &mut self,
+        steps: usize,
+        surroundings: &S,
+        interrupted: &mut dyn FnMut() -> bool,
+    ) -> Result<()> {
+        for done in 0..steps {
             self.step(surroundings)?;
+            if interrupted() {
+                return Err(TetherError::Interrupted {
+                    time: self.state.time,
+                    done: done + 1,
+                    requested: steps,
+                });
+            }
         }
         Ok(())
     }

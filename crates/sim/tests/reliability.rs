@@ -1,0 +1,63 @@
+//! Regression tests of issue 13 for the capture simulation: configuration errors name the field,
+//! cross-field rules hold, the coupled step substeps fine tethers and never the default one, and
+//! an empty gust history is not filled grid time by grid time.
+
+use accd_sim::{CaptureConfig, CaptureSim, EnvConfig, Seeds, TurbulenceConfig};
+
+#[test]
+fn a_value_of_the_wrong_type_is_named_by_its_field() {
+    for (doc, field) in [
+        (r#"{"capture_window": "long"}"#, "`capture_window`"),
+        (r#"{"tether": {"segments": -1}}"#, "`tether.segments`"),
+        (r#"{"reward": {"capture": [1]}}"#, "`reward.capture`"),
+        (r#"{"capture_windw": 3}"#, "`capture_windw`"),
+    ] {
+        let e = EnvConfig::from_json(doc).unwrap_err().to_string();
+        assert!(
+            e.contains(field) && !e.contains("line 1 column"),
+            "{doc}: {e}"
+        );
+    }
+    let e = EnvConfig::from_json("[1]").unwrap_err().to_string();
+    assert!(e.contains("JSON object"), "{e}");
+}
+
+#[test]
+fn a_flap_limit_beyond_the_default_table_is_refused() {
+    let mut c = CaptureConfig::default();
+    c.accd.flap_limit_deg = 20.0;
+    let e = c.validate().unwrap_err().to_string();
+    assert!(e.contains("accd.flap_limit_deg") && e.contains("15"), "{e}");
+    c.accd.flap_limit_deg = 15.0;
+    c.validate().unwrap();
+}
+
+#[test]
+fn the_default_step_is_one_rk4_step_and_fine_tethers_substep() {
+    let mut sim = CaptureSim::new(&CaptureConfig::default(), Seeds::default()).unwrap();
+    for _ in 0..2000 {
+        assert_eq!(sim.substeps(), 1, "t = {}", sim.time());
+        sim.step([0.0; 4]).unwrap();
+    }
+    let mut fine = CaptureConfig::calm();
+    fine.tether.segments = 300;
+    let mut sim = CaptureSim::new(&fine, Seeds::default()).unwrap();
+    let mut most = 1;
+    for _ in 0..2000 {
+        most = most.max(sim.substeps());
+        sim.step([0.0; 4]).unwrap();
+    }
+    assert!(most >= 2 && sim.attachment_tension().is_finite());
+}
+
+#[test]
+fn no_gust_channels_keep_no_history() {
+    let calm = TurbulenceConfig {
+        wake_turbulence: false,
+        ..TurbulenceConfig::default()
+    };
+    assert_eq!(calm.channels(), 0);
+    assert_eq!(calm.history_slots(1e-6), 1);
+    assert_eq!(calm.history_bytes(1e-6), 0);
+    assert!(TurbulenceConfig::default().history_slots(185.0) > 100);
+}

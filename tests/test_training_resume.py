@@ -1,0 +1,103 @@
+"""Issue 13, item 6: training survives interruption. SIGINT or SIGTERM during ``accd-gym train``
+writes a checkpoint with the normalization statistics and the envs' state and marks the run
+interrupted; ``--resume`` continues to the same total; evaluating the unfinished run uses the
+latest checkpoint and says so; a model without its statistics is refused unless asked for."""
+
+import json
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+import accd_gym
+from accd_gym import training
+from accd_gym.cli import main
+from accd_gym.evaluation import SB3Policy
+
+SHORT = {"capture_window": 5.0}
+TOTAL = 1024
+
+
+def _config(tmp_path, total):
+    cfg = {"algo": "ppo", "total_timesteps": total, "num_envs": 4, "num_threads": 1, "seed": 1, "env": SHORT,
+           "algo_kwargs": {"n_steps": 32, "batch_size": 64, "n_epochs": 2},
+           "policy_kwargs": {"net_arch": [16, 16]}, "checkpoint_every": 128}
+    path = tmp_path / "cfg.json"
+    path.write_text(json.dumps(cfg))
+    return path
+
+
+def _train_until_first_checkpoint_then(sig, tmp_path):
+    """Runs ``accd-gym train`` in a child process, sends ``sig`` once a checkpoint exists;
+    returns (exit code, stderr, run folder)."""
+    run = tmp_path / "run"
+    cfg = _config(tmp_path, 10**7)
+    child = subprocess.Popen([sys.executable, "-m", "accd_gym", "train", "--config", str(cfg), "--out", str(run),
+                              "--quiet"], stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not list((run / "checkpoints").glob("*.zip")) and time.monotonic() < deadline:
+        assert child.poll() is None, child.stderr.read()
+        time.sleep(0.1)
+    child.send_signal(sig)
+    _, err = child.communicate(timeout=120)
+    return child.returncode, err, run
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_interrupted_training_checkpoints_and_resumes_to_the_same_total(sig, tmp_path, capsys):
+    rc, err, run = _train_until_first_checkpoint_then(sig, tmp_path)
+    assert rc == 130, err
+    assert "interrupted" in err and "--resume" in err and "Traceback" not in err
+    meta = json.loads((run / "run.json").read_text())
+    assert meta["status"] == "interrupted" and meta["timesteps"] > 0
+    ckpt = training.latest_checkpoint(run)
+    assert ckpt["steps"] == meta["timesteps"] and ckpt["vecnormalize"] is not None and ckpt["env_state"] is not None
+    assert not (run / "final_model.zip").exists()
+
+    # evaluating the unfinished run uses its latest checkpoint and says so
+    with pytest.warns(UserWarning, match="latest checkpoint"):
+        policy = SB3Policy(run)
+    assert "latest checkpoint" in policy.note and policy.normalizer is not None
+
+    # resume to a total just above the interruption (the test's budget), with the same config
+    meta["config"]["total_timesteps"] = meta["timesteps"] + 256
+    (run / "run.json").write_text(json.dumps(meta))
+    assert main(["train", "--resume", str(run), "--quiet"]) == 0
+    done = json.loads((run / "run.json").read_text())
+    assert done["status"] == "done" and done["timesteps"] >= meta["timesteps"] + 256
+    assert done["resumed"][0]["from_steps"] == meta["timesteps"]
+    assert (run / "final_model.zip").is_file() and (run / "vecnormalize.pkl").is_file()
+    assert main(["train", "--resume", str(run), "--quiet"]) == 2  # a finished run has nothing to resume
+    assert "complete" in capsys.readouterr().err
+
+
+def test_evaluate_of_an_interrupted_run_says_so_in_the_report(tmp_path, capsys):
+    rc, err, run = _train_until_first_checkpoint_then(signal.SIGINT, tmp_path)
+    assert rc == 130, err
+    out = tmp_path / "eval"
+    with pytest.warns(UserWarning):
+        assert main(["evaluate", "--policy", str(run), "--episodes", "2", "--num-envs", "2", "--num-threads", "1",
+                     "--env", json.dumps(SHORT), "--out", str(out), "--quiet"]) == 0
+    assert "latest checkpoint" in capsys.readouterr().err
+    assert "latest checkpoint" in (out / "summary.md").read_text()
+    assert "latest checkpoint" in json.loads((out / "results.json").read_text())["policies"][str(run)]["note"]
+
+
+def test_a_model_without_its_statistics_is_refused_unless_asked_for(tmp_path):
+    cfg = training.load_config(str(_config(tmp_path, 256)))
+    run = tmp_path / "ppo"
+    training.train(cfg, run, progress=False)
+    lone = tmp_path / "lone"
+    lone.mkdir()
+    shutil.copy(run / "final_model.zip", lone / "final_model.zip")
+    shutil.copy(run / "run.json", lone / "run.json")
+    with pytest.raises(accd_gym.ConfigError, match="VecNormalize statistics"):
+        SB3Policy(lone)
+    assert main(["rollout", "--policy", str(lone), "--episodes", "1", "--num-envs", "1", "--quiet"]) == 2
+    with pytest.warns(UserWarning, match="unnormalised"):
+        policy = SB3Policy(lone, allow_unnormalized=True)
+    assert policy.normalizer is None
+    assert SB3Policy(run).normalizer is not None
