@@ -8,7 +8,7 @@ import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
 from accd_gym import _core
-from accd_gym.config import config_json, env_config
+from accd_gym.config import config_json, env_config, self_contained
 from accd_gym.core_env import CoreEnvMixin
 from accd_gym.errors import ConfigError
 from accd_gym.task import (
@@ -61,7 +61,8 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
                 f"invalid config: `render_mode` = {render_mode!r} is outside the allowed range 'rgb_array' or None"
             )
         self.render_mode = render_mode
-        self._config = env_config(config)
+        # A user aerodynamic table is kept as its contents: pickles and saved states need no file.
+        self._config = self_contained(env_config(config))
         base = random_seed() if seed is None else check_seed(seed)
         self._core = _core.BatchEnv(config_json(self._config), int(num_envs), base, "same_step", int(num_threads))
         self._actions: Optional[np.ndarray] = None
@@ -154,10 +155,15 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
             "render_mode": self.render_mode,
             "config": self._config,
             "state": self.get_state(),
+            # What seed() and set_options() left for the next reset().
+            "base_seed": self._base_seed,
+            "pending_options": self._pending_options,
         }
 
     def __setstate__(self, d: dict[str, Any]) -> None:
         self.__init__(d["num_envs"], num_threads=d["num_threads"], render_mode=d["render_mode"], **d["config"])
         self.set_state(d["state"])
+        self._base_seed = d["base_seed"]
+        self._pending_options = d["pending_options"]
 
 

@@ -10,7 +10,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from accd_gym import _core
-from accd_gym.config import config_json, env_config
+from accd_gym.config import config_json, env_config, self_contained
 from accd_gym.core_env import CoreEnvMixin
 from accd_gym.errors import ConfigError
 from accd_gym.task import (
@@ -108,7 +108,8 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
             raise ConfigError(
                 f"invalid config: `render_mode` = {render_mode!r} is outside the allowed range 'rgb_array' or None"
             )
-        self._config = env_config(config)
+        # A user aerodynamic table is kept as its contents: pickles and saved states need no file.
+        self._config = self_contained(env_config(config))
         check_max_episode_steps(max_episode_steps, self._config)
         self._core = _core.BatchEnv(config_json(self._config), int(num_envs), random_seed(), _MODES[mode], int(num_threads))
         self.num_envs = self._core.num_envs
