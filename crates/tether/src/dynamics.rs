@@ -586,15 +586,7 @@ impl TetherModel {
         qd: &[f64],
         centres: &mut [V3],
     ) -> Result<(V3, V3)> {
-        self.check_len("q", q)?;
-        self.check_len("qd", qd)?;
-        if centres.len() != self.n {
-            return Err(TetherError::WrongSize {
-                what: "segment centres",
-                expected: self.n,
-                found: centres.len(),
-            });
-        }
+        self.check_walk(q, qd, centres)?;
         let mut k = 0;
         Ok(self.walk(q, qd, |_, _, centre, _| {
             centres[k] = centre;
@@ -611,15 +603,7 @@ impl TetherModel {
         qd: &[f64],
         centres: &mut [V3],
     ) -> Result<(V3, V3)> {
-        self.check_len("q", q)?;
-        self.check_len("qd", qd)?;
-        if centres.len() != self.n {
-            return Err(TetherError::WrongSize {
-                what: "segment centres",
-                expected: self.n,
-                found: centres.len(),
-            });
-        }
+        self.check_walk(q, qd, centres)?;
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
         {
@@ -647,6 +631,20 @@ impl TetherModel {
             *c = ch.com.get(k);
         }
         (ch.tip, ch.tip_vel)
+    }
+
+    /// The argument checks of the walks that fill segment centres.
+    fn check_walk(&self, q: &[f64], qd: &[f64], centres: &[V3]) -> Result<()> {
+        self.check_len("q", q)?;
+        self.check_len("qd", qd)?;
+        if centres.len() != self.n {
+            return Err(TetherError::WrongSize {
+                what: "segment centres",
+                expected: self.n,
+                found: centres.len(),
+            });
+        }
+        Ok(())
     }
 
     /// Tip position (m) and velocity (m/s) in the TA frame.
