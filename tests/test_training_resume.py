@@ -101,3 +101,15 @@ def test_a_model_without_its_statistics_is_refused_unless_asked_for(tmp_path):
         policy = SB3Policy(lone, allow_unnormalized=True)
     assert policy.normalizer is None
     assert SB3Policy(run).normalizer is not None
+
+
+def test_the_first_signal_stops_at_the_next_env_step_and_a_second_one_at_once():
+    # Regression: a SIGTERM raised inside Adam's first step left its state half initialised, and
+    # the checkpoint written then could not be resumed (KeyError 'exp_avg' in a fresh-clone run).
+    stop = training._StopRequest()
+    callback = stop.callback()
+    assert callback._on_step() is True
+    stop.handler(signal.SIGTERM, None)
+    assert stop.signal_name == "signal SIGTERM" and callback._on_step() is False
+    with pytest.raises(KeyboardInterrupt):
+        stop.handler(signal.SIGINT, None)

@@ -213,21 +213,52 @@ def _capture_callback():
     return CaptureStats()
 
 
-@contextlib.contextmanager
-def _terminate_raises_interrupt():
-    """While active (main thread only), SIGTERM raises KeyboardInterrupt as SIGINT does."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
+class _StopRequest:
+    """SIGINT and SIGTERM during training, turned into a request to stop at the next env step.
 
-    def handler(signum: int, frame: Any) -> None:
-        raise KeyboardInterrupt(f"signal {signal.Signals(signum).name}")
+    Raising ``KeyboardInterrupt`` from the handler could cut an optimizer step in half (Adam's
+    state half initialised: a checkpoint written then cannot be resumed), so the first signal only
+    sets :attr:`signal_name`; :meth:`callback` makes ``learn`` return at the next env step, after
+    the gradient update under way. A second signal raises ``KeyboardInterrupt`` at once (no new
+    checkpoint: the run keeps its periodic ones).
+    """
 
-    previous = signal.signal(signal.SIGTERM, handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+    def __init__(self) -> None:
+        self.signal_name: Optional[str] = None
+
+    def handler(self, signum: int, frame: Any) -> None:
+        """The signal handler: remember the first signal, raise on the second."""
+        name = signal.Signals(signum).name
+        if self.signal_name is not None:
+            raise KeyboardInterrupt(f"signal {name} (second)")
+        self.signal_name = f"signal {name}"
+
+    @contextlib.contextmanager
+    def installed(self):
+        """While active (main thread only), SIGINT and SIGTERM request the stop."""
+        if threading.current_thread() is not threading.main_thread():
+            yield
+            return
+        previous = {sig: signal.signal(sig, self.handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            yield
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+
+    def callback(self):
+        """An SB3 callback that stops ``learn`` once a stop was requested."""
+        from stable_baselines3.common.callbacks import BaseCallback
+
+        request = self
+
+        class StopOnSignal(BaseCallback):
+            """Returns False from ``_on_step`` after SIGINT or SIGTERM."""
+
+            def _on_step(self) -> bool:
+                return request.signal_name is None
+
+        return StopOnSignal()
 
 
 @contextlib.contextmanager
@@ -415,19 +446,26 @@ def _learn(model: Any, env: Any, cfg: dict[str, Any], out: Path, meta: dict[str,
     remaining = cfg["total_timesteps"] - (0 if fresh else int(model.num_timesteps))
     t0 = time.time()
     start_steps = 0 if fresh else int(model.num_timesteps)
-    interrupted: Optional[str] = None
+    stop = _StopRequest()
     try:
-        with _terminate_raises_interrupt():
+        with stop.installed():
             if remaining > 0:
                 model.learn(
                     total_timesteps=remaining,
-                    callback=CallbackList([checkpoints, _capture_callback()]),
+                    callback=CallbackList([checkpoints, _capture_callback(), stop.callback()]),
                     progress_bar=progress,
                     tb_log_name=cfg["algo"],
                     reset_num_timesteps=fresh,
                 )
     except KeyboardInterrupt as e:
-        interrupted = str(e) or "SIGINT"
+        # A second signal (or Ctrl+C outside the handler's reach): the model may be mid-update,
+        # so no checkpoint of it is written; the run is marked and keeps its periodic ones.
+        with _signals_deferred():
+            meta.update(status="interrupted", interrupted_by=str(e) or "SIGINT", timesteps=int(model.num_timesteps))
+            _write_meta(out, meta)
+        env.close()
+        raise
+    interrupted = stop.signal_name
     wall = time.time() - t0
     with _signals_deferred():
         done = int(model.num_timesteps)
