@@ -233,18 +233,9 @@ class _StopRequest:
             raise KeyboardInterrupt(f"signal {name} (second)")
         self.signal_name = f"signal {name}"
 
-    @contextlib.contextmanager
     def installed(self):
         """While active (main thread only), SIGINT and SIGTERM request the stop."""
-        if threading.current_thread() is not threading.main_thread():
-            yield
-            return
-        previous = {sig: signal.signal(sig, self.handler) for sig in (signal.SIGINT, signal.SIGTERM)}
-        try:
-            yield
-        finally:
-            for sig, handler in previous.items():
-                signal.signal(sig, handler)
+        return _signal_handlers(self.handler)
 
     def callback(self):
         """An SB3 callback that stops ``learn`` once a stop was requested."""
@@ -262,18 +253,24 @@ class _StopRequest:
 
 
 @contextlib.contextmanager
-def _signals_deferred():
-    """While active (main thread only), SIGINT and SIGTERM are held back, so that a checkpoint
-    being written is not cut short; a signal that arrived meanwhile is ignored."""
+def _signal_handlers(handler: Any):
+    """While active (main thread only; elsewhere Python delivers no signals), ``handler`` takes
+    SIGINT and SIGTERM; the previous handlers come back on exit."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = {sig: signal.signal(sig, signal.SIG_IGN) for sig in (signal.SIGINT, signal.SIGTERM)}
+    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield
     finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+def _signals_deferred():
+    """While active, SIGINT and SIGTERM are held back, so that a checkpoint being written is not
+    cut short; a signal that arrived meanwhile is ignored."""
+    return _signal_handlers(signal.SIG_IGN)
 
 
 def _prefix(cfg: dict[str, Any]) -> str:

@@ -723,6 +723,10 @@ impl CaptureSim {
                 ),
             });
         }
+        // Per-step sampling: the disturbance at the step's start, held over every (sub)step.
+        if self.config.wake.sampling == AirSampling::PerStep {
+            self.hold_disturbance(t);
+        }
         // The state is read while the stage buffers are written: lend it out for the step.
         let q0 = std::mem::take(&mut self.tether.q);
         let qd0 = std::mem::take(&mut self.tether.qd);
@@ -781,9 +785,6 @@ impl CaptureSim {
         let inertia = self.inertia;
         let (att0, w0) = (*self.accd.attitude.quaternion(), self.accd.omega);
         let hold = self.config.wake.sampling == AirSampling::PerStep;
-        if hold {
-            self.hold_disturbance(t);
-        }
         let (mut stage, model, b) = self.parts_with(hold)?;
         let h = 0.5 * dt;
 
