@@ -4,17 +4,17 @@
 //!
 //! # Integration
 //! The tether coordinates and the ACCD's attitude quaternion and body rates form one state,
-//! advanced by classical RK4 at the tether's fixed step (0.01 s by default). At every stage the
+//! advanced by the tether crate's one RK4 ([`accd_tether::Rk4`] over the [`System`] `Coupled`)
+//! at the tether's fixed step (0.01 s by default). At every stage the
 //! ACCD's aerodynamic force (from its attitude, rates, flaps and the air at its position) enters
 //! the tether as the tip force, and its moment drives Euler's equations. Once per step, before
 //! the RK4 stages: the flap actuators, the boom and the air disturbance advance, and the air
 //! density is taken from ISA at the aircraft's altitude (varying linearly with depth below it).
 //! The quaternion is renormalised after each step.
 
-use std::cell::Cell;
 use std::sync::Arc;
 
-use accd_tether::{Atmosphere, Surroundings, TetherConfig, TetherModel, TetherState};
+use accd_tether::{Atmosphere, Rk4, Surroundings, System, TetherConfig, TetherModel, TetherState};
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -197,7 +197,7 @@ struct AirAtStep {
 
 /// The surroundings of the tether during one RK4 stage: free stream and disturbance at every
 /// point, the aircraft's acceleration, and the ACCD's aerodynamic force as the tip force (its
-/// loads are kept for the attitude equations).
+/// loads, the moment for the attitude equations among them, are the tip report).
 struct Stage<'a> {
     aircraft: &'a AircraftConfig,
     air: AirAtStep,
@@ -205,13 +205,14 @@ struct Stage<'a> {
     aero: &'a AeroModel,
     accd: AccdState,
     deflection: [f64; 4],
-    loads: Cell<AeroLoads>,
     /// With [`AirSampling::PerStep`]: the disturbance at each segment centre and at the tip,
     /// sampled once at the step's initial state and held over the stages.
     held: Option<(&'a [V3], V3)>,
 }
 
 impl Surroundings for Stage<'_> {
+    type TipReport = AeroLoads;
+
     fn air_velocity(&self, time: f64, position: &V3) -> V3 {
         -self.aircraft.velocity(time) + self.disturbance.velocity(time, position)
     }
@@ -229,6 +230,9 @@ impl Surroundings for Stage<'_> {
         self.aircraft.acceleration(time)
     }
     fn tip_force(&self, time: f64, position: &V3, velocity: &V3) -> V3 {
+        self.tip_loads(time, position, velocity).0
+    }
+    fn tip_loads(&self, time: f64, position: &V3, velocity: &V3) -> (V3, AeroLoads) {
         let wind = match self.held {
             Some((_, tip)) => -self.aircraft.velocity(time) + tip,
             None => self.air_velocity(time, position),
@@ -242,21 +246,84 @@ impl Surroundings for Stage<'_> {
             rho,
             &self.deflection,
         );
-        self.loads.set(loads);
-        loads.force
+        (loads.force, loads)
     }
 }
 
-/// RK4 stage buffers.
-#[derive(Debug, Clone)]
-struct Buffers {
-    q: Vec<f64>,
-    qd: Vec<f64>,
-    qd_k: [Vec<f64>; 3],
-    a_k: [Vec<f64>; 4],
-    /// The state between substeps (see [`TetherConfig::substeps_for`]).
-    spare_q: Vec<f64>,
-    spare_qd: Vec<f64>,
+/// The first-order states of the coupled system: the ACCD's attitude quaternion (coordinates
+/// i, j, k, w) and body rates (rad/s).
+const ACCD_STATES: usize = 7;
+
+/// The ACCD state as first-order states.
+fn accd_to_states(accd: &AccdState) -> [f64; ACCD_STATES] {
+    let q = accd.attitude.coords;
+    let w = accd.omega;
+    [q[0], q[1], q[2], q[3], w.x, w.y, w.z]
+}
+
+/// The (unnormalised) quaternion and body rates of first-order states.
+fn states_to_parts(x: &[f64]) -> (Quaternion<f64>, V3) {
+    (
+        Quaternion::new(x[3], x[0], x[1], x[2]),
+        V3::new(x[4], x[5], x[6]),
+    )
+}
+
+/// The capture system as the integrator sees it: the tether's coordinates, and the ACCD's
+/// attitude and rates as first-order states. At every stage the ACCD's aerodynamic loads at the
+/// stage's attitude enter the tether as its tip force and come back (the tip report) to drive
+/// Euler's equations and the quaternion kinematics `q' = q (0, omega) / 2`.
+struct Coupled<'a> {
+    model: &'a mut TetherModel,
+    stage: Stage<'a>,
+    inertia: V3,
+}
+
+impl System for Coupled<'_> {
+    fn dofs(&self) -> usize {
+        self.model.dofs()
+    }
+
+    fn first_order_states(&self) -> usize {
+        ACCD_STATES
+    }
+
+    fn derivatives(
+        &mut self,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        x: &[f64],
+        qdd: &mut [f64],
+        xd: &mut [f64],
+    ) -> accd_tether::Result<()> {
+        let (quat, omega) = states_to_parts(x);
+        self.stage.accd = AccdState {
+            attitude: UnitQuaternion::new_normalize(quat),
+            omega,
+        };
+        let loads = self.model.accelerations(time, q, qd, &self.stage, qdd)?;
+        let omega_dot = angular_acceleration(&self.inertia, &omega, &loads.moment);
+        let quat_dot = quat * Quaternion::from_parts(0.0, omega) * 0.5;
+        xd[..4].copy_from_slice(quat_dot.coords.as_slice());
+        xd[4..].copy_from_slice(omega_dot.as_slice());
+        Ok(())
+    }
+
+    /// Renormalises the quaternion (after every step; the integrator has checked that it is
+    /// finite); a zero quaternion is a divergence.
+    fn project(&self, time: f64, x: &mut [f64]) -> accd_tether::Result<()> {
+        let (quat, _) = states_to_parts(x);
+        if quat.norm() == 0.0 {
+            return Err(accd_tether::TetherError::Diverged {
+                time,
+                reason: "the ACCD's attitude quaternion vanished".into(),
+            });
+        }
+        let unit = UnitQuaternion::new_normalize(quat);
+        x[..4].copy_from_slice(unit.coords.as_slice());
+        Ok(())
+    }
 }
 
 /// What the stepper derives from the current state once and uses several times (the boom before
@@ -270,44 +337,6 @@ struct Derived {
     tip: V3,
     /// The capture point and its velocity, m and m/s.
     capture_point: (V3, V3),
-}
-
-/// One RK4 stage's state: `q = q0 + h rate`, `qd = qd0 + h acc` (slices of one length; the
-/// equal lengths let the compiler drop the bounds checks).
-#[inline(always)]
-fn stage_state(
-    q: &mut [f64],
-    qd: &mut [f64],
-    q0: &[f64],
-    qd0: &[f64],
-    rate: &[f64],
-    acc: &[f64],
-    h: f64,
-) {
-    let n = q.len();
-    let (qd, q0, qd0, rate, acc) = (&mut qd[..n], &q0[..n], &qd0[..n], &rate[..n], &acc[..n]);
-    for i in 0..n {
-        q[i] = q0[i] + h * rate[i];
-        qd[i] = qd0[i] + h * acc[i];
-    }
-}
-
-/// RK4's combination `out = x0 + sixth (k1 + 2 (k2 + k3) + k4)`.
-#[inline(always)]
-fn combine(
-    out: &mut [f64],
-    x0: &[f64],
-    k1: &[f64],
-    k2: &[f64],
-    k3: &[f64],
-    k4: &[f64],
-    sixth: f64,
-) {
-    let n = out.len();
-    let (x0, k1, k2, k3, k4) = (&x0[..n], &k1[..n], &k2[..n], &k3[..n], &k4[..n]);
-    for i in 0..n {
-        out[i] = x0[i] + sixth * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]);
-    }
 }
 
 /// A snapshot of everything a user may want to see, in the TA frame, SI units.
@@ -358,7 +387,9 @@ pub struct CaptureSim {
     actuators: Actuators,
     boom: Boom,
     disturbance: Box<dyn AirDisturbance>,
-    buffers: Buffers,
+    rk4: Rk4,
+    /// Accelerations computed along with the tensions.
+    qdd: Vec<f64>,
     derived: Derived,
     /// The disturbance held at each segment centre and at the tip over a step, for
     /// [`AirSampling::PerStep`]; a function of the step's initial state, so not saved.
@@ -384,7 +415,8 @@ impl Clone for CaptureSim {
             actuators: self.actuators,
             boom: self.boom.clone(),
             disturbance: self.disturbance.clone_box(),
-            buffers: self.buffers.clone(),
+            rk4: self.rk4.clone(),
+            qdd: self.qdd.clone(),
             derived: self.derived.clone(),
             held: self.held.clone(),
             held_tip: self.held_tip,
@@ -425,7 +457,7 @@ impl CaptureSim {
         let (tip, tip_velocity) = model.tip_state(&tether.q, &tether.qd)?;
         let (capture, _) = capture_point(&tip, &tip_velocity, &accd, &capture_offset);
         let dofs = model.dofs();
-        let z = || vec![0.0; dofs];
+        let rk4 = Rk4::new(dofs, ACCD_STATES);
         let mut sim = CaptureSim {
             inertia: config.accd.principal_inertia(),
             capture_offset,
@@ -437,14 +469,8 @@ impl CaptureSim {
             accd,
             actuators: Actuators::default(),
             disturbance,
-            buffers: Buffers {
-                q: z(),
-                qd: z(),
-                qd_k: [z(), z(), z()],
-                a_k: [z(), z(), z(), z()],
-                spare_q: z(),
-                spare_qd: z(),
-            },
+            rk4,
+            qdd: vec![0.0; dofs],
             derived: Derived {
                 centres: vec![V3::zeros(); tether_config.segments],
                 tip,
@@ -630,14 +656,11 @@ impl CaptureSim {
         })
     }
 
-    /// The surroundings of the current step (with the ACCD's current state), the tether model and
-    /// the stage buffers, borrowed apart so that the model can run while the stage is alive.
-    fn parts(&mut self) -> Result<(Stage<'_>, &mut TetherModel, &mut Buffers)> {
-        self.parts_with(false)
-    }
-
-    /// [`CaptureSim::parts`]; with `hold`, the segments see the disturbance held in the buffers.
-    fn parts_with(&mut self, hold: bool) -> Result<(Stage<'_>, &mut TetherModel, &mut Buffers)> {
+    /// The surroundings of the current step (with the ACCD's current state) and the tether
+    /// model, borrowed apart so that the model can run while the stage is alive; with `hold`
+    /// ([`AirSampling::PerStep`]), the segments and the tip see the disturbance held over the
+    /// step, otherwise the disturbance is prepared at the current state's points.
+    fn parts(&mut self, hold: bool) -> Result<(Stage<'_>, &mut TetherModel, &mut Rk4)> {
         let air = self.air_at_step()?;
         if !hold {
             // The stage samples the disturbance at the current state's points.
@@ -645,7 +668,6 @@ impl CaptureSim {
             self.disturbance
                 .prepare(std::slice::from_ref(&self.derived.tip));
         }
-        let (model, buffers) = (&mut self.model, &mut self.buffers);
         let held = hold.then_some((&self.held[..], self.held_tip));
         let stage = Stage {
             aircraft: &self.config.aircraft,
@@ -654,10 +676,9 @@ impl CaptureSim {
             aero: &self.aero,
             accd: self.accd,
             deflection: self.actuators.deflection,
-            loads: Cell::new(AeroLoads::default()),
             held,
         };
-        Ok((stage, model, buffers))
+        Ok((stage, &mut self.model, &mut self.rk4))
     }
 
     /// Samples the disturbance at the segment centres of the current state into the held
@@ -670,31 +691,6 @@ impl CaptureSim {
             *held = self.disturbance.velocity(time, centre);
         }
         self.held_tip = self.disturbance.velocity(time, &d.tip);
-    }
-
-    /// Derivatives at one stage: tether accelerations into `qdd`, and the quaternion and body-rate
-    /// rates returned.
-    #[allow(clippy::too_many_arguments)]
-    fn stage(
-        model: &mut TetherModel,
-        stage: &mut Stage<'_>,
-        inertia: &V3,
-        time: f64,
-        q: &[f64],
-        qd: &[f64],
-        quat: &Quaternion<f64>,
-        omega: &V3,
-        qdd: &mut [f64],
-    ) -> Result<(Quaternion<f64>, V3)> {
-        stage.accd = AccdState {
-            attitude: UnitQuaternion::new_normalize(*quat),
-            omega: *omega,
-        };
-        model.accelerations(time, q, qd, &*stage, qdd)?;
-        let loads = stage.loads.get();
-        let omega_dot = angular_acceleration(inertia, omega, &loads.moment);
-        let quat_dot = quat * Quaternion::from_parts(0.0, *omega) * 0.5;
-        Ok((quat_dot, omega_dot))
     }
 
     /// Advances one physics step with the flap commands `command` (rad; clipped to the limit).
@@ -724,145 +720,34 @@ impl CaptureSim {
             });
         }
         // Per-step sampling: the disturbance at the step's start, held over every (sub)step.
-        if self.config.wake.sampling == AirSampling::PerStep {
+        let hold = self.config.wake.sampling == AirSampling::PerStep;
+        if hold {
             self.hold_disturbance(t);
         }
-        // The state is read while the stage buffers are written: lend it out for the step.
-        let q0 = std::mem::take(&mut self.tether.q);
-        let qd0 = std::mem::take(&mut self.tether.qd);
-        let h = dt / k as f64;
-        let mut result = self.integrate(t, h, &q0, &qd0);
-        if k > 1 {
-            let accd0 = self.accd;
-            let mut q = std::mem::take(&mut self.buffers.spare_q);
-            let mut qd = std::mem::take(&mut self.buffers.spare_qd);
-            for j in 1..k {
-                let Ok((attitude, omega)) = result else { break };
-                self.accd = AccdState {
-                    attitude: UnitQuaternion::new_normalize(attitude),
-                    omega,
-                };
-                std::mem::swap(&mut q, &mut self.buffers.q);
-                std::mem::swap(&mut qd, &mut self.buffers.qd);
-                result = self.integrate(t + j as f64 * h, h, &q, &qd);
-            }
-            self.buffers.spare_q = q;
-            self.buffers.spare_qd = qd;
-            if result.is_err() {
-                self.accd = accd0;
-            }
-        }
-        match result {
-            Ok((attitude, omega)) => {
-                // The new state is in the buffers; the old vectors become the next buffers.
-                self.tether.q = std::mem::replace(&mut self.buffers.q, q0);
-                self.tether.qd = std::mem::replace(&mut self.buffers.qd, qd0);
-                self.steps += 1;
-                self.tether.time = self.time_origin + self.steps as f64 * dt;
-                self.accd = AccdState {
-                    attitude: UnitQuaternion::new_normalize(attitude),
-                    omega,
-                };
-                self.refresh()
-            }
-            Err(e) => {
-                self.tether.q = q0;
-                self.tether.qd = qd0;
-                Err(e)
-            }
-        }
-    }
-
-    /// One RK4 step of the coupled state from (q0, qd0) and the current ACCD state; writes the new
-    /// tether state into the buffers and returns the new (unnormalised) quaternion and body rates.
-    fn integrate(
-        &mut self,
-        t: f64,
-        dt: f64,
-        q0: &[f64],
-        qd0: &[f64],
-    ) -> Result<(Quaternion<f64>, V3)> {
         let inertia = self.inertia;
-        let (att0, w0) = (*self.accd.attitude.quaternion(), self.accd.omega);
-        let hold = self.config.wake.sampling == AirSampling::PerStep;
-        let (mut stage, model, b) = self.parts_with(hold)?;
-        let h = 0.5 * dt;
-
-        let (dq1, dw1) = Self::stage(
-            model,
-            &mut stage,
-            &inertia,
-            t,
-            q0,
-            qd0,
-            &att0,
-            &w0,
-            &mut b.a_k[0],
-        )?;
-        stage_state(&mut b.q, &mut b.qd_k[0], q0, qd0, qd0, &b.a_k[0], h);
-        let (att, w) = (att0 + dq1 * h, w0 + dw1 * h);
-        let (dq2, dw2) = Self::stage(
-            model,
-            &mut stage,
-            &inertia,
-            t + h,
-            &b.q,
-            &b.qd_k[0],
-            &att,
-            &w,
-            &mut b.a_k[1],
-        )?;
-        {
-            let [k0, k1, _] = &mut b.qd_k;
-            stage_state(&mut b.q, k1, q0, qd0, k0, &b.a_k[1], h);
-        }
-        let (att, w) = (att0 + dq2 * h, w0 + dw2 * h);
-        let (dq3, dw3) = Self::stage(
-            model,
-            &mut stage,
-            &inertia,
-            t + h,
-            &b.q,
-            &b.qd_k[1],
-            &att,
-            &w,
-            &mut b.a_k[2],
-        )?;
-        {
-            let [_, k1, k2] = &mut b.qd_k;
-            stage_state(&mut b.q, k2, q0, qd0, k1, &b.a_k[2], dt);
-        }
-        let (att, w) = (att0 + dq3 * dt, w0 + dw3 * dt);
-        let (dq4, dw4) = Self::stage(
-            model,
-            &mut stage,
-            &inertia,
-            t + dt,
-            &b.q,
-            &b.qd_k[2],
-            &att,
-            &w,
-            &mut b.a_k[3],
-        )?;
-
-        let sixth = dt / 6.0;
-        combine(&mut b.q, q0, qd0, &b.qd_k[0], &b.qd_k[1], &b.qd_k[2], sixth);
-        combine(
-            &mut b.qd, qd0, &b.a_k[0], &b.a_k[1], &b.a_k[2], &b.a_k[3], sixth,
-        );
-        let att = att0 + (dq1 + (dq2 + dq3) * 2.0 + dq4) * sixth;
-        let w = w0 + (dw1 + (dw2 + dw3) * 2.0 + dw4) * sixth;
-        let finite = b.q.iter().chain(b.qd.iter()).all(|v| v.is_finite())
-            && att.coords.iter().all(|v| v.is_finite())
-            && w.iter().all(|v| v.is_finite())
-            && att.norm() > 0.0;
-        if !finite {
-            return Err(SimError::Diverged {
-                time: t + dt,
-                reason: "state became non-finite".into(),
-            });
-        }
-        Ok((att, w))
+        let mut x = accd_to_states(&self.accd);
+        // The state is advanced while the stage borrows the rest: lend it out for the step.
+        let mut q = std::mem::take(&mut self.tether.q);
+        let mut qd = std::mem::take(&mut self.tether.qd);
+        let result = self.parts(hold).and_then(|(stage, model, rk4)| {
+            let mut system = Coupled {
+                model,
+                stage,
+                inertia,
+            };
+            Ok(rk4.advance(&mut system, t, dt, k, &mut q, &mut qd, &mut x)?)
+        });
+        self.tether.q = q;
+        self.tether.qd = qd;
+        result?;
+        self.steps += 1;
+        self.tether.time = self.time_origin + self.steps as f64 * dt;
+        let (attitude, omega) = states_to_parts(&x);
+        self.accd = AccdState {
+            attitude: UnitQuaternion::new_unchecked(attitude),
+            omega,
+        };
+        self.refresh()
     }
 
     /// RK4 substeps of the next step ([`TetherConfig::substeps_for`]) under the load of the
@@ -912,9 +797,8 @@ impl CaptureSim {
     pub fn snapshot(&mut self) -> Result<Snapshot> {
         let t = self.tether.time;
         let (position, velocity) = self.model.tip_state(&self.tether.q, &self.tether.qd)?;
-        let (stage, _, _) = self.parts()?;
-        stage.tip_force(t, &position, &velocity);
-        let loads = stage.loads.get();
+        let (stage, _, _) = self.parts(false)?;
+        let (_, loads) = stage.tip_loads(t, &position, &velocity);
         let attitude = self.accd.attitude;
         let (capture_point, capture_point_velocity) =
             capture_point(&position, &velocity, &self.accd, &self.capture_offset);
@@ -951,9 +835,11 @@ impl CaptureSim {
         let t = self.tether.time;
         let q = std::mem::take(&mut self.tether.q);
         let qd = std::mem::take(&mut self.tether.qd);
-        let result = self.parts().and_then(|(stage, model, buffers)| {
-            Ok(model.tensions(t, &q, &qd, &stage, &mut buffers.a_k[0], out)?)
-        });
+        let mut qdd = std::mem::take(&mut self.qdd);
+        let result = self
+            .parts(false)
+            .and_then(|(stage, model, _)| Ok(model.tensions(t, &q, &qd, &stage, &mut qdd, out)?));
+        self.qdd = qdd;
         self.tether.q = q;
         self.tether.qd = qd;
         result

@@ -155,6 +155,7 @@ impl WakeField {
 }
 
 impl Surroundings for WakeField {
+    type TipReport = ();
     /// [`WakeField::air_velocity_at`]; `time` is ignored (turbulence held over the step).
     fn air_velocity(&self, _time: f64, position: &Vector3<f64>) -> Vector3<f64> {
         self.air_velocity_at(position)

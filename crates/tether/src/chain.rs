@@ -276,11 +276,11 @@ impl ChainState {
         time: f64,
         c: &LoadConstants,
         surroundings: &S,
-    ) -> Result<()> {
+    ) -> Result<S::TipReport> {
         let n = self.n;
         let g_eff = V3::new(0.0, 0.0, c.gravity) - surroundings.frame_acceleration(time);
-        self.tip_force =
-            g_eff * c.tip_mass + surroundings.tip_force(time, &self.tip, &self.tip_vel);
+        let (tip_force, report) = surroundings.tip_loads(time, &self.tip, &self.tip_vel);
+        self.tip_force = g_eff * c.tip_mass + tip_force;
 
         // Joints j = 1 .. n-1, between segments j-1 and j. The spring stores
         // U = -(2 EI / l) ln((1 + e_{j-1} . e_j) / 2); the damper's torque on segment j is
@@ -357,7 +357,7 @@ impl ChainState {
             ry,
             rz,
         );
-        Ok(())
+        Ok(report)
     }
 }
 

@@ -216,7 +216,7 @@ impl TetherModel {
         q: &[f64],
         qd: &[f64],
         surroundings: &S,
-    ) -> Result<()> {
+    ) -> Result<S::TipReport> {
         let constants = self.load_constants();
         let chain = &mut self.ws.chain;
         chain.kinematics::<M>(time, self.l, q, qd)?;
@@ -345,7 +345,7 @@ impl TetherModel {
         qd: &[f64],
         surroundings: &S,
         qdd: &mut [f64],
-    ) -> Result<()> {
+    ) -> Result<S::TipReport> {
         match self.solver {
             Solver::Recursive => self.solve_recursive(time, q, qd, surroundings, qdd, None),
             Solver::Dense => self.accelerations_dense(time, q, qd, surroundings, qdd),
@@ -361,7 +361,7 @@ impl TetherModel {
         qd: &[f64],
         surroundings: &S,
         qdd: &mut [f64],
-    ) -> Result<()> {
+    ) -> Result<S::TipReport> {
         self.solve_recursive(time, q, qd, surroundings, qdd, None)
     }
 
@@ -374,11 +374,11 @@ impl TetherModel {
         qd: &[f64],
         surroundings: &S,
         qdd: &mut [f64],
-    ) -> Result<()> {
+    ) -> Result<S::TipReport> {
         self.check_len("q", q)?;
         self.check_len("qd", qd)?;
         self.check_len("qdd", qdd)?;
-        self.prepare::<Plain, S>(time, q, qd, surroundings)?;
+        let report = self.prepare::<Plain, S>(time, q, qd, surroundings)?;
         self.generalized_forces(q, qd, qdd);
         self.assemble_mass(q[0]);
         let dim = self.dofs();
@@ -387,7 +387,7 @@ impl TetherModel {
             reason: format!("mass matrix lost positive definiteness at column {col}"),
         })?;
         cholesky_solve(&self.ws.mass, dim, qdd);
-        Ok(())
+        Ok(report)
     }
 
     fn solve_recursive<S: Surroundings + ?Sized>(
@@ -398,7 +398,7 @@ impl TetherModel {
         surroundings: &S,
         qdd: &mut [f64],
         tensions: Option<&mut [f64]>,
-    ) -> Result<()> {
+    ) -> Result<S::TipReport> {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
         {
@@ -419,7 +419,7 @@ impl TetherModel {
         surroundings: &S,
         qdd: &mut [f64],
         tensions: Option<&mut [f64]>,
-    ) -> Result<()> {
+    ) -> Result<S::TipReport> {
         self.solve_recursive_body::<crate::arith::Fused, S>(
             time,
             q,
@@ -439,7 +439,7 @@ impl TetherModel {
         surroundings: &S,
         qdd: &mut [f64],
         tensions: Option<&mut [f64]>,
-    ) -> Result<()> {
+    ) -> Result<S::TipReport> {
         self.check_len("q", q)?;
         self.check_len("qd", qd)?;
         self.check_len("qdd", qdd)?;
@@ -451,7 +451,7 @@ impl TetherModel {
             k: self.k,
             c_s: self.c_s,
         };
-        self.prepare::<M, S>(time, q, qd, surroundings)?;
+        let report = self.prepare::<M, S>(time, q, qd, surroundings)?;
         let ws = &mut self.ws;
         recursive::solve::<M>(
             time,
@@ -462,7 +462,8 @@ impl TetherModel {
             &mut ws.articulated,
             qdd,
             tensions,
-        )
+        )?;
+        Ok(report)
     }
 
     /// The mass matrix M(q) (symmetric, dim x dim). Allocates; for analysis and tests.
@@ -527,7 +528,9 @@ impl TetherModel {
             });
         }
         if self.solver == Solver::Recursive {
-            return self.solve_recursive(time, q, qd, surroundings, qdd, Some(tensions));
+            return self
+                .solve_recursive(time, q, qd, surroundings, qdd, Some(tensions))
+                .map(|_| ());
         }
         self.accelerations_dense(time, q, qd, surroundings, qdd)?;
         let ws = &self.ws;

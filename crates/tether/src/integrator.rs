@@ -1,14 +1,81 @@
-//! Classical fixed-step fourth-order Runge-Kutta for the second-order system q'' = a(t, q, q'),
-//! with its stage buffers allocated once.
+//! The one integrator: classical fixed-step fourth-order Runge-Kutta for a [`System`] of
+//! second-order coordinates q and first-order states x,
+//!
+//! ```text
+//! q'' = a(t, q, q', x),    x' = f(t, q, q', x),
+//! ```
+//!
+//! used by the tether alone ([`crate::Tether`], x empty) and by the capture simulation (x the
+//! capturing device's attitude quaternion and body rates) alike. One step of length dt may be
+//! split into equal substeps (for the chain's fastest mode, [`crate::TetherConfig::substeps_for`]):
+//! substep j starts at `t + j dt / k`. The stepper never keeps time: callers hold the clock
+//! (`origin + steps dt`, free of the drift of summing dt). Stage buffers are allocated once.
 
 use crate::dynamics::TetherModel;
 use crate::error::{Result, TetherError};
-use crate::state::TetherState;
 use crate::surroundings::Surroundings;
 
-/// The largest magnitude a coordinate (m, rad) or rate (m/s, rad/s) may reach: beyond it a state
-/// is a divergence, even where it is still finite (a state of 1e63 gives infinite energies).
+/// The largest magnitude a coordinate (m, rad), rate (m/s, rad/s) or first-order state may reach:
+/// beyond it a state is a divergence, even where it is still finite (a state of 1e63 gives
+/// infinite energies).
 pub const STATE_BOUND: f64 = 1e6;
+
+/// A system the integrator advances: second-order coordinates q with rates q', and first-order
+/// states x.
+pub trait System {
+    /// Number of second-order coordinates (the length of q, q' and q'').
+    fn dofs(&self) -> usize;
+
+    /// Number of first-order states (the length of x); none by default.
+    fn first_order_states(&self) -> usize {
+        0
+    }
+
+    /// The derivatives at `(time, q, q', x)`: q'' into `qdd` and x' into `xd`.
+    fn derivatives(
+        &mut self,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        x: &[f64],
+        qdd: &mut [f64],
+        xd: &mut [f64],
+    ) -> Result<()>;
+
+    /// Maps the first-order states at the end of a (sub)step back onto their manifold (e.g.
+    /// renormalises a quaternion); errors if that is impossible. Nothing by default.
+    fn project(&self, _time: f64, _x: &mut [f64]) -> Result<()> {
+        Ok(())
+    }
+}
+
+/// The tether model in its surroundings, as a [`System`] without first-order states.
+pub struct InSurroundings<'a, S: Surroundings + ?Sized> {
+    /// The equations of motion.
+    pub model: &'a mut TetherModel,
+    /// What the tether meets: air, frame acceleration, tip force.
+    pub surroundings: &'a S,
+}
+
+impl<S: Surroundings + ?Sized> System for InSurroundings<'_, S> {
+    fn dofs(&self) -> usize {
+        self.model.dofs()
+    }
+
+    fn derivatives(
+        &mut self,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        _x: &[f64],
+        qdd: &mut [f64],
+        _xd: &mut [f64],
+    ) -> Result<()> {
+        self.model
+            .accelerations(time, q, qd, self.surroundings, qdd)
+            .map(|_| ())
+    }
+}
 
 /// Whether any entry is NaN or beyond `bound` in magnitude (for positive `bound`, the bits of
 /// `|x|` compare as the values do; NaN and infinity compare above every finite bound).
@@ -23,105 +90,223 @@ fn any_beyond(v: &[f64], bound: f64) -> bool {
     any != 0
 }
 
-/// RK4 stage buffers for one model size.
+/// One RK4 stage's state: `q = q0 + h rate`, `qd = qd0 + h acc` (slices of one length; the
+/// equal lengths let the compiler drop the bounds checks).
+#[inline(always)]
+fn stage_state(
+    q: &mut [f64],
+    qd: &mut [f64],
+    q0: &[f64],
+    qd0: &[f64],
+    rate: &[f64],
+    acc: &[f64],
+    h: f64,
+) {
+    let n = q.len();
+    let (qd, q0, qd0, rate, acc) = (&mut qd[..n], &q0[..n], &qd0[..n], &rate[..n], &acc[..n]);
+    for i in 0..n {
+        q[i] = q0[i] + h * rate[i];
+        qd[i] = qd0[i] + h * acc[i];
+    }
+}
+
+/// A first-order stage state `x = x0 + h rate`.
+#[inline(always)]
+fn stage_first_order(x: &mut [f64], x0: &[f64], rate: &[f64], h: f64) {
+    let n = x.len();
+    let (x0, rate) = (&x0[..n], &rate[..n]);
+    for i in 0..n {
+        x[i] = x0[i] + h * rate[i];
+    }
+}
+
+/// RK4's combination `out = x0 + sixth (k1 + 2 (k2 + k3) + k4)`.
+#[inline(always)]
+fn combine(
+    out: &mut [f64],
+    x0: &[f64],
+    k1: &[f64],
+    k2: &[f64],
+    k3: &[f64],
+    k4: &[f64],
+    sixth: f64,
+) {
+    let n = out.len();
+    let (x0, k1, k2, k3, k4) = (&x0[..n], &k1[..n], &k2[..n], &k3[..n], &k4[..n]);
+    for i in 0..n {
+        out[i] = x0[i] + sixth * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]);
+    }
+}
+
+/// A state (q, q', x) the stepper writes: the end of a substep.
+#[derive(Debug, Clone)]
+struct Slot {
+    q: Vec<f64>,
+    qd: Vec<f64>,
+    x: Vec<f64>,
+}
+
+impl Slot {
+    fn new(dofs: usize, first_order: usize) -> Self {
+        Slot {
+            q: vec![0.0; dofs],
+            qd: vec![0.0; dofs],
+            x: vec![0.0; first_order],
+        }
+    }
+}
+
+/// RK4 stage buffers for one system size.
 #[derive(Debug, Clone)]
 pub struct Rk4 {
+    /// The stage state's coordinates (the stage rates are in `qd_k`).
     q_stage: Vec<f64>,
-    qd_stage: Vec<f64>,
-    qd2: Vec<f64>,
-    qd3: Vec<f64>,
-    qd4: Vec<f64>,
-    a1: Vec<f64>,
-    a2: Vec<f64>,
-    a3: Vec<f64>,
-    a4: Vec<f64>,
+    qd_k: [Vec<f64>; 3],
+    a_k: [Vec<f64>; 4],
+    x_stage: Vec<f64>,
+    xd_k: [Vec<f64>; 4],
+    /// Two end-of-substep states, written alternately so the input is never overwritten.
+    slots: [Slot; 2],
 }
 
 impl Rk4 {
-    /// Buffers for `dofs` generalized coordinates.
-    pub fn new(dofs: usize) -> Self {
-        let z = vec![0.0; dofs];
+    /// Buffers for `dofs` second-order coordinates and `first_order` first-order states.
+    pub fn new(dofs: usize, first_order: usize) -> Self {
+        let z = || vec![0.0; dofs];
+        let x = || vec![0.0; first_order];
         Rk4 {
-            q_stage: z.clone(),
-            qd_stage: z.clone(),
-            qd2: z.clone(),
-            qd3: z.clone(),
-            qd4: z.clone(),
-            a1: z.clone(),
-            a2: z.clone(),
-            a3: z.clone(),
-            a4: z,
+            q_stage: z(),
+            qd_k: [z(), z(), z()],
+            a_k: [z(), z(), z(), z()],
+            x_stage: x(),
+            xd_k: [x(), x(), x(), x()],
+            slots: [Slot::new(dofs, first_order), Slot::new(dofs, first_order)],
         }
     }
 
-    /// Advances `state` by `dt` seconds. On error the state is left unchanged.
-    pub fn step<S: Surroundings + ?Sized>(
+    /// Buffers sized for `system`.
+    pub fn for_system<Y: System + ?Sized>(system: &Y) -> Self {
+        Rk4::new(system.dofs(), system.first_order_states())
+    }
+
+    /// Advances `(q, qd, x)` from `time` by `dt` in `substeps` equal RK4 steps (at least one),
+    /// checking after each that no value is NaN or beyond [`STATE_BOUND`] and projecting x
+    /// ([`System::project`]). On error `(q, qd, x)` are left unchanged. Allocates nothing.
+    #[allow(clippy::too_many_arguments)]
+    pub fn advance<Y: System + ?Sized>(
         &mut self,
-        model: &mut TetherModel,
-        state: &mut TetherState,
-        surroundings: &S,
+        system: &mut Y,
+        time: f64,
         dt: f64,
+        substeps: usize,
+        q: &mut Vec<f64>,
+        qd: &mut Vec<f64>,
+        x: &mut [f64],
     ) -> Result<()> {
-        let dim = model.dofs();
-        if state.q.len() != dim || state.qd.len() != dim {
+        let (dim, first) = (system.dofs(), system.first_order_states());
+        let sizes = [
+            ("q", q.len(), dim),
+            ("qd", qd.len(), dim),
+            ("x", x.len(), first),
+            ("integrator buffers", self.q_stage.len(), dim),
+            ("integrator first-order buffers", self.x_stage.len(), first),
+        ];
+        if let Some(&(what, found, expected)) = sizes.iter().find(|(_, f, e)| f != e) {
             return Err(TetherError::WrongSize {
-                what: "state",
-                expected: dim,
-                found: state.q.len(),
+                what,
+                expected,
+                found,
             });
         }
-        let t = state.time;
+        let substeps = substeps.max(1);
+        let h = dt / substeps as f64;
+        let [first_slot, second_slot] = &mut self.slots;
+        let mut stages = Stages {
+            q_stage: &mut self.q_stage,
+            qd_k: &mut self.qd_k,
+            a_k: &mut self.a_k,
+            x_stage: &mut self.x_stage,
+            xd_k: &mut self.xd_k,
+        };
+        stages.step(system, time, h, q, qd, x, first_slot)?;
+        let (mut done, mut spare) = (first_slot, second_slot);
+        for j in 1..substeps {
+            let t = time + j as f64 * h;
+            stages.step(system, t, h, &done.q, &done.qd, &done.x, spare)?;
+            std::mem::swap(&mut done, &mut spare);
+        }
+        // The new state is in `done`; the old vectors become its buffers.
+        std::mem::swap(q, &mut done.q);
+        std::mem::swap(qd, &mut done.qd);
+        x.copy_from_slice(&done.x);
+        Ok(())
+    }
+}
+
+/// The stage buffers, borrowed apart from the end-of-substep slots.
+struct Stages<'a> {
+    q_stage: &'a mut [f64],
+    qd_k: &'a mut [Vec<f64>; 3],
+    a_k: &'a mut [Vec<f64>; 4],
+    x_stage: &'a mut [f64],
+    xd_k: &'a mut [Vec<f64>; 4],
+}
+
+impl Stages<'_> {
+    /// One RK4 step of length `dt` from `(q0, qd0, x0)` at `t` into `out`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn step<Y: System + ?Sized>(
+        &mut self,
+        system: &mut Y,
+        t: f64,
+        dt: f64,
+        q0: &[f64],
+        qd0: &[f64],
+        x0: &[f64],
+        out: &mut Slot,
+    ) -> Result<()> {
         let h = 0.5 * dt;
-        let (q, qd) = (&state.q, &state.qd);
+        let (q, qd_k, a_k) = (&mut *self.q_stage, &mut *self.qd_k, &mut *self.a_k);
+        let (x, xd_k) = (&mut *self.x_stage, &mut *self.xd_k);
 
-        model.accelerations(t, q, qd, surroundings, &mut self.a1)?;
-
-        for i in 0..dim {
-            self.q_stage[i] = q[i] + h * qd[i];
-            self.qd2[i] = qd[i] + h * self.a1[i];
+        system.derivatives(t, q0, qd0, x0, &mut a_k[0], &mut xd_k[0])?;
+        stage_state(q, &mut qd_k[0], q0, qd0, qd0, &a_k[0], h);
+        stage_first_order(x, x0, &xd_k[0], h);
+        system.derivatives(t + h, q, &qd_k[0], x, &mut a_k[1], &mut xd_k[1])?;
+        {
+            let [k0, k1, _] = qd_k;
+            stage_state(q, k1, q0, qd0, k0, &a_k[1], h);
         }
-        model.accelerations(t + h, &self.q_stage, &self.qd2, surroundings, &mut self.a2)?;
-
-        for i in 0..dim {
-            self.q_stage[i] = q[i] + h * self.qd2[i];
-            self.qd3[i] = qd[i] + h * self.a2[i];
+        stage_first_order(x, x0, &xd_k[1], h);
+        system.derivatives(t + h, q, &qd_k[1], x, &mut a_k[2], &mut xd_k[2])?;
+        {
+            let [_, k1, k2] = qd_k;
+            stage_state(q, k2, q0, qd0, k1, &a_k[2], dt);
         }
-        model.accelerations(t + h, &self.q_stage, &self.qd3, surroundings, &mut self.a3)?;
+        stage_first_order(x, x0, &xd_k[2], dt);
+        system.derivatives(t + dt, q, &qd_k[2], x, &mut a_k[3], &mut xd_k[3])?;
 
-        for i in 0..dim {
-            self.q_stage[i] = q[i] + dt * self.qd3[i];
-            self.qd4[i] = qd[i] + dt * self.a3[i];
-        }
-        model.accelerations(t + dt, &self.q_stage, &self.qd4, surroundings, &mut self.a4)?;
-
-        let w = dt / 6.0;
-        for i in 0..dim {
-            self.q_stage[i] = q[i] + w * (qd[i] + 2.0 * (self.qd2[i] + self.qd3[i]) + self.qd4[i]);
-            self.qd_stage[i] =
-                qd[i] + w * (self.a1[i] + 2.0 * (self.a2[i] + self.a3[i]) + self.a4[i]);
-        }
-        let new_time = t + dt;
-        if any_beyond(&self.q_stage, STATE_BOUND) || any_beyond(&self.qd_stage, STATE_BOUND) {
-            let (i, v) = self
-                .q_stage
+        let sixth = dt / 6.0;
+        combine(&mut out.q, q0, qd0, &qd_k[0], &qd_k[1], &qd_k[2], sixth);
+        combine(&mut out.qd, qd0, &a_k[0], &a_k[1], &a_k[2], &a_k[3], sixth);
+        combine(
+            &mut out.x, x0, &xd_k[0], &xd_k[1], &xd_k[2], &xd_k[3], sixth,
+        );
+        let end = t + dt;
+        let parts = [("q", &out.q), ("qd", &out.qd), ("x", &out.x)];
+        if let Some((what, v)) = parts.iter().find(|(_, v)| any_beyond(v, STATE_BOUND)) {
+            let (i, value) = v
                 .iter()
-                .chain(self.qd_stage.iter())
                 .copied()
                 .enumerate()
                 .find(|(_, v)| v.is_nan() || v.abs() > STATE_BOUND)
                 .unwrap_or((0, f64::NAN));
-            let what = if i < dim { "q" } else { "qd" };
             return Err(TetherError::Diverged {
-                time: new_time,
-                reason: format!(
-                    "{what}[{}] = {v:e} is non-finite or beyond {STATE_BOUND:e}",
-                    i % dim
-                ),
+                time: end,
+                reason: format!("{what}[{i}] = {value:e} is non-finite or beyond {STATE_BOUND:e}"),
             });
         }
-        std::mem::swap(&mut state.q, &mut self.q_stage);
-        std::mem::swap(&mut state.qd, &mut self.qd_stage);
-        state.time = new_time;
-        Ok(())
+        system.project(end, &mut out.x)
     }
 }

@@ -11,7 +11,9 @@
 //! * [`TetherConfig`] — serde configuration with validation and the paper's presets;
 //! * [`TetherState`] — time, coordinates, rates;
 //! * [`TetherModel`] — the equations of motion (M(q) q'' = Q), with preallocated buffers;
-//! * [`Rk4`] — the fixed-step integrator;
+//! * [`Rk4`] — the one fixed-step integrator, over a [`System`] of second-order coordinates and
+//!   first-order states (the tether in its surroundings, [`InSurroundings`], or the capture
+//!   simulation above it);
 //! * [`Surroundings`] — what the caller supplies: air velocity and density at any point, the
 //!   aircraft's acceleration, the force on the tip;
 //! * [`Tether`] — the three together, for stepping.
@@ -40,7 +42,7 @@ pub use config::{TetherConfig, STANDARD_GRAVITY};
 pub use direction::DirectionJet;
 pub use dynamics::{Energy, Solver, TetherModel};
 pub use error::{Result, TetherError};
-pub use integrator::Rk4;
+pub use integrator::{InSurroundings, Rk4, System};
 pub use material::Material;
 pub use state::TetherState;
 pub use surroundings::{Surroundings, UniformFlow, Vacuum};

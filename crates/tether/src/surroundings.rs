@@ -12,6 +12,10 @@ use nalgebra::Vector3;
 /// A source of air data and loads. Implementations must be pure functions of their arguments
 /// during a step (no interior mutation), so that steps are deterministic.
 pub trait Surroundings {
+    /// What the tip body's loads yield besides the force (a capturing device's aerodynamic
+    /// moment, say), returned by [`crate::TetherModel::accelerations`]; `()` when nothing.
+    type TipReport: Copy + Default;
+
     /// Velocity of the air relative to the TA frame at `position` (m), m/s.
     fn air_velocity(&self, time: f64, position: &Vector3<f64>) -> Vector3<f64>;
 
@@ -49,6 +53,21 @@ pub trait Surroundings {
     ) -> Vector3<f64> {
         Vector3::zeros()
     }
+
+    /// The tip body's force (N, as [`Surroundings::tip_force`]) and its report. Default: the
+    /// force of [`Surroundings::tip_force`] and the default report.
+    #[inline(always)]
+    fn tip_loads(
+        &self,
+        time: f64,
+        position: &Vector3<f64>,
+        velocity: &Vector3<f64>,
+    ) -> (Vector3<f64>, Self::TipReport) {
+        (
+            self.tip_force(time, position, velocity),
+            Self::TipReport::default(),
+        )
+    }
 }
 
 /// No air, no frame acceleration, no tip force: the tether under gravity alone.
@@ -56,6 +75,7 @@ pub trait Surroundings {
 pub struct Vacuum;
 
 impl Surroundings for Vacuum {
+    type TipReport = ();
     fn air_velocity(&self, _time: f64, _position: &Vector3<f64>) -> Vector3<f64> {
         Vector3::zeros()
     }
@@ -99,6 +119,7 @@ impl UniformFlow {
 }
 
 impl Surroundings for UniformFlow {
+    type TipReport = ();
     fn air_velocity(&self, _time: f64, _position: &Vector3<f64>) -> Vector3<f64> {
         self.velocity
     }

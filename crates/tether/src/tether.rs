@@ -5,7 +5,7 @@ use nalgebra::Vector3;
 use crate::config::{StepLoad, TetherConfig};
 use crate::dynamics::{Energy, TetherModel};
 use crate::error::{Result, TetherError};
-use crate::integrator::Rk4;
+use crate::integrator::{InSurroundings, Rk4};
 use crate::state::TetherState;
 use crate::surroundings::Surroundings;
 
@@ -18,14 +18,19 @@ use crate::surroundings::Surroundings;
 /// chain's fastest mode needs at the current attachment tension and air
 /// ([`TetherConfig::substeps_for`]): one for Table 3's n = 30 at 0.01 s, so its steps are plain
 /// RK4 steps; two or more for fine discretizations (n = 300) that a single step would blow up.
+///
+/// Time is kept as `origin + steps * dt` (the origin is the time of the last state set from
+/// outside), free of the drift of summing dt: the rule of the capture simulation too.
 #[derive(Debug, Clone)]
 pub struct Tether {
     model: TetherModel,
     state: TetherState,
-    /// The state before a substepped step, restored when a substep fails.
-    backup: TetherState,
     rk4: Rk4,
     qdd: Vec<f64>,
+    /// Time of the last state set from outside, s.
+    time_origin: f64,
+    /// Steps taken since `time_origin`.
+    steps: u64,
 }
 
 impl Tether {
@@ -35,11 +40,12 @@ impl Tether {
         let model = TetherModel::new(config)?;
         let state = TetherState::straight(config.segments, Vector3::new(-1.0, 0.0, 0.0), 0.0)?;
         Ok(Tether {
-            rk4: Rk4::new(model.dofs()),
+            rk4: Rk4::new(model.dofs(), 0),
             qdd: vec![0.0; model.dofs()],
             model,
-            backup: state.clone(),
             state,
+            time_origin: 0.0,
+            steps: 0,
         })
     }
 
@@ -68,6 +74,8 @@ impl Tether {
             });
         }
         state.validate()?;
+        self.time_origin = state.time;
+        self.steps = 0;
         self.state = state;
         Ok(())
     }
@@ -94,11 +102,6 @@ impl Tether {
     pub fn step<S: Surroundings + ?Sized>(&mut self, surroundings: &S) -> Result<()> {
         let dt = self.model.config().time_step;
         let k = self.substeps(surroundings);
-        if k == 1 {
-            return self
-                .rk4
-                .step(&mut self.model, &mut self.state, surroundings, dt);
-        }
         if k > crate::config::MAX_SUBSTEPS {
             return Err(TetherError::Diverged {
                 time: self.state.time,
@@ -109,21 +112,15 @@ impl Tether {
                 ),
             });
         }
-        let t0 = self.state.time;
-        self.backup.time = t0;
-        self.backup.q.copy_from_slice(&self.state.q);
-        self.backup.qd.copy_from_slice(&self.state.qd);
-        let h = dt / k as f64;
-        for _ in 0..k {
-            if let Err(e) = self
-                .rk4
-                .step(&mut self.model, &mut self.state, surroundings, h)
-            {
-                std::mem::swap(&mut self.state, &mut self.backup);
-                return Err(e);
-            }
-        }
-        self.state.time = t0 + dt;
+        let mut system = InSurroundings {
+            model: &mut self.model,
+            surroundings,
+        };
+        let s = &mut self.state;
+        self.rk4
+            .advance(&mut system, s.time, dt, k, &mut s.q, &mut s.qd, &mut [])?;
+        self.steps += 1;
+        s.time = self.time_origin + self.steps as f64 * dt;
         Ok(())
     }
 

@@ -86,6 +86,7 @@ struct Busy {
 }
 
 impl Surroundings for Busy {
+    type TipReport = ();
     fn air_velocity(&self, t: f64, p: &V3) -> V3 {
         self.flow.velocity
             + Vector3::new(0.0, 0.3 * p.z, -0.2 * p.x) * 0.01
