@@ -318,3 +318,30 @@ def test_environment_doc_carries_the_cores_observation_table():
 def test_the_id_loads_through_gymnasiums_module_syntax():
     env = gym.make("accd_gym:accd_gym/InAirCapture-v0", **QUICK)
     assert isinstance(env.unwrapped, accd_gym.InAirCaptureEnv)
+
+
+def test_observation_is_read_by_name():
+    """The Python index constants come from the one Rust table; unknown names are refused."""
+    from accd_gym.task import OBSERVATION_INDEX, OBSERVATION_TABLE, observation_indices
+
+    names = [row[0] for row in OBSERVATION_TABLE]
+    assert list(observation_indices(*names)) == list(range(len(names)))
+    assert list(OBSERVATION_INDEX) == names
+    with pytest.raises(KeyError, match="boom_rel_w"):
+        observation_indices("boom_rel_x", "boom_rel_w")
+
+
+def test_python_code_reads_the_observation_by_name():
+    """No numeric slices of the observation in the package (issue 11: names, never indices)."""
+    import re
+    from pathlib import Path
+
+    import accd_gym
+
+    pattern = re.compile(r"\b(obs|o|observation|observations)\[[^\]]*\b\d+\s*:\s*\d+")
+    offenders = []
+    for path in Path(accd_gym.__file__).parent.rglob("*.py"):
+        for no, line in enumerate(path.read_text().splitlines(), 1):
+            if pattern.search(line):
+                offenders.append(f"{path.name}:{no}: {line.strip()}")
+    assert not offenders, offenders

@@ -10,16 +10,16 @@ from accd_gym import training
 from accd_gym.baselines import BASELINES, GuidancePolicy, RandomPolicy, ZeroPolicy, quaternion_to_euler
 from accd_gym.cli import main
 from accd_gym.evaluation import run_episodes, summarize, wilson_interval
+from accd_gym.task import OBS_DIM, OBSERVATION_SCALE, observation_indices
 
 SHORT = {"capture_window": 5.0}  # 50 agent steps per episode
 
 
 def _obs(n=3, rel=(0.0, 0.0, 0.0)):
     """Observations of an ACCD level and at rest with the boom tip at ``rel`` (m) from the capture point."""
-    o = np.zeros((n, 25), dtype=np.float32)
-    o[:, 0:3] = np.asarray(rel) * 0.05
-    o[:, 12] = 1.0
-    o[:, 24] = 1.0
+    o = np.zeros((n, OBS_DIM), dtype=np.float32)
+    o[:, observation_indices("boom_rel_x", "boom_rel_y", "boom_rel_z")] = np.asarray(rel) * OBSERVATION_SCALE["boom_rel_x"]
+    o[:, observation_indices("quat_w", "time_left")] = 1.0
     return o
 
 
@@ -27,7 +27,8 @@ def _obs(n=3, rel=(0.0, 0.0, 0.0)):
 def test_baselines_give_bounded_actions_of_the_right_shape(name):
     policy = accd_gym.baselines.make_baseline(name, seed=3)
     obs = np.random.default_rng(0).uniform(-1, 1, (5, 25)).astype(np.float32)
-    obs[:, 12:16] /= np.linalg.norm(obs[:, 12:16], axis=1, keepdims=True)
+    quat = observation_indices("quat_w", "quat_x", "quat_y", "quat_z")
+    obs[:, quat] /= np.linalg.norm(obs[:, quat], axis=1, keepdims=True)
     a = policy.predict(obs)
     assert a.shape == (5, 4) and a.dtype == np.float32
     assert np.all(np.isfinite(a)) and np.all(np.abs(a) <= 1.0)

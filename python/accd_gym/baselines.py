@@ -23,12 +23,17 @@ from typing import Any, Callable, Optional
 import numpy as np
 
 from accd_gym.errors import ConfigError
-from accd_gym.task import ACT_DIM, OBS_DIM, OBSERVATION_SCALE
+from accd_gym.task import ACT_DIM, OBS_DIM, OBSERVATION_SCALE, observation_indices
 
 #: Observation scales, from the core's observation table.
 _POS_SCALE = OBSERVATION_SCALE["boom_rel_y"]  # 1/m
 _VEL_SCALE = OBSERVATION_SCALE["boom_rel_vy"]  # s/m
 _RATE_SCALE = OBSERVATION_SCALE["rate_p"]  # s/rad
+# The observation entries the guidance reads, by name.
+_LATERAL_ERROR = observation_indices("boom_rel_y", "boom_rel_z")
+_LATERAL_RATE = observation_indices("boom_rel_vy", "boom_rel_vz")
+_QUATERNION = observation_indices("quat_w", "quat_x", "quat_y", "quat_z")
+_BODY_RATES = observation_indices("rate_p", "rate_q", "rate_r")
 
 
 def _check_obs(obs: Any) -> np.ndarray:
@@ -107,9 +112,10 @@ class GuidancePolicy:
 
     From the observation alone (per env):
 
-    * ``e = obs[0:3] / 0.05`` (m): boom tip minus capture point; ``ev = obs[3:6] / 0.1`` (m/s):
-      its rate; roll ``phi`` from the quaternion ``obs[12:16]``; body rates
-      ``p, q, r = obs[16:19] / 0.5`` (rad/s).
+    * ``e`` (m): boom tip minus capture point, lateral and vertical (``boom_rel_y``,
+      ``boom_rel_z`` over their scale); ``ev`` (m/s): its rate (``boom_rel_vy``, ``boom_rel_vz``);
+      roll ``phi`` from the quaternion (``quat_w`` .. ``quat_z``); body rates ``p, q, r``
+      (``rate_p`` .. ``rate_r``, rad/s). Entries are read by name (``observation_indices``).
     * Outer loop (TA frame, lateral y and vertical z only; the along-track x follows from the
       tether geometry): a demanded force direction ``F = kp e + kd ev + ki \\int e dt`` (the
       integral, clamped to ``i_limit / ki``, rejects the mean wake's steady push and the
@@ -173,15 +179,15 @@ class GuidancePolicy:
         n = o.shape[0]
         if self._integral is None or self._integral.shape[0] != n:
             self._integral = np.zeros((n, 2))
-        e = o[:, 1:3] / _POS_SCALE  # y, z errors (m)
-        ev = o[:, 4:6] / _VEL_SCALE  # their rates (m/s)
+        e = o[:, _LATERAL_ERROR] / _POS_SCALE  # y, z errors (m)
+        ev = o[:, _LATERAL_RATE] / _VEL_SCALE  # their rates (m/s)
         if g.ki > 0.0:
             bound = g.i_limit / g.ki
             self._integral = np.clip(self._integral + e * g.dt, -bound, bound)
         f = g.kp * e + g.kd * ev + g.ki * self._integral
         fy, fz = f[:, 0], f[:, 1]
-        roll, _, _ = quaternion_to_euler(o[:, 12:16])
-        p, q, r = (o[:, 16:19] / _RATE_SCALE).T
+        roll, _, _ = quaternion_to_euler(o[:, _QUATERNION])
+        p, q, r = (o[:, _BODY_RATES] / _RATE_SCALE).T
         s, c = np.sin(roll), np.cos(roll)
         pitch = fy * s - fz * c - g.kq * q
         yaw = fy * c + fz * s - g.kq * r

@@ -24,11 +24,12 @@ from typing import Any, Optional, Sequence
 import numpy as np
 
 from accd_gym.errors import ConfigError
-from accd_gym.task import EVENT_NAMES, HELD_OUT_WAKE_SEEDS, INFO_NAMES, OBSERVATION_SCALE
+from accd_gym.task import EVENT_NAMES, HELD_OUT_WAKE_SEEDS, INFO_NAMES, OBSERVATION_SCALE, observation_indices
 
 #: Base seed of evaluation episodes (initial conditions and RLV motion); fixed so runs compare.
 EVAL_BASE_SEED: int = 20_240_607
 _POS_SCALE = OBSERVATION_SCALE["boom_rel_x"]  # observation scale of the boom-relative position, 1/m
+_BOOM_REL = observation_indices("boom_rel_x", "boom_rel_y", "boom_rel_z")  # boom tip minus capture point
 
 
 def wilson_interval(successes: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
@@ -222,9 +223,9 @@ def run_episodes(
     if hasattr(policy, "reset"):
         policy.reset(None)
     ep_of = np.arange(n)  # index of the episode each env is running
-    traj: list[list[np.ndarray]] = [[-obs[i, 0:3] / _POS_SCALE] for i in range(n)]
+    traj: list[list[np.ndarray]] = [[-obs[i, _BOOM_REL] / _POS_SCALE] for i in range(n)]
     acts: list[list[np.ndarray]] = [[] for _ in range(n)]
-    mind = np.linalg.norm(obs[:, 0:3], axis=1) / _POS_SCALE
+    mind = np.linalg.norm(obs[:, _BOOM_REL], axis=1) / _POS_SCALE
     peak = np.zeros(n)
     ret = np.zeros(n)
     done_eps: dict[int, Episode] = {}
@@ -274,9 +275,9 @@ def run_episodes(
             if bar is not None:
                 bar.update(1)
             ep_of[i] += n
-            traj[i] = [-obs[i, 0:3] / _POS_SCALE]
+            traj[i] = [-obs[i, _BOOM_REL] / _POS_SCALE]
             acts[i] = []
-            mind[i] = np.linalg.norm(obs[i, 0:3]) / _POS_SCALE
+            mind[i] = np.linalg.norm(obs[i, _BOOM_REL]) / _POS_SCALE
             peak[i] = 0.0
             ret[i] = 0.0
         if hasattr(policy, "reset"):

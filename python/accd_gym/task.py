@@ -30,6 +30,18 @@ HELD_OUT_WAKE_SEEDS: range = range(*_core.HELD_OUT_WAKE_SEEDS)
 OBSERVATION_SCALE: dict[str, float] = {name: scale for name, _, scale, _ in OBSERVATION_TABLE}
 #: Observation index by name.
 OBSERVATION_INDEX: dict[str, int] = {name: i for i, (name, _, _, _) in enumerate(OBSERVATION_TABLE)}
+
+
+def observation_indices(*names: str) -> np.ndarray:
+    """The observation indices of the entries ``names`` (``OBSERVATION_TABLE``'s names), in the
+    order given: ``obs[:, observation_indices("boom_rel_y", "boom_rel_z")]``. Code reads the
+    observation by name, never by numeric slices. Raises ``KeyError`` naming an unknown entry."""
+    try:
+        return np.array([OBSERVATION_INDEX[n] for n in names], dtype=np.intp)
+    except KeyError as e:
+        raise KeyError(f"no observation entry {e.args[0]!r}; the entries are {list(OBSERVATION_INDEX)}") from None
+
+
 #: Flags of the info dict that say why an episode ended.
 EVENT_NAMES: tuple[str, ...] = ("captured", "overload", "envelope_exit", "diverged")
 

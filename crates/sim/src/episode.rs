@@ -12,7 +12,7 @@ use crate::capture::{CaptureSim, Seeds, Snapshot};
 use crate::codec::{StateReader, StateWriter};
 use crate::error::{Result, SimError};
 use crate::rng::Stream;
-use crate::task::{tilt, EnvConfig, ACT_DIM, OBSERVATION, OBS_BOUND, OBS_DIM};
+use crate::task::{observe, tilt, EnvConfig, ObservationInputs, ACT_DIM, OBS_DIM};
 use crate::turbulence::AmbientTurbulence;
 
 type V3 = Vector3<f64>;
@@ -191,47 +191,13 @@ impl Episode {
 
     /// Writes the observation of `s` into `self.obs` if it is finite; false otherwise.
     fn observe(&mut self, s: &Snapshot) -> bool {
-        let rel = s.boom_tip - s.capture_point;
-        let rel_v = s.boom_velocity - s.capture_point_velocity;
-        let d = s.position - self.equilibrium.position;
-        let q = s.attitude.quaternion();
-        let sign = if q.w < 0.0 { -1.0 } else { 1.0 };
-        let f = self.flap_limit;
-        let window = self.config.capture_window;
-        let raw: [f64; OBS_DIM] = [
-            rel.x,
-            rel.y,
-            rel.z,
-            rel_v.x,
-            rel_v.y,
-            rel_v.z,
-            d.x,
-            d.y,
-            d.z,
-            s.velocity.x,
-            s.velocity.y,
-            s.velocity.z,
-            sign * q.w,
-            sign * q.i,
-            sign * q.j,
-            sign * q.k,
-            s.omega.x,
-            s.omega.y,
-            s.omega.z,
-            s.deflection[0] / f,
-            s.deflection[1] / f,
-            s.deflection[2] / f,
-            s.deflection[3] / f,
-            s.attachment_tension,
-            (window - s.time) / window,
-        ];
-        if !raw.iter().all(|v| v.is_finite()) {
-            return false;
-        }
-        for (o, (v, field)) in self.obs.iter_mut().zip(raw.iter().zip(&OBSERVATION)) {
-            *o = ((v * field.scale) as f32).clamp(-OBS_BOUND, OBS_BOUND);
-        }
-        true
+        let inputs = ObservationInputs {
+            snapshot: s,
+            equilibrium: &self.equilibrium.position,
+            flap_limit: self.flap_limit,
+            capture_window: self.config.capture_window,
+        };
+        observe(&inputs, &mut self.obs)
     }
 
     /// One agent step with `action` (four flap commands in [-1, 1], clipped). A non-finite

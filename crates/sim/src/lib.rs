@@ -33,7 +33,10 @@ pub use capture::{AirDisturbance, CalmAir, CaptureConfig, CaptureSim, Seeds, Sna
 pub use episode::{Episode, Equilibrium, Outcome};
 pub use error::SimError;
 pub use rng::NormalSampler;
-pub use task::{EnvConfig, ACT_DIM, OBSERVATION, OBS_BOUND, OBS_DIM};
+pub use task::{
+    observation_index, EnvConfig, ObservationField, ObservationInputs, ACT_DIM, OBSERVATION,
+    OBS_BOUND, OBS_DIM,
+};
 pub use turbulence::{AmbientTurbulence, LaneStreams, Turbulence, TurbulenceConfig};
 pub use wake::{
     AirSampling, AnalyticWake, Wake, WakeConfig, WakeSample, WakeTable, WakeTableData,

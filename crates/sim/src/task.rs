@@ -45,7 +45,7 @@ use serde::{Deserialize, Serialize};
 use crate::accd::AccdConfig;
 use crate::aircraft::AircraftConfig;
 use crate::boom::BoomConfig;
-use crate::capture::CaptureConfig;
+use crate::capture::{CaptureConfig, Snapshot};
 use crate::error::{Result, SimError};
 use crate::turbulence::TurbulenceConfig;
 use crate::wake::WakeConfig;
@@ -58,8 +58,34 @@ pub const OBS_BOUND: f32 = 10.0;
 /// Number of action values (flap commands).
 pub const ACT_DIM: usize = 4;
 
-/// One row of the observation table.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// What the observation is computed from: the state's [`Snapshot`] and the episode's constants.
+#[derive(Debug, Clone, Copy)]
+pub struct ObservationInputs<'a> {
+    /// Everything observable about the state.
+    pub snapshot: &'a Snapshot,
+    /// The ACCD's open-loop equilibrium position (TA frame), m.
+    pub equilibrium: &'a Vector3<f64>,
+    /// The flap limit, rad.
+    pub flap_limit: f64,
+    /// The capture window, s.
+    pub capture_window: f64,
+}
+
+impl ObservationInputs<'_> {
+    /// +1 or -1: the sign that puts the attitude quaternion in the hemisphere w >= 0 (q and -q
+    /// are the same attitude; the observation shows one of them).
+    #[inline]
+    pub fn hemisphere(&self) -> f64 {
+        if self.snapshot.attitude.w < 0.0 {
+            -1.0
+        } else {
+            1.0
+        }
+    }
+}
+
+/// One row of the observation table: what the value is and how it is computed.
+#[derive(Debug, Clone, Copy)]
 pub struct ObservationField {
     /// Name (also the key users see).
     pub name: &'static str,
@@ -69,140 +95,211 @@ pub struct ObservationField {
     pub scale: f64,
     /// What it is.
     pub description: &'static str,
+    /// The physical quantity (in `unit`) at a state.
+    pub value: fn(&ObservationInputs<'_>) -> f64,
 }
 
-const fn field(
-    name: &'static str,
-    unit: &'static str,
-    scale: f64,
-    description: &'static str,
-) -> ObservationField {
-    ObservationField {
-        name,
-        unit,
-        scale,
-        description,
-    }
-}
-
-/// The observation table, in index order.
+/// The observation table, in index order: the one declaration the observation values
+/// ([`observe`]), the names, the docs and Python's index constants come from.
 pub const OBSERVATION: [ObservationField; OBS_DIM] = [
-    field(
-        "boom_rel_x",
-        "m",
-        0.05,
-        "boom tip minus capture point, x (forward)",
-    ),
-    field(
-        "boom_rel_y",
-        "m",
-        0.05,
-        "boom tip minus capture point, y (starboard)",
-    ),
-    field(
-        "boom_rel_z",
-        "m",
-        0.05,
-        "boom tip minus capture point, z (down)",
-    ),
-    field(
-        "boom_rel_vx",
-        "m/s",
-        0.1,
-        "boom-tip velocity minus capture-point velocity, x",
-    ),
-    field(
-        "boom_rel_vy",
-        "m/s",
-        0.1,
-        "boom-tip velocity minus capture-point velocity, y",
-    ),
-    field(
-        "boom_rel_vz",
-        "m/s",
-        0.1,
-        "boom-tip velocity minus capture-point velocity, z",
-    ),
-    field(
-        "accd_dx",
-        "m",
-        0.05,
-        "ACCD position minus its open-loop equilibrium, x",
-    ),
-    field(
-        "accd_dy",
-        "m",
-        0.05,
-        "ACCD position minus its open-loop equilibrium, y",
-    ),
-    field(
-        "accd_dz",
-        "m",
-        0.05,
-        "ACCD position minus its open-loop equilibrium, z",
-    ),
-    field(
-        "accd_vx",
-        "m/s",
-        0.1,
-        "ACCD velocity relative to the aircraft, x",
-    ),
-    field(
-        "accd_vy",
-        "m/s",
-        0.1,
-        "ACCD velocity relative to the aircraft, y",
-    ),
-    field(
-        "accd_vz",
-        "m/s",
-        0.1,
-        "ACCD velocity relative to the aircraft, z",
-    ),
-    field(
-        "quat_w",
-        "-",
-        1.0,
-        "attitude quaternion body -> TA frame, scalar part (>= 0)",
-    ),
-    field("quat_x", "-", 1.0, "attitude quaternion, x part"),
-    field("quat_y", "-", 1.0, "attitude quaternion, y part"),
-    field("quat_z", "-", 1.0, "attitude quaternion, z part"),
-    field("rate_p", "rad/s", 0.5, "body roll rate"),
-    field("rate_q", "rad/s", 0.5, "body pitch rate"),
-    field("rate_r", "rad/s", 0.5, "body yaw rate"),
-    field(
-        "flap_right",
-        "-",
-        1.0,
-        "right flap deflection / accd.flap_limit_deg",
-    ),
-    field(
-        "flap_left",
-        "-",
-        1.0,
-        "left flap deflection / accd.flap_limit_deg",
-    ),
-    field(
-        "flap_top",
-        "-",
-        1.0,
-        "top flap deflection / accd.flap_limit_deg",
-    ),
-    field(
-        "flap_bottom",
-        "-",
-        1.0,
-        "bottom flap deflection / accd.flap_limit_deg",
-    ),
-    field("tension", "N", 1e-4, "tension at the attachment"),
-    field(
-        "time_left",
-        "-",
-        1.0,
-        "time left in the capture window / capture_window",
-    ),
+    ObservationField {
+        name: "boom_rel_x",
+        unit: "m",
+        scale: 0.05,
+        description: "boom tip minus capture point, x (forward)",
+        value: |o| o.snapshot.boom_tip.x - o.snapshot.capture_point.x,
+    },
+    ObservationField {
+        name: "boom_rel_y",
+        unit: "m",
+        scale: 0.05,
+        description: "boom tip minus capture point, y (starboard)",
+        value: |o| o.snapshot.boom_tip.y - o.snapshot.capture_point.y,
+    },
+    ObservationField {
+        name: "boom_rel_z",
+        unit: "m",
+        scale: 0.05,
+        description: "boom tip minus capture point, z (down)",
+        value: |o| o.snapshot.boom_tip.z - o.snapshot.capture_point.z,
+    },
+    ObservationField {
+        name: "boom_rel_vx",
+        unit: "m/s",
+        scale: 0.1,
+        description: "boom-tip velocity minus capture-point velocity, x",
+        value: |o| o.snapshot.boom_velocity.x - o.snapshot.capture_point_velocity.x,
+    },
+    ObservationField {
+        name: "boom_rel_vy",
+        unit: "m/s",
+        scale: 0.1,
+        description: "boom-tip velocity minus capture-point velocity, y",
+        value: |o| o.snapshot.boom_velocity.y - o.snapshot.capture_point_velocity.y,
+    },
+    ObservationField {
+        name: "boom_rel_vz",
+        unit: "m/s",
+        scale: 0.1,
+        description: "boom-tip velocity minus capture-point velocity, z",
+        value: |o| o.snapshot.boom_velocity.z - o.snapshot.capture_point_velocity.z,
+    },
+    ObservationField {
+        name: "accd_dx",
+        unit: "m",
+        scale: 0.05,
+        description: "ACCD position minus its open-loop equilibrium, x",
+        value: |o| o.snapshot.position.x - o.equilibrium.x,
+    },
+    ObservationField {
+        name: "accd_dy",
+        unit: "m",
+        scale: 0.05,
+        description: "ACCD position minus its open-loop equilibrium, y",
+        value: |o| o.snapshot.position.y - o.equilibrium.y,
+    },
+    ObservationField {
+        name: "accd_dz",
+        unit: "m",
+        scale: 0.05,
+        description: "ACCD position minus its open-loop equilibrium, z",
+        value: |o| o.snapshot.position.z - o.equilibrium.z,
+    },
+    ObservationField {
+        name: "accd_vx",
+        unit: "m/s",
+        scale: 0.1,
+        description: "ACCD velocity relative to the aircraft, x",
+        value: |o| o.snapshot.velocity.x,
+    },
+    ObservationField {
+        name: "accd_vy",
+        unit: "m/s",
+        scale: 0.1,
+        description: "ACCD velocity relative to the aircraft, y",
+        value: |o| o.snapshot.velocity.y,
+    },
+    ObservationField {
+        name: "accd_vz",
+        unit: "m/s",
+        scale: 0.1,
+        description: "ACCD velocity relative to the aircraft, z",
+        value: |o| o.snapshot.velocity.z,
+    },
+    ObservationField {
+        name: "quat_w",
+        unit: "-",
+        scale: 1.0,
+        description: "attitude quaternion body -> TA frame, scalar part (>= 0)",
+        value: |o| o.hemisphere() * o.snapshot.attitude.w,
+    },
+    ObservationField {
+        name: "quat_x",
+        unit: "-",
+        scale: 1.0,
+        description: "attitude quaternion, x part",
+        value: |o| o.hemisphere() * o.snapshot.attitude.i,
+    },
+    ObservationField {
+        name: "quat_y",
+        unit: "-",
+        scale: 1.0,
+        description: "attitude quaternion, y part",
+        value: |o| o.hemisphere() * o.snapshot.attitude.j,
+    },
+    ObservationField {
+        name: "quat_z",
+        unit: "-",
+        scale: 1.0,
+        description: "attitude quaternion, z part",
+        value: |o| o.hemisphere() * o.snapshot.attitude.k,
+    },
+    ObservationField {
+        name: "rate_p",
+        unit: "rad/s",
+        scale: 0.5,
+        description: "body roll rate",
+        value: |o| o.snapshot.omega.x,
+    },
+    ObservationField {
+        name: "rate_q",
+        unit: "rad/s",
+        scale: 0.5,
+        description: "body pitch rate",
+        value: |o| o.snapshot.omega.y,
+    },
+    ObservationField {
+        name: "rate_r",
+        unit: "rad/s",
+        scale: 0.5,
+        description: "body yaw rate",
+        value: |o| o.snapshot.omega.z,
+    },
+    ObservationField {
+        name: "flap_right",
+        unit: "-",
+        scale: 1.0,
+        description: "right flap deflection / accd.flap_limit_deg",
+        value: |o| o.snapshot.deflection[0] / o.flap_limit,
+    },
+    ObservationField {
+        name: "flap_left",
+        unit: "-",
+        scale: 1.0,
+        description: "left flap deflection / accd.flap_limit_deg",
+        value: |o| o.snapshot.deflection[1] / o.flap_limit,
+    },
+    ObservationField {
+        name: "flap_top",
+        unit: "-",
+        scale: 1.0,
+        description: "top flap deflection / accd.flap_limit_deg",
+        value: |o| o.snapshot.deflection[2] / o.flap_limit,
+    },
+    ObservationField {
+        name: "flap_bottom",
+        unit: "-",
+        scale: 1.0,
+        description: "bottom flap deflection / accd.flap_limit_deg",
+        value: |o| o.snapshot.deflection[3] / o.flap_limit,
+    },
+    ObservationField {
+        name: "tension",
+        unit: "N",
+        scale: 0.0001,
+        description: "tension at the attachment",
+        value: |o| o.snapshot.attachment_tension,
+    },
+    ObservationField {
+        name: "time_left",
+        unit: "-",
+        scale: 1.0,
+        description: "time left in the capture window / capture_window",
+        value: |o| (o.capture_window - o.snapshot.time) / o.capture_window,
+    },
 ];
+
+/// The index of the observation entry `name`, if there is one.
+pub fn observation_index(name: &str) -> Option<usize> {
+    OBSERVATION.iter().position(|f| f.name == name)
+}
+
+/// The observation of `inputs` into `out` (each quantity times its scale, clipped to
+/// [-[`OBS_BOUND`], [`OBS_BOUND`]]) if every quantity is finite; false (and `out` unchanged)
+/// otherwise.
+pub fn observe(inputs: &ObservationInputs<'_>, out: &mut [f32; OBS_DIM]) -> bool {
+    let mut raw = [0.0; OBS_DIM];
+    for (v, field) in raw.iter_mut().zip(&OBSERVATION) {
+        *v = (field.value)(inputs);
+    }
+    if !raw.iter().all(|v| v.is_finite()) {
+        return false;
+    }
+    for (o, (v, field)) in out.iter_mut().zip(raw.iter().zip(&OBSERVATION)) {
+        *o = ((v * field.scale) as f32).clamp(-OBS_BOUND, OBS_BOUND);
+    }
+    true
+}
 
 /// Random initial conditions of an episode, around the open-loop equilibrium.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
