@@ -137,6 +137,8 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
     * v0: first release.
     """
 
+    _state_kind = "single"
+
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 10}
 
     def __init__(self, render_mode: Optional[str] = None, **config: Any) -> None:
