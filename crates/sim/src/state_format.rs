@@ -690,6 +690,104 @@ mod tests {
         ));
     }
 
+    /// The postcard encoding of a stream, byte by byte after postcard's wire specification:
+    /// a fixed array is its elements, unsigned integers are LEB128 varints, an `Option` a 0/1
+    /// tag, an `f64` its 8 little-endian bytes.
+    #[test]
+    fn stream_state_encodes_as_the_postcard_spec_says() {
+        let state = StreamState {
+            chacha: ChaChaState {
+                seed: [9; 32],
+                stream: 300,
+                word_pos: 5,
+            },
+            spare: Some(1.5),
+        };
+        let mut want = vec![9u8; 32];
+        want.extend_from_slice(&[0xAC, 0x02]); // 300 = 0b10_0101100
+        want.push(5);
+        want.push(1);
+        want.extend_from_slice(&1.5f64.to_le_bytes());
+        assert_eq!(postcard::to_allocvec(&state).unwrap(), want);
+        let none = StreamState {
+            spare: None,
+            ..state
+        };
+        assert_eq!(postcard::to_allocvec(&none).unwrap().len(), 32 + 2 + 1 + 1);
+    }
+
+    /// Pins the encoding of every state type of this module: when it fails, the format changed,
+    /// so bump [`FORMAT_VERSION`] and then update the digest (printed by the failure).
+    #[test]
+    fn payload_layout_is_pinned() {
+        let stream = StreamState {
+            chacha: ChaChaState {
+                seed: [1; 32],
+                stream: 2,
+                word_pos: 3,
+            },
+            spare: Some(0.5),
+        };
+        let state = EpisodeState {
+            sim: CaptureState {
+                time_origin: 0.25,
+                steps: 4,
+                time: 1.25,
+                q: vec![0.1, 0.2, 0.3],
+                qd: vec![-0.1, -0.2, -0.3],
+                attitude: [0.0, 0.1, 0.2, 0.97],
+                omega: [1.0, 2.0, 3.0],
+                flap_command: [0.1; 4],
+                flap_deflection: [0.05; 4],
+                boom: BoomState {
+                    base: [1.0; 3],
+                    phase: [2.0; 3],
+                    perturbation: [3.0; 3],
+                    previous_tip: [4.0; 3],
+                    velocity: [5.0; 3],
+                    along: 6.0,
+                    stream,
+                },
+                air: AirState::Turbulence(Box::new(TurbulenceState {
+                    seed: 11,
+                    time: 0.5,
+                    newest: 50,
+                    ring: vec![0.5f32; 6],
+                    processes: vec![0.25; 3],
+                    wake_stream: stream,
+                    ambient_stream: stream,
+                    lanes: Some(LaneState {
+                        streams: vec![stream; 2],
+                        generated: vec![1, 0],
+                        covered: Some([0, 0, 0, 1]),
+                    }),
+                })),
+            },
+            steps: 9,
+            seeds: Seeds {
+                initial: 1,
+                wake: 2,
+                rlv: 3,
+            },
+            previous_action: [0.5; ACT_DIM],
+            observation: vec![0.125; 3],
+            distance: 2.5,
+            done: false,
+            divergence: Some("x".into()),
+        };
+        let bytes = postcard::to_allocvec(&state).unwrap();
+        let digest = hex(&Sha256::digest(&bytes));
+        assert_eq!(
+            (FORMAT_VERSION, bytes.len(), digest.as_str()),
+            (
+                3,
+                662,
+                "5472b754ae91b148d6367446b2333b4a547df6887b99620d790f06b896d74a88"
+            ),
+            "the state types' encoding changed: bump FORMAT_VERSION, then pin the new digest"
+        );
+    }
+
     #[test]
     fn config_hash_is_canonical_and_stable() {
         #[derive(Serialize)]
