@@ -224,7 +224,8 @@ def test_state_snapshot_restores_exactly_and_envs_pickle():
         assert np.array_equal(x[0], y[0]) and np.array_equal(x[0], z[0])
         assert x[1:4] == y[1:4] == z[1:4]
     other = gym.make(ENV_ID, capture_window=3.0, initial={"settle_time": 20.0}).unwrapped
-    with pytest.raises(accd_gym.ConfigError):
+    # Was ConfigError; issue 11 item 3: every foreign state is a StateError naming what differs.
+    with pytest.raises(accd_gym.StateError, match="another configuration"):
         other.set_state(state)
 
     vec = gym.make_vec(ENV_ID, num_envs=2, **QUICK)

@@ -20,6 +20,8 @@ class CoreEnvMixin:
     _config: dict[str, Any]
     _seeded: bool = False
     _needs_reset: bool = True
+    #: The kind written into and required of a state: ``"single"``, ``"vector"`` or ``"sb3"``.
+    _state_kind: str
 
     @property
     def config(self) -> dict[str, Any]:
@@ -49,13 +51,21 @@ class CoreEnvMixin:
         return obs, wake
 
     def get_state(self) -> bytes:
-        """The env's exact state (physics, random streams, seeds, counters) as bytes."""
-        return bytes([self._needs_reset, self._seeded]) + self._core.get_state()
+        """The env's exact state (physics, random streams, seeds, counters) as bytes.
+
+        The bytes are a header (magic ``ACCDSNAP``, format version, the kind of env, the number
+        of envs, the SHA-256 of the configuration, a CRC-32 of everything) followed by the
+        postcard-encoded state; the configuration itself is not included (pickles carry it)."""
+        return self._core.get_state(self._state_kind, self._needs_reset, self._seeded)
 
     def set_state(self, state: bytes) -> None:
-        """Restores a state from :meth:`get_state` of an env with the same configuration and size;
-        raises ConfigError for another configuration and StateError for anything else."""
-        if len(state) < 2 or state[0] > 1 or state[1] > 1:
-            raise StateError(f"not a state from {type(self).__name__}.get_state()")
-        self._core.set_state(state[2:])
-        self._needs_reset, self._seeded = bool(state[0]), bool(state[1])
+        """Restores a state from :meth:`get_state` of an env of the same class, configuration and
+        number of envs; it then continues bit for bit as the saved one would.
+
+        Raises :class:`~accd_gym.StateError` (a ``ValueError``) naming what is wrong for anything
+        else (a corrupted or truncated state, another env class, configuration or number of
+        envs, random bytes, a state of the old format written before format version 3), and then
+        changes nothing."""
+        if not isinstance(state, (bytes, bytearray, memoryview)):
+            raise StateError(f"a state is bytes from {type(self).__name__}.get_state(), got {type(state).__name__}")
+        self._needs_reset, self._seeded = self._core.set_state(bytes(state), self._state_kind)

@@ -130,12 +130,18 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
     ## State
 
     ``get_state()``/``set_state()`` snapshot and restore the env exactly (random streams
-    included); the env pickles.
+    included); the env pickles. A state is bytes: a header (magic, format version, the kind of
+    env, the number of envs, the configuration's SHA-256, a CRC-32) and the encoded state.
+    ``set_state`` raises ``StateError`` naming what is wrong for anything but a state of this
+    class, configuration and size (a corrupted or truncated state, random bytes, a state of the
+    old format written before format version 3), and then changes nothing.
 
     ## Version History
 
     * v0: first release.
     """
+
+    _state_kind = "single"
 
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 10}
 

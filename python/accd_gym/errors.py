@@ -4,7 +4,8 @@
 
     AccdError
      +-- ConfigError (also ValueError)      invalid configuration: names the field, value, range
-     +-- StateError (also ValueError)       invalid state or array argument (shape, non-finite)
+     +-- StateError (also ValueError)       invalid state or array argument (shape, non-finite),
+                                            or a saved state that cannot be restored
      +-- SimulationError (also RuntimeError) the simulation diverged
 """
 
@@ -18,7 +19,9 @@ class ConfigError(AccdError, ValueError):
 
 
 class StateError(AccdError, ValueError):
-    """An invalid state or array argument: wrong shape, non-finite values, a singular direction."""
+    """An invalid state or array argument: wrong shape, non-finite values, a singular direction;
+    or a saved state (``get_state`` bytes) that cannot be restored: corrupted, truncated, of
+    another env class, configuration or number of envs, or of an older state format."""
 
 
 class SimulationError(AccdError, RuntimeError):

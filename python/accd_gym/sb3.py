@@ -47,6 +47,8 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
     ``VecMonitor`` and ``VecNormalize``.
     """
 
+    _state_kind = "sb3"
+
     def __init__(
         self,
         num_envs: int = 1,

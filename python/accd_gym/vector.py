@@ -81,6 +81,8 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
     ``render()`` returns a tuple of one RGB frame per env, as ``SyncVectorEnv`` does.
     """
 
+    _state_kind = "vector"
+
     def __init__(
         self,
         num_envs: int = 1,

@@ -8,9 +8,10 @@
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::Arc;
 
-use accd_sim::codec::{StateReader, StateWriter};
+use accd_sim::state_format::{self, EpisodeState, Expected, StateError, StateKind};
 use accd_sim::{EnvConfig, Episode, Equilibrium, Outcome, SimError, ACT_DIM, OBS_DIM};
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 
 use crate::error::{BatchError, Result};
 use crate::seeds::{episode_seeds, WakeSchedule};
@@ -527,97 +528,136 @@ impl BatchEnv {
         }
     }
 
-    /// Saves every env's state (episodes, seeds, counters, random streams) with the config, for
-    /// [`BatchEnv::load`].
-    pub fn save(&self) -> Vec<u8> {
-        let mut w = StateWriter::new();
-        w.raw(MAGIC);
-        w.bytes(config_json(&self.config).as_bytes());
-        w.u64(self.slots.len() as u64);
-        match &self.schedule {
-            WakeSchedule::Training => w.u64(0),
-            WakeSchedule::Fixed(s) => {
-                w.u64(1);
-                w.u64(*s);
-            }
-            WakeSchedule::List(list) => {
-                w.u64(2);
-                w.u64(list.len() as u64);
-                for s in list {
-                    w.u64(*s);
-                }
-            }
+    /// Every env's dynamic state (episodes, seeds, counters, random streams) and the wake
+    /// schedule; the config is not included.
+    pub fn state(&self) -> BatchState {
+        BatchState {
+            schedule: self.schedule.clone(),
+            envs: self
+                .slots
+                .iter()
+                .map(|slot| SlotState {
+                    base: slot.base,
+                    index: slot.index,
+                    pending_reset: slot.pending_reset,
+                    episode: slot.episode.state(),
+                })
+                .collect(),
         }
-        for slot in &self.slots {
-            w.u64(slot.base);
-            w.u64(slot.index);
-            w.bool(slot.pending_reset);
-            slot.episode.save(&mut w);
-        }
-        w.into_bytes()
     }
 
-    /// Restores a state saved by [`BatchEnv::save`] of a batch with the same config and size:
-    /// every env then continues exactly as the saved one would.
-    pub fn load(&mut self, bytes: &[u8]) -> Result<()> {
-        let mut r = StateReader::new(bytes);
-        let magic = r.raw::<8>("header")?;
-        if &magic != MAGIC {
-            return Err(SimError::invalid_config(
-                "state",
-                "unknown header",
-                "a state saved by accd-gym's get_state",
-            )
+    /// Restores a state from [`BatchEnv::state`] of a batch with the same config and size:
+    /// every env then continues exactly as the saved one would. Restored into copies first:
+    /// on an error (another number of envs, a malformed episode) the batch is as it was.
+    pub fn set_state(&mut self, state: BatchState) -> Result<()> {
+        if state.envs.len() != self.slots.len() {
+            return Err(SimError::from(StateError::NumEnvs {
+                expected: self.slots.len() as u64,
+                found: state.envs.len() as u64,
+            })
             .into());
         }
-        let saved = String::from_utf8_lossy(r.bytes("config")?).into_owned();
-        if saved != config_json(&self.config) {
-            return Err(SimError::invalid_config(
-                "state",
-                "a state of another configuration",
-                "a state saved by an env with the same configuration",
-            )
-            .into());
-        }
-        let n = r.u64("num_envs")?;
-        if n != self.slots.len() as u64 {
-            return Err(SimError::invalid_config(
-                "state",
-                format!("a state of {n} envs"),
-                &format!("a state of {} envs", self.slots.len()),
-            )
-            .into());
-        }
-        let schedule = match r.u64("wake schedule")? {
-            0 => WakeSchedule::Training,
-            1 => WakeSchedule::Fixed(r.u64("wake seed")?),
-            2 => {
-                let len = r.u64("wake seed list")?;
-                if len > bytes.len() as u64 {
-                    return Err(
-                        SimError::invalid_config("state", "corrupt", "a saved state").into(),
-                    );
-                }
-                (0..len)
-                    .map(|_| r.u64("wake seed"))
-                    .collect::<Result<Vec<_>, _>>()
-                    .map(WakeSchedule::List)?
+        if let WakeSchedule::List(list) = &state.schedule {
+            if list.is_empty() {
+                return Err(SimError::from(StateError::invalid(
+                    "schedule",
+                    "an empty wake seed list",
+                    "a list of at least one wake seed",
+                ))
+                .into());
             }
-            _ => return Err(SimError::invalid_config("state", "corrupt", "a saved state").into()),
-        };
-        // Restore into copies first: a malformed state leaves the batch as it was.
-        let mut slots = self.slots.clone();
-        for slot in &mut slots {
-            slot.base = r.u64("base seed")?;
-            slot.index = r.u64("episode index")?;
-            slot.pending_reset = r.bool("pending reset")?;
-            slot.episode.load(&mut r)?;
         }
-        r.finish()?;
+        let mut slots = self.slots.clone();
+        for (env, (slot, saved)) in slots.iter_mut().zip(state.envs).enumerate() {
+            slot.base = saved.base;
+            slot.index = saved.index;
+            slot.pending_reset = saved.pending_reset;
+            slot.final_divergence = None;
+            slot.episode
+                .set_state(saved.episode)
+                .map_err(|e| in_env(env, e))?;
+        }
         self.slots = slots;
-        self.schedule = schedule;
+        self.schedule = state.schedule;
         Ok(())
     }
+
+    /// The hash of the config that pins a state to it ([`state_format::config_hash`]).
+    pub fn config_hash(&self) -> Result<[u8; 32]> {
+        Ok(state_format::config_hash(&*self.config).map_err(SimError::from)?)
+    }
+
+    /// What a state of this batch saved as `kind` must be.
+    pub fn expected_state(&self, kind: StateKind) -> Result<Expected> {
+        Ok(Expected {
+            kind,
+            config_hash: self.config_hash()?,
+            num_envs: self.slots.len() as u64,
+        })
+    }
+
+    /// [`BatchEnv::state`] behind a header ([`state_format`], kind [`StateKind::Batch`]).
+    pub fn save(&self) -> Result<Vec<u8>> {
+        let hash = self.config_hash()?;
+        let n = self.slots.len() as u64;
+        Ok(
+            state_format::encode(StateKind::Batch, &hash, n, &self.state())
+                .map_err(SimError::from)?,
+        )
+    }
+
+    /// Restores a state from [`BatchEnv::save`]: a corrupted, truncated or foreign blob
+    /// (another kind, config or number of envs) is an error naming what is wrong
+    /// ([`SimError::State`]) and changes nothing.
+    pub fn load(&mut self, bytes: &[u8]) -> Result<()> {
+        let expected = self.expected_state(StateKind::Batch)?;
+        let state = state_format::decode(bytes, &expected).map_err(SimError::from)?;
+        self.set_state(state)
+    }
+}
+
+/// An error restoring env `env`'s episode, as a state error naming the env.
+fn in_env(env: usize, error: SimError) -> BatchError {
+    let error = match error {
+        SimError::State(StateError::Invalid {
+            field,
+            value,
+            allowed,
+        }) => StateError::Invalid {
+            field: format!("envs[{env}].{field}"),
+            value,
+            allowed,
+        },
+        other => StateError::invalid(
+            &format!("envs[{env}]"),
+            other,
+            "a state the env can continue from",
+        ),
+    };
+    SimError::State(error).into()
+}
+
+/// The saved state of a [`BatchEnv`] ([`BatchEnv::state`]): part of the state format
+/// ([`state_format`]; a change here is a change of [`state_format::FORMAT_VERSION`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BatchState {
+    /// Where the wake seeds come from.
+    pub schedule: WakeSchedule,
+    /// Every env, in order.
+    pub envs: Vec<SlotState>,
+}
+
+/// One env of a [`BatchState`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SlotState {
+    /// The env's base seed.
+    pub base: u64,
+    /// Index of its current episode under `base`.
+    pub index: u64,
+    /// Its episode ended in the last step and awaits a reset.
+    pub pending_reset: bool,
+    /// The episode.
+    pub episode: EpisodeState,
 }
 
 /// One env's share of a step: its slot, action and output rows.
@@ -633,12 +673,6 @@ type Row<'a> = (
     &'a mut u64,
     &'a mut bool,
 );
-
-const MAGIC: &[u8; 8] = b"ACCDST02";
-
-fn config_json(config: &EnvConfig) -> String {
-    serde_json::to_string(config).unwrap_or_default()
-}
 
 /// Starts the slot's episode `slot.index` (the slot is env `env` of `n`); on failure the
 /// episode is marked diverged and its outcome returned.

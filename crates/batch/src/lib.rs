@@ -11,6 +11,9 @@ pub mod error;
 pub mod memory;
 pub mod seeds;
 
-pub use batch::{info, Autoreset, BatchEnv, ResetBuffers, SeedSpec, StepBuffers, StepOutputs};
+pub use batch::{
+    info, Autoreset, BatchEnv, BatchState, ResetBuffers, SeedSpec, SlotState, StepBuffers,
+    StepOutputs,
+};
 pub use error::{BatchError, Result};
 pub use seeds::{episode_seeds, WakeSchedule, HELD_OUT_WAKE_SEEDS, TRAINING_WAKE_SEEDS};

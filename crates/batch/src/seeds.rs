@@ -50,7 +50,7 @@ const RLV: u64 = u64::from_be_bytes(*b"RLV BOOM");
 const WAKE: u64 = u64::from_be_bytes(*b"WAKESEED");
 
 /// Where an episode's wake seed comes from.
-#[derive(Debug, Clone, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 pub enum WakeSchedule {
     /// Drawn from [`TRAINING_WAKE_SEEDS`] with the episode's other seeds.
     #[default]

@@ -332,7 +332,7 @@ fn a_saved_batch_continues_bit_for_bit_and_foreign_states_are_refused() {
     for k in 0..12 {
         a.step(&actions(3, k)).unwrap();
     }
-    let saved = a.env.save();
+    let saved = a.env.save().unwrap();
     let tail_a: Vec<Step> = (12..40).map(|k| a.step(&actions(3, k)).unwrap()).collect();
     let mut b = Runner::new(3, 1, Autoreset::SameStep);
     b.env.load(&saved).unwrap();
@@ -355,4 +355,34 @@ fn a_saved_batch_continues_bit_for_bit_and_foreign_states_are_refused() {
         .unwrap_err()
         .to_string()
         .contains("configuration"));
+}
+
+#[test]
+fn a_state_that_fails_in_its_last_env_changes_no_env() {
+    let mut a = Runner::new(3, 2, Autoreset::SameStep);
+    for k in 0..6 {
+        a.step(&actions(3, k)).unwrap();
+    }
+    let mut b = Runner::new(3, 5, Autoreset::SameStep);
+    b.step(&actions(3, 9)).unwrap();
+    let before = b.env.state();
+    // Envs 0 and 1 are fine; env 2's tether has one coordinate too many.
+    let mut bad = a.env.state();
+    bad.envs[2].episode.sim.q.push(0.0);
+    let e = b.env.set_state(bad).unwrap_err().to_string();
+    assert!(e.contains("envs[2].sim.q"), "{e}");
+    assert_eq!(b.env.state(), before, "nothing half-applied");
+    // Another wrong part, inside the turbulence.
+    let mut bad = a.env.state();
+    if let accd_sim::state_format::AirState::Turbulence(t) = &mut bad.envs[1].episode.sim.air {
+        t.ring.pop();
+    } else {
+        panic!("the default config has turbulence");
+    }
+    let e = b.env.set_state(bad).unwrap_err().to_string();
+    assert!(e.contains("envs[1].turbulence.ring"), "{e}");
+    assert_eq!(b.env.state(), before);
+    // The good state applies whole.
+    b.env.set_state(a.env.state()).unwrap();
+    assert_eq!(b.env.state(), a.env.state());
 }

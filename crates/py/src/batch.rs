@@ -2,14 +2,17 @@
 //! stable-baselines3 envs. Rust writes every step's outputs straight into numpy arrays that this
 //! object owns (two sets, used alternately), with the GIL released while the envs step.
 
+use accd_batch::BatchState;
 use accd_batch::{
     info, Autoreset, BatchEnv, BatchError, ResetBuffers, SeedSpec, StepBuffers, WakeSchedule,
     HELD_OUT_WAKE_SEEDS, TRAINING_WAKE_SEEDS,
 };
-use accd_sim::{EnvConfig, ACT_DIM, OBSERVATION, OBS_BOUND, OBS_DIM};
+use accd_sim::state_format::{self, StateKind};
+use accd_sim::{EnvConfig, SimError, ACT_DIM, OBSERVATION, OBS_BOUND, OBS_DIM};
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyTuple};
+use serde::{Deserialize, Serialize};
 
 use crate::arrays::{vector_to_py, vectors_to_py};
 use crate::capture::sim_to_py;
@@ -95,6 +98,33 @@ impl PyBatchEnv {
             self.buffers[i] = Buffers::new(py, self.inner.num_envs());
         }
         &self.buffers[i]
+    }
+}
+
+/// The payload of a Python env's state ([`accd_sim::state_format`]; a change here is a change
+/// of the format): the batch and the two flags the Python class keeps.
+#[derive(Serialize, Deserialize)]
+struct EnvState {
+    /// The env must be reset before it is stepped (it never was).
+    needs_reset: bool,
+    /// The env was seeded (a reset without a seed then continues the seeded streams).
+    seeded: bool,
+    /// The batch.
+    batch: BatchState,
+}
+
+/// The state kind of a Python env class: ``"single"``, ``"vector"`` or ``"sb3"``.
+fn parse_kind(kind: &str) -> PyResult<StateKind> {
+    match kind {
+        "single" => Ok(StateKind::SingleEnv),
+        "vector" => Ok(StateKind::VectorEnv),
+        "sb3" => Ok(StateKind::Sb3VecEnv),
+        other => Err(raise(
+            Kind::State,
+            format!(
+                "invalid state kind `kind` = {other:?}, expected \"single\", \"vector\" or \"sb3\""
+            ),
+        )),
     }
 }
 
@@ -307,16 +337,44 @@ impl PyBatchEnv {
         }
     }
 
-    /// Every env's exact state (episodes, seeds, counters, random streams, the config) as bytes.
-    fn get_state<'py>(&self, py: Python<'py>) -> Bound<'py, PyBytes> {
-        PyBytes::new(py, &self.inner.save())
+    /// Every env's exact state (episodes, seeds, counters, random streams) and the Python
+    /// env's flags ``needs_reset`` and ``seeded``, as bytes: a header (magic, format version,
+    /// ``kind`` (``"single"``, ``"vector"`` or ``"sb3"``), number of envs, the config's SHA-256,
+    /// a CRC-32) and the postcard-encoded state (``accd_sim::state_format``).
+    fn get_state<'py>(
+        &self,
+        py: Python<'py>,
+        kind: &str,
+        needs_reset: bool,
+        seeded: bool,
+    ) -> PyResult<Bound<'py, PyBytes>> {
+        let kind = parse_kind(kind)?;
+        let hash = self.inner.config_hash().map_err(batch_to_py)?;
+        let state = EnvState {
+            needs_reset,
+            seeded,
+            batch: self.inner.state(),
+        };
+        let n = self.inner.num_envs() as u64;
+        let bytes = state_format::encode(kind, &hash, n, &state)
+            .map_err(|e| sim_to_py(SimError::State(e)))?;
+        Ok(PyBytes::new(py, &bytes))
     }
 
-    /// Restores a state from ``get_state`` of a batch with the same config and size; raises
-    /// ConfigError otherwise (and changes nothing).
-    fn set_state(&mut self, py: Python<'_>, state: &[u8]) -> PyResult<()> {
+    /// Restores a state from ``get_state`` of an env of the same ``kind``, config and number of
+    /// envs and returns its ``(needs_reset, seeded)``. Anything else (corrupted, truncated,
+    /// another kind, config or size, the old format) raises ``StateError`` naming what is wrong
+    /// and changes nothing.
+    fn set_state(&mut self, py: Python<'_>, state: &[u8], kind: &str) -> PyResult<(bool, bool)> {
+        let kind = parse_kind(kind)?;
         let inner = &mut self.inner;
-        py.detach(|| inner.load(state)).map_err(batch_to_py)
+        py.detach(|| {
+            let expected = inner.expected_state(kind)?;
+            let saved: EnvState = state_format::decode(state, &expected).map_err(SimError::from)?;
+            inner.set_state(saved.batch)?;
+            Ok((saved.needs_reset, saved.seeded))
+        })
+        .map_err(batch_to_py)
     }
 
     /// The current observation of env ``i`` (a new array).

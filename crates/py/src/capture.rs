@@ -21,6 +21,7 @@ pub fn sim_to_py(error: SimError) -> PyErr {
         SimError::Diverged { .. } | SimError::Interrupted { .. } => {
             raise(Kind::Simulation, error.to_string())
         }
+        SimError::State(_) => raise(Kind::State, error.to_string()),
     }
 }
 

@@ -25,9 +25,9 @@
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use crate::codec::{StateReader, StateWriter};
 use crate::error::{Result, SimError};
-use crate::rng::{Stream, RLV_STREAM};
+use crate::rng::{NormalSampler, Stream, RLV_STREAM};
+use crate::state_format::BoomState;
 
 type V3 = Vector3<f64>;
 
@@ -247,35 +247,29 @@ impl Boom {
         self.previous_tip = tip;
     }
 
-    /// Writes the dynamic state (formation offset, drift phases, perturbation, stream).
-    pub fn save(&self, w: &mut StateWriter) {
-        for v in [
-            &self.base,
-            &self.phase,
-            &self.perturbation,
-            &self.previous_tip,
-            &self.velocity,
-        ] {
-            w.f64s(v.as_slice());
+    /// The dynamic state (formation offset, drift phases, perturbation, stream).
+    pub fn state(&self) -> BoomState {
+        BoomState {
+            base: self.base.into(),
+            phase: self.phase.into(),
+            perturbation: self.perturbation.into(),
+            previous_tip: self.previous_tip.into(),
+            velocity: self.velocity.into(),
+            along: self.along,
+            stream: self.stream.state(),
         }
-        w.f64(self.along);
-        self.stream.save(w);
     }
 
-    /// Restores a state written by [`Boom::save`].
-    pub fn load(&mut self, r: &mut StateReader<'_>) -> Result<()> {
-        for (what, v) in [
-            ("boom offset", &mut self.base),
-            ("boom phase", &mut self.phase),
-            ("boom perturbation", &mut self.perturbation),
-            ("boom previous tip", &mut self.previous_tip),
-            ("boom velocity", &mut self.velocity),
-        ] {
-            r.f64s_into(what, v.as_mut_slice())?;
-        }
-        self.along = r.f64("boom along-track position")?;
-        self.stream = Stream::load(r)?;
-        Ok(())
+    /// Restores a state from [`Boom::state`] (of a boom with any config: the state has no
+    /// lengths to check).
+    pub fn set_state(&mut self, state: &BoomState) {
+        self.base = state.base.into();
+        self.phase = state.phase.into();
+        self.perturbation = state.perturbation.into();
+        self.previous_tip = state.previous_tip.into();
+        self.velocity = state.velocity.into();
+        self.along = state.along;
+        self.stream = Stream::from_state(&state.stream, NormalSampler::BoxMuller);
     }
 
     /// The configuration.

@@ -22,8 +22,8 @@ use crate::accd::{aero_loads, angular_acceleration, AccdConfig, AccdState, Actua
 use crate::aero::AeroModel;
 use crate::aircraft::AircraftConfig;
 use crate::boom::{Boom, BoomConfig, CaptureStatus};
-use crate::codec::{StateReader, StateWriter};
 use crate::error::{Result, SimError};
+use crate::state_format::{check_len, AirState, CaptureState, StateError};
 use crate::turbulence::{Turbulence, TurbulenceConfig};
 use crate::wake::{AirSampling, Wake, WakeConfig};
 use crate::wake_field::WakeField;
@@ -59,12 +59,22 @@ pub trait AirDisturbance: Send + Sync {
     /// A boxed copy (the episode is cloned for snapshots).
     fn clone_box(&self) -> Box<dyn AirDisturbance>;
 
-    /// Writes the time-dependent state (nothing for a steady disturbance).
-    fn save(&self, _w: &mut StateWriter) {}
+    /// The time-dependent state ([`AirState::Steady`] for a steady disturbance).
+    fn state(&self) -> AirState {
+        AirState::Steady
+    }
 
-    /// Restores a state written by `save` of a disturbance built from the same config.
-    fn load(&mut self, _r: &mut StateReader<'_>) -> Result<()> {
-        Ok(())
+    /// Restores a state from `state` of a disturbance built from the same config; checks it
+    /// first and changes nothing on an error.
+    fn set_state(&mut self, state: AirState) -> Result<(), StateError> {
+        match state {
+            AirState::Steady => Ok(()),
+            AirState::Turbulence(_) => Err(StateError::invalid(
+                "air",
+                "the state of a turbulent wake",
+                "the state of a steady disturbance",
+            )),
+        }
     }
 }
 
@@ -595,45 +605,79 @@ impl CaptureSim {
         Ok(())
     }
 
-    /// Writes the episode's dynamic state (tether, ACCD, flaps, boom, air disturbance, clock)
-    /// for [`CaptureSim::load`]; the configuration is not included.
-    pub fn save(&self, w: &mut StateWriter) {
-        w.f64(self.time_origin);
-        w.u64(self.steps);
-        w.f64(self.tether.time);
-        w.f64s(&self.tether.q);
-        w.f64s(&self.tether.qd);
-        w.f64s(self.accd.attitude.coords.as_slice());
-        w.f64s(self.accd.omega.as_slice());
-        w.f64s(&self.actuators.command);
-        w.f64s(&self.actuators.deflection);
-        self.boom.save(w);
-        self.disturbance.save(w);
+    /// The episode's dynamic state (tether, ACCD, flaps, boom, air disturbance, clock); the
+    /// configuration is not included.
+    pub fn state(&self) -> CaptureState {
+        let coords = &self.accd.attitude.coords;
+        CaptureState {
+            time_origin: self.time_origin,
+            steps: self.steps,
+            time: self.tether.time,
+            q: self.tether.q.clone(),
+            qd: self.tether.qd.clone(),
+            attitude: [coords[0], coords[1], coords[2], coords[3]],
+            omega: self.accd.omega.into(),
+            flap_command: self.actuators.command,
+            flap_deflection: self.actuators.deflection,
+            boom: self.boom.state(),
+            air: self.disturbance.state(),
+        }
     }
 
-    /// Restores a state written by [`CaptureSim::save`] of an episode with the same
-    /// configuration; it then continues bit for bit as the saved one would.
-    pub fn load(&mut self, r: &mut StateReader<'_>) -> Result<()> {
-        self.time_origin = r.f64("time origin")?;
-        self.steps = r.u64("steps")?;
-        self.tether.time = r.f64("time")?;
-        r.f64s_into("tether q", &mut self.tether.q)?;
-        r.f64s_into("tether qd", &mut self.tether.qd)?;
-        let mut quat = [0.0; 4];
-        r.f64s_into("attitude", &mut quat)?;
-        let mut omega = [0.0; 3];
-        r.f64s_into("body rates", &mut omega)?;
+    /// Restores a state from [`CaptureSim::state`] of an episode with the same configuration;
+    /// it then continues bit for bit as the saved one would. The state is checked whole
+    /// (lengths, the disturbance's structure) before anything changes: on an error the
+    /// episode is as it was.
+    pub fn set_state(&mut self, state: CaptureState) -> Result<()> {
+        let mut next = self.clone();
+        next.apply_state(state)?;
+        *self = next;
+        Ok(())
+    }
+
+    /// [`CaptureSim::set_state`] without the copy: on an error `self` may be half restored
+    /// (callers restore into a copy).
+    pub(crate) fn apply_state(&mut self, state: CaptureState) -> Result<()> {
+        let dofs = self.model.dofs();
+        check_len("sim.q", state.q.len(), dofs)?;
+        check_len("sim.qd", state.qd.len(), dofs)?;
+        self.disturbance.set_state(state.air)?;
+        self.time_origin = state.time_origin;
+        self.steps = state.steps;
+        self.tether.time = state.time;
+        self.tether.q.copy_from_slice(&state.q);
+        self.tether.qd.copy_from_slice(&state.qd);
+        let [i, j, k, w] = state.attitude;
         self.accd = AccdState {
-            attitude: UnitQuaternion::new_unchecked(Quaternion::new(
-                quat[3], quat[0], quat[1], quat[2],
-            )),
-            omega: V3::from(omega),
+            attitude: UnitQuaternion::new_unchecked(Quaternion::new(w, i, j, k)),
+            omega: V3::from(state.omega),
         };
-        r.f64s_into("flap commands", &mut self.actuators.command)?;
-        r.f64s_into("flap deflections", &mut self.actuators.deflection)?;
-        self.boom.load(r)?;
-        self.disturbance.load(r)?;
+        self.actuators.command = state.flap_command;
+        self.actuators.deflection = state.flap_deflection;
+        self.boom.set_state(&state.boom);
         self.refresh()
+    }
+
+    /// The state behind a header ([`crate::state_format`], kind
+    /// [`StateKind::CaptureSim`](crate::state_format::StateKind::CaptureSim), the hash of the
+    /// configuration).
+    pub fn save(&self) -> Result<Vec<u8>> {
+        use crate::state_format::{config_hash, encode, StateKind};
+        let hash = config_hash(&self.config)?;
+        Ok(encode(StateKind::CaptureSim, &hash, 1, &self.state())?)
+    }
+
+    /// Restores a state from [`CaptureSim::save`]: a corrupted, truncated or foreign blob (of
+    /// another kind or configuration) is a [`SimError::State`] naming what is wrong, and
+    /// changes nothing.
+    pub fn load(&mut self, bytes: &[u8]) -> Result<()> {
+        use crate::state_format::{config_hash, decode, Expected, StateKind};
+        let expected = Expected {
+            kind: StateKind::CaptureSim,
+            config_hash: config_hash(&self.config)?,
+            num_envs: 1,
+        };
+        self.set_state(decode(bytes, &expected)?)
     }
 
     /// The flap actuators.

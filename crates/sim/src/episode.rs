@@ -9,9 +9,9 @@ use nalgebra::{UnitQuaternion, Vector3};
 
 use crate::accd::AccdState;
 use crate::capture::{CaptureSim, Seeds, Snapshot};
-use crate::codec::{StateReader, StateWriter};
 use crate::error::{Result, SimError};
 use crate::rng::Stream;
+use crate::state_format::{check_len, EpisodeState};
 use crate::task::{observe, tilt, EnvConfig, ObservationInputs, ACT_DIM, OBS_DIM};
 use crate::turbulence::AmbientTurbulence;
 
@@ -386,35 +386,34 @@ impl Episode {
         &mut self.sim
     }
 
-    /// Writes the episode's dynamic state.
-    pub fn save(&self, w: &mut StateWriter) {
-        self.sim.save(w);
-        w.u64(self.steps);
-        w.u64(self.seeds.initial);
-        w.u64(self.seeds.wake);
-        w.u64(self.seeds.rlv);
-        w.f64s(&self.previous_action);
-        w.f32s(&self.obs);
-        w.f64(self.distance);
-        w.bool(self.done);
-        w.bytes(self.divergence.as_deref().unwrap_or("").as_bytes());
+    /// The episode's dynamic state (physics, counters, seeds, last action and observation).
+    pub fn state(&self) -> EpisodeState {
+        EpisodeState {
+            sim: self.sim.state(),
+            steps: self.steps,
+            seeds: self.seeds,
+            previous_action: self.previous_action,
+            observation: self.obs.to_vec(),
+            distance: self.distance,
+            done: self.done,
+            divergence: self.divergence.clone(),
+        }
     }
 
-    /// Restores a state written by [`Episode::save`] of an episode with the same config.
-    pub fn load(&mut self, r: &mut StateReader<'_>) -> Result<()> {
-        self.sim.load(r)?;
-        self.steps = r.u64("episode steps")?;
-        self.seeds = Seeds {
-            initial: r.u64("initial seed")?,
-            wake: r.u64("wake seed")?,
-            rlv: r.u64("rlv seed")?,
-        };
-        r.f64s_into("previous action", &mut self.previous_action)?;
-        r.f32s_into("observation", &mut self.obs)?;
-        self.distance = r.f64("distance")?;
-        self.done = r.bool("done")?;
-        let reason = String::from_utf8_lossy(r.bytes("divergence")?).into_owned();
-        self.divergence = (!reason.is_empty()).then_some(reason);
+    /// Restores a state from [`Episode::state`] of an episode with the same config, checked
+    /// whole first: on an error the episode is as it was.
+    pub fn set_state(&mut self, state: EpisodeState) -> Result<()> {
+        check_len("observation", state.observation.len(), OBS_DIM)?;
+        let mut sim = self.sim.clone();
+        sim.apply_state(state.sim)?;
+        self.sim = sim;
+        self.steps = state.steps;
+        self.seeds = state.seeds;
+        self.previous_action = state.previous_action;
+        self.obs.copy_from_slice(&state.observation);
+        self.distance = state.distance;
+        self.done = state.done;
+        self.divergence = state.divergence;
         Ok(())
     }
 }

@@ -50,6 +50,10 @@ pub enum SimError {
     /// The tether model reported an error.
     #[error(transparent)]
     Tether(#[from] accd_tether::TetherError),
+    /// A saved state is malformed, corrupted or of another object
+    /// ([`crate::state_format::StateError`]).
+    #[error(transparent)]
+    State(#[from] crate::state_format::StateError),
 }
 
 impl SimError {

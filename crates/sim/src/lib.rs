@@ -15,11 +15,11 @@ pub mod aero;
 pub mod aircraft;
 pub mod boom;
 pub mod capture;
-pub mod codec;
 pub mod episode;
 pub mod error;
 mod interp;
 pub mod rng;
+pub mod state_format;
 pub mod task;
 pub mod turbulence;
 pub mod wake;
@@ -33,6 +33,7 @@ pub use capture::{AirDisturbance, CalmAir, CaptureConfig, CaptureSim, Seeds, Sna
 pub use episode::{Episode, Equilibrium, Outcome};
 pub use error::SimError;
 pub use rng::NormalSampler;
+pub use state_format::StateError;
 pub use task::{
     observation_index, EnvConfig, ObservationField, ObservationInputs, ACT_DIM, OBSERVATION,
     OBS_BOUND, OBS_DIM,

@@ -25,8 +25,7 @@ use rand_core::{Rng, SeedableRng};
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
-use crate::codec::{StateReader, StateWriter};
-use crate::error::Result;
+use crate::state_format::{ChaChaState, StreamState};
 
 /// ChaCha stream label of the wake turbulence lanes ("WAKELANE" in ASCII).
 pub const WAKE_LANES_STREAM: u64 = u64::from_be_bytes(*b"WAKELANE");
@@ -92,35 +91,29 @@ impl Stream {
         }
     }
 
-    /// Writes the stream's exact position (key, stream label, word position, spare deviate).
-    pub fn save(&self, w: &mut StateWriter) {
-        w.raw(&self.rng.get_seed());
-        w.u64(self.rng.get_stream());
-        w.u128(self.rng.get_word_pos());
-        w.bool(self.spare.is_some());
-        w.f64(self.spare.unwrap_or(0.0));
+    /// The stream's exact position (key, stream label, word position, spare deviate).
+    pub fn state(&self) -> StreamState {
+        StreamState {
+            chacha: ChaChaState {
+                seed: self.rng.get_seed(),
+                stream: self.rng.get_stream(),
+                word_pos: self.rng.get_word_pos(),
+            },
+            spare: self.spare,
+        }
     }
 
-    /// Reads a stream written by [`Stream::save`] (normals by Box-Muller): it continues exactly
-    /// where the saved one was.
-    pub fn load(r: &mut StateReader<'_>) -> Result<Stream> {
-        Stream::load_with_sampler(r, NormalSampler::BoxMuller)
-    }
-
-    /// [`Stream::load`] for a stream whose normals come from `sampler` (a configuration choice,
-    /// not part of the saved state).
-    pub fn load_with_sampler(r: &mut StateReader<'_>, sampler: NormalSampler) -> Result<Stream> {
-        let key = r.raw::<32>("stream key")?;
-        let mut rng = ChaCha8Rng::from_seed(key);
-        rng.set_stream(r.u64("stream label")?);
-        rng.set_word_pos(r.u128("stream position")?);
-        let has_spare = r.bool("spare flag")?;
-        let spare = r.f64("spare")?;
-        Ok(Stream {
+    /// The stream at `state`, normals by `sampler` (a configuration choice, not part of the
+    /// state): it continues exactly where the saved one was.
+    pub fn from_state(state: &StreamState, sampler: NormalSampler) -> Stream {
+        let mut rng = ChaCha8Rng::from_seed(state.chacha.seed);
+        rng.set_stream(state.chacha.stream);
+        rng.set_word_pos(state.chacha.word_pos);
+        Stream {
             rng,
-            spare: has_spare.then_some(spare),
+            spare: state.spare,
             sampler,
-        })
+        }
     }
 
     /// Uniform in [0, 1), from the top 53 bits of one `u64`.
@@ -164,10 +157,9 @@ mod tests {
             a.gaussian();
         }
         a.uniform();
-        let mut w = StateWriter::new();
-        a.save(&mut w);
-        let bytes = w.into_bytes();
-        let mut b = Stream::load(&mut StateReader::new(&bytes)).unwrap();
+        let bytes = postcard::to_allocvec(&a.state()).unwrap();
+        let state: StreamState = postcard::from_bytes(&bytes).unwrap();
+        let mut b = Stream::from_state(&state, NormalSampler::BoxMuller);
         for _ in 0..100 {
             assert_eq!(a.gaussian().to_bits(), b.gaussian().to_bits());
             assert_eq!(a.uniform().to_bits(), b.uniform().to_bits());

@@ -77,9 +77,9 @@
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use crate::codec::{StateReader, StateWriter};
 use crate::error::{Result, SimError};
 use crate::rng::{NormalSampler, Stream, AMBIENT_STREAM, WAKE_LANES_STREAM};
+use crate::state_format::{check_len, LaneState, StateError, TurbulenceState};
 
 /// MIL-F-8785C turbulence length scale above 2000 ft (1750 ft), m.
 pub const MIL_LENGTH_SCALE_M: f64 = 533.4;
@@ -652,72 +652,117 @@ impl Turbulence {
         Ok(())
     }
 
-    /// Writes the dynamic state (seed, clock, history ring, processes, streams).
-    pub fn save(&self, w: &mut StateWriter) {
-        w.u64(self.seed);
-        w.f64(self.time);
-        w.i64(self.newest);
-        w.f32s(&self.ring);
-        w.f64s(&self.state);
-        self.wake_rng.save(w);
-        self.ambient_rng.save(w);
-        if self.on_demand {
-            for (active, rng) in self.active.iter().zip(&self.lane_rngs) {
-                w.bool(*active);
-                rng.save(w);
-            }
-            w.bool(self.covered.is_some());
-            for v in self.covered.unwrap_or_default() {
-                w.u64(v as u64);
-            }
+    /// The dynamic state (seed, clock, history ring, processes, streams, generated lanes).
+    pub fn state(&self) -> TurbulenceState {
+        TurbulenceState {
+            seed: self.seed,
+            time: self.time,
+            newest: self.newest,
+            ring: self.ring.clone(),
+            processes: self.state.clone(),
+            wake_stream: self.wake_rng.state(),
+            ambient_stream: self.ambient_rng.state(),
+            lanes: self.on_demand.then(|| LaneState {
+                streams: self.lane_rngs.iter().map(Stream::state).collect(),
+                generated: self.active_list.iter().map(|&l| l as u64).collect(),
+                covered: self.covered.map(|c| c.map(|v| v as u64)),
+            }),
         }
     }
 
-    /// Restores a state written by [`Turbulence::save`] of turbulence with the same config.
-    pub fn load(&mut self, r: &mut StateReader<'_>) -> Result<()> {
-        self.seed = r.u64("turbulence seed")?;
-        self.time = r.f64("turbulence time")?;
-        self.newest = r.i64("turbulence grid index")?;
+    /// Restores a state from [`Turbulence::state`] of turbulence with the same config. Its
+    /// structure (lengths, lane indices, the clock against the grid) is checked first; on an
+    /// error nothing is changed.
+    pub fn set_state(&mut self, state: TurbulenceState) -> Result<(), StateError> {
+        check_len("turbulence.ring", state.ring.len(), self.ring.len())?;
+        check_len(
+            "turbulence.processes",
+            state.processes.len(),
+            self.state.len(),
+        )?;
+        // The clock and the newest grid time as `advance` leaves them.
+        let grid = |j: i64| j as f64 * self.dt;
+        let consistent = state.time.is_finite()
+            && state.time >= 0.0
+            && (0..i64::MAX / 2).contains(&state.newest)
+            && grid(state.newest) >= state.time
+            && (state.newest == 0 || grid(state.newest - 1) < state.time);
+        if !consistent {
+            return Err(StateError::invalid(
+                "turbulence.time",
+                format!("{} s with newest grid index {}", state.time, state.newest),
+                format!(
+                    "a time in ((newest - 1) dt, newest dt] with dt = {} s",
+                    self.dt
+                ),
+            ));
+        }
+        let lanes = match (self.on_demand, state.lanes) {
+            (false, None) => None,
+            (true, Some(lanes)) => {
+                check_len("turbulence.lanes.streams", lanes.streams.len(), self.lanes)?;
+                let mut active = vec![false; self.lanes];
+                for &l in &lanes.generated {
+                    if l >= self.lanes as u64 || active[l as usize] {
+                        return Err(StateError::invalid(
+                            "turbulence.lanes.generated",
+                            l,
+                            format!("distinct lane indices below {}", self.lanes),
+                        ));
+                    }
+                    active[l as usize] = true;
+                }
+                let (ny, nz) = (self.lanes_y.count as u64, self.lanes_z.count as u64);
+                if let Some(c) = lanes.covered {
+                    let inside = c[0] <= c[1] && c[1] < ny && c[2] <= c[3] && c[3] < nz;
+                    if !inside
+                        || !(c[0]..=c[1])
+                            .all(|iy| (c[2]..=c[3]).all(|iz| active[(iy * nz + iz) as usize]))
+                    {
+                        return Err(StateError::invalid(
+                            "turbulence.lanes.covered",
+                            format!("{c:?}"),
+                            format!("a rectangle of generated lanes within the {ny} x {nz} grid"),
+                        ));
+                    }
+                }
+                Some((lanes, active))
+            }
+            (on_demand, found) => {
+                return Err(StateError::invalid(
+                    "turbulence.lanes",
+                    if found.is_some() {
+                        "per-lane streams"
+                    } else {
+                        "none"
+                    },
+                    if on_demand {
+                        "per-lane streams (this config generates lanes on demand)"
+                    } else {
+                        "none (this config has no per-lane streams)"
+                    },
+                ))
+            }
+        };
+        // Checked: apply.
+        let sampler = self.config.normal_sampler;
+        self.seed = state.seed;
+        self.time = state.time;
+        self.newest = state.newest;
         self.newest_slot = self.newest.rem_euclid(self.slots as i64) as usize;
-        r.f32s_into("turbulence history", &mut self.ring)?;
-        r.f64s_into("turbulence processes", &mut self.state)?;
-        self.wake_rng = Stream::load_with_sampler(r, self.config.normal_sampler)?;
-        self.ambient_rng = Stream::load_with_sampler(r, self.config.normal_sampler)?;
-        if self.on_demand {
+        self.ring = state.ring;
+        self.state = state.processes;
+        self.wake_rng = Stream::from_state(&state.wake_stream, sampler);
+        self.ambient_rng = Stream::from_state(&state.ambient_stream, sampler);
+        if let Some((lanes, active)) = lanes {
+            for (rng, s) in self.lane_rngs.iter_mut().zip(&lanes.streams) {
+                *rng = Stream::from_state(s, sampler);
+            }
+            self.active = active;
             self.active_list.clear();
-            for l in 0..self.lanes {
-                self.active[l] = r.bool("turbulence lane generated")?;
-                self.lane_rngs[l] = Stream::load_with_sampler(r, self.config.normal_sampler)?;
-                if self.active[l] {
-                    self.active_list.push(l);
-                }
-            }
-            let has_covered = r.bool("turbulence covered flag")?;
-            let mut c = [0usize; 4];
-            for v in &mut c {
-                *v = r.u64("turbulence covered lanes")? as usize;
-            }
-            let (ny, nz) = (self.lanes_y.count, self.lanes_z.count);
-            self.covered = if has_covered {
-                if c[0] > c[1] || c[1] >= ny || c[2] > c[3] || c[3] >= nz {
-                    return Err(SimError::invalid_config(
-                        "turbulence state",
-                        format!("{c:?}"),
-                        "a lane rectangle within the lane grid",
-                    ));
-                }
-                let all = (c[0]..=c[1]).all(|iy| (c[2]..=c[3]).all(|iz| self.active[iy * nz + iz]));
-                if !all {
-                    return Err(SimError::invalid_config(
-                        "turbulence state",
-                        format!("{c:?}"),
-                        "a rectangle of generated lanes",
-                    ));
-                }
-                Some(c)
-            } else {
-                None
-            };
+            self.active_list
+                .extend(lanes.generated.iter().map(|&l| l as usize));
+            self.covered = lanes.covered.map(|c| c.map(|v| v as usize));
         }
         Ok(())
     }

@@ -17,6 +17,7 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, SimError};
+use crate::state_format::{AirState, StateError};
 use crate::turbulence::{Turbulence, TurbulenceConfig};
 use crate::wake::{Wake, WakeConfig, WakeTables};
 
@@ -224,11 +225,18 @@ impl crate::capture::AirDisturbance for WakeField {
         Box::new(self.clone())
     }
 
-    fn save(&self, w: &mut crate::codec::StateWriter) {
-        self.turbulence.save(w);
+    fn state(&self) -> AirState {
+        AirState::Turbulence(Box::new(self.turbulence.state()))
     }
 
-    fn load(&mut self, r: &mut crate::codec::StateReader<'_>) -> Result<()> {
-        self.turbulence.load(r)
+    fn set_state(&mut self, state: AirState) -> Result<(), StateError> {
+        match state {
+            AirState::Turbulence(t) => self.turbulence.set_state(*t),
+            AirState::Steady => Err(StateError::invalid(
+                "air",
+                "a steady disturbance",
+                "the state of a wake with turbulence",
+            )),
+        }
     }
 }

@@ -119,12 +119,9 @@ fn same_seeds_and_saved_states(config: EnvConfig) {
     let rb = run(&mut b, 20);
     assert_eq!(format!("{ra:?}"), format!("{rb:?}"));
 
-    let mut w = accd_sim::codec::StateWriter::new();
-    a.save(&mut w);
-    let bytes = w.into_bytes();
+    let bytes = postcard::to_allocvec(&a.state()).unwrap();
     let mut c = episode(quick(), 99);
-    c.load(&mut accd_sim::codec::StateReader::new(&bytes))
-        .unwrap();
+    c.set_state(postcard::from_bytes(&bytes).unwrap()).unwrap();
     assert_eq!(a.observation(), c.observation());
     let cloned = a.clone();
     let tail_a = run(&mut a, 25);

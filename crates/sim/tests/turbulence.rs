@@ -653,12 +653,9 @@ fn on_demand_state_saves_and_continues_bit_for_bit() {
     for _ in 0..150 {
         a.advance(DT).unwrap();
     }
-    let mut w = accd_sim::codec::StateWriter::new();
-    a.save(&mut w);
-    let bytes = w.into_bytes();
+    let bytes = postcard::to_allocvec(&a.state()).unwrap();
     let mut b = Turbulence::new(&config, U, 1).unwrap();
-    b.load(&mut accd_sim::codec::StateReader::new(&bytes))
-        .unwrap();
+    b.set_state(postcard::from_bytes(&bytes).unwrap()).unwrap();
     assert_eq!(a.active_lanes(), b.active_lanes());
     for step in 0..200 {
         if step == 50 {
