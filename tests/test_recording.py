@@ -179,3 +179,19 @@ def test_bad_arguments_name_the_field():
         record_episodes("zero", 2, wake_seeds=[5], config=SHORT)
     with pytest.raises(ConfigError, match="RecordEpisode wraps"):
         RecordEpisode(gym.make("CartPole-v1"))
+
+
+def test_every_public_name_of_the_replay_modules_has_a_docstring():
+    import inspect
+
+    from accd_gym import browser, recording, replay
+
+    for module in (recording, replay, browser):
+        assert inspect.getdoc(module)
+        for name in module.__all__:
+            obj = getattr(module, name)
+            if inspect.isclass(obj) or inspect.isfunction(obj):
+                assert inspect.getdoc(obj), f"{module.__name__}.{name}"
+                for attr, member in vars(obj).items() if inspect.isclass(obj) else ():
+                    if not attr.startswith("_") and callable(member) or isinstance(member, property):
+                        assert inspect.getdoc(member), f"{module.__name__}.{name}.{attr}"
