@@ -195,3 +195,19 @@ def test_every_public_name_of_the_replay_modules_has_a_docstring():
                 for attr, member in vars(obj).items() if inspect.isclass(obj) else ():
                     if not attr.startswith("_") and callable(member) or isinstance(member, property):
                         assert inspect.getdoc(member), f"{module.__name__}.{name}.{attr}"
+
+
+def test_format_doc_lists_every_array_as_recorded():
+    from pathlib import Path
+
+    from accd_gym.recording import fields_markdown
+
+    doc = (Path(__file__).parents[1] / "docs" / "recording-format.md").read_text()
+    table = fields_markdown()
+    assert table in doc, "docs/recording-format.md: regenerate the table with accd_gym.recording.fields_markdown()"
+    (rec,) = record_episodes("zero", 1, config=dict(SHORT, capture_window=1.0), seed=BASE, num_envs=1)
+    rows = [r.split("|")[1:4] for r in table.splitlines()[2:]]
+    assert {name.strip(" `") for name, _, _ in rows} == set(rec.arrays)
+    for name, shape, dtype in rows:
+        assert str(rec[name.strip(" `")].dtype) == dtype.strip(), name
+        assert rec[name.strip(" `")].ndim == shape.count(",") + (0 if shape.strip().endswith(",)") else 1), name

@@ -154,7 +154,7 @@ def _replay(args: argparse.Namespace) -> int:
     written = replay.run_replay(args.policy, args.episodes, args.out, seed=args.seed, config=_env_overrides(args.env),
                                 num_envs=args.num_envs, num_threads=args.num_threads, video=args.video,
                                 screenshot=args.screenshot, max_frames=args.max_frames,
-                                allow_unnormalized=args.allow_unnormalized, progress=not args.quiet)
+                                allow_unnormalized=args.allow_unnormalized, progress=not args.quiet, only=args.only)
     for e in written:
         files = ", ".join(e[k] for k in ("html", "npz", "mp4", "png") if k in e)
         print(f"episode {e['episode']}: {e['outcome']} after {e['steps']} steps, miss {e['min_distance']:.3f} m: {files}")
@@ -236,9 +236,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--num-threads", type=_nonnegative("--num-threads"), default=0,
                    help="threads stepping the envs (default 0: one per core)")
     p.add_argument("--env", help="environment config overrides as JSON")
+    p.add_argument("--only", type=_nonnegative("--only"), action="append", metavar="K",
+                   help="write only episode K of the --episodes run (repeatable; the others run unrecorded)")
     p.add_argument("--video", action="store_true", help="also write an MP4 per episode (imageio-ffmpeg)")
     p.add_argument("--screenshot", action="store_true",
-                   help="also write a PNG of each page at the closest approach (headless chromium)")
+                   help="also write a PNG of each page at the capture or the closest approach (headless chromium)")
     p.add_argument("--max-frames", type=_positive("--max-frames"), default=1000,
                    help="most 3D frames per page; longer recordings are decimated (default 1000)")
     p.add_argument("--allow-unnormalized", action="store_true",

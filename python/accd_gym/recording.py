@@ -463,4 +463,28 @@ class RecordEpisode(gym.Wrapper):
 
 
 __all__ = ["FORMAT_NAME", "FORMAT_VERSION", "Recording", "RecordEpisode", "SAMPLE_FIELDS", "STEP_FIELDS",
-           "accd_geometry", "iter_recordings", "record_episodes"]
+           "accd_geometry", "fields_markdown", "iter_recordings", "record_episodes"]
+
+
+def fields_markdown() -> str:
+    """The table of every array of a recording file (name, rows, unit, meaning), as in
+    ``docs/recording-format.md`` (a test keeps the two equal)."""
+    rows = ["| array | shape | dtype | unit | meaning |", "|---|---|---|---|---|"]
+    shapes = {"joints": "(T+1, n+1, 3)", "tensions": "(T+1, n+1)", "attitude": "(T+1, 4)",
+              "flap_deflection_deg": "(T+1, 4)", "flap_command_deg": "(T+1, 4)"}
+    vectors = {"position", "velocity", "euler", "omega", "force", "moment", "capture_point", "capture_point_velocity",
+               "boom_tip", "boom_velocity", "aircraft_velocity"}
+    for name, (unit, meaning) in SAMPLE_FIELDS.items():
+        shape = shapes.get(name, "(T+1, 3)" if name in vectors else "(T+1,)")
+        rows.append(f"| `{name}` | {shape} | {'bool' if name == 'captured' else 'float64'} | {unit} | {meaning} |")
+    rows.append("| `observation` | (T+1, 25) | float32 | - | the env's observation (scaled; `docs/environment.md`) |")
+    rows.append("| `equilibrium` | (3,) | float64 | m | the ACCD's open-loop equilibrium |")
+    for name, (unit, meaning) in STEP_FIELDS.items():
+        if name == "action":
+            shape, dtype = "(T, 4)", "float32"
+        else:
+            shape = "(T,)"
+            dtype = ("bool" if name in ("terminated", "truncated") or name.removeprefix("info_") in _BOOL_INFO
+                     else "int64" if name == "info_episode_steps" else "float64")
+        rows.append(f"| `{name}` | {shape} | {dtype} | {unit} | {meaning} |")
+    return "\n".join(rows)

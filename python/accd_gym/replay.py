@@ -184,11 +184,13 @@ def write_video(rec: Recording, path: str | Path, *, fps: Optional[float] = None
 
 def screenshot_replay(html: str | Path, png: str | Path, time: Optional[float] = None,
                       width: int = 1400, height: int = 900) -> list[str]:
-    """A screenshot of a replay page at ``time`` (s; default the closest approach) taken with
-    headless Chromium (:mod:`accd_gym.browser`); returns the page's JavaScript errors."""
+    """A screenshot of a replay page at ``time`` (s; default the capture, or for an episode
+    without one the closest approach) taken with headless Chromium (:mod:`accd_gym.browser`);
+    returns the page's JavaScript errors."""
     from accd_gym.browser import screenshot
 
-    setup = "accdReplay.setTime(accdReplay.meta.time_of_min_distance)" if time is None else f"accdReplay.setTime({float(time)!r})"
+    default = "accdReplay.meta.captured_at !== null ? accdReplay.meta.captured_at : accdReplay.meta.time_of_min_distance"
+    setup = f"accdReplay.setTime({default})" if time is None else f"accdReplay.setTime({float(time)!r})"
     return screenshot(html, png, setup=setup, width=width, height=height)
 
 
@@ -529,11 +531,13 @@ def write_evaluation_replays(spec: str, label: str, episodes: Any, count: int, o
 def run_replay(policy: str, episodes: int, out: str | Path, *, seed: Optional[int] = None,
                wake_seeds: Optional[list[int]] = None, config: Optional[dict[str, Any]] = None, num_envs: int = 16,
                num_threads: int = 0, video: bool = False, screenshot: bool = False, max_frames: int = MAX_FRAMES,
-               allow_unnormalized: bool = False, progress: bool = False) -> list[dict[str, Any]]:
+               allow_unnormalized: bool = False, progress: bool = False,
+               only: Optional[list[int]] = None) -> list[dict[str, Any]]:
     """``accd-gym replay``: records ``episodes`` episodes of ``policy`` (the evaluation's episodes
-    with the same ``episodes`` and ``num_envs``) and writes per episode ``episode_<k>.npz``,
+    with the same ``episodes`` and ``num_envs``; ``only``: just these indices of them, the others
+    run unrecorded) and writes per episode ``episode_<k>.npz``,
     ``episode_<k>.html`` and, on request, ``episode_<k>.mp4`` and ``episode_<k>.png`` (a screenshot
-    of the page at the closest approach, by headless Chromium). Returns one entry per episode."""
+    of the page at the capture or the closest approach, by headless Chromium). Returns one entry per episode."""
     from accd_gym.evaluation import load_policy
     from accd_gym.recording import iter_recordings
 
@@ -548,10 +552,10 @@ def run_replay(policy: str, episodes: int, out: str | Path, *, seed: Optional[in
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=episodes, desc=policy, unit="ep")
+        bar = tqdm(total=episodes if only is None else len(set(only)), desc=policy, unit="ep")
     written = []
     for rec in iter_recordings(loaded, episodes, config=config, seed=seed, wake_seeds=wake_seeds, num_envs=num_envs,
-                               num_threads=num_threads):
+                               num_threads=num_threads, keep=only):
         k = int(rec.meta["episode"])
         rec.meta["policy"] = policy
         stem = folder / f"episode_{k:04d}"
