@@ -423,6 +423,8 @@ class RecordEpisode(gym.Wrapper):
 
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
         """Resets the env and starts recording the new episode."""
+        from accd_gym import _core
+
         obs, info = self.env.reset(**kwargs)
         core = self._core_env._core
         cfg = self._core_env.config
@@ -437,7 +439,7 @@ class RecordEpisode(gym.Wrapper):
             "config": cfg,
             "accd_geometry": accd_geometry(cfg),
             "agent_step": float(cfg["agent_step"]),
-            "accd_gym_version": __import__("accd_gym").__version__,
+            "accd_gym_version": _core.__version__,
             "divergence": None,
         }
         return obs, info
