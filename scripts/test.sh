@@ -13,5 +13,13 @@ cargo clippy --workspace --all-targets --release -q -- -D warnings
 echo "== cargo test"
 # The bindings crate is a cdylib built and tested through Python below.
 cargo test --release --workspace --exclude accd-py
+# The replay pages are tested in a real browser (tests/test_replay.py): Debian's chromium, installed
+# here under CI (about 30 s); locally those tests are skipped, saying so, when it is missing.
+if [ "${CI:-}" = "true" ] && ! command -v chromium >/dev/null && [ ! -x /usr/lib/chromium/chromium ]; then
+  echo "== installing chromium (Debian) for the browser tests"
+  SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends chromium >/dev/null
+fi
 echo "== pytest"
 "$ACCD_PY" -m pytest -q tests

@@ -19,6 +19,9 @@ Public API:
   :func:`reward_bounds`.
 * :class:`CaptureSim` -- one capture episode's physics (tether, 6-DoF capturing device, towing
   aircraft, RLV boom) for scripted runs; :func:`mix_flaps` turns pitch/yaw/roll into flaps.
+* :func:`record_episodes`, :class:`RecordEpisode`, :class:`Recording` -- recorded episodes
+  (``.npz``, :mod:`accd_gym.recording`); :mod:`accd_gym.replay` -- their self-contained 3D replay
+  pages and MP4 videos (``accd-gym replay``).
 * :class:`Tether` -- the tether model alone, for design studies and validation.
 * :func:`tether_config` -- validated tether configurations from the paper's presets.
 * :func:`towed_tether`, :func:`stand_in_body` -- the towed reference case (a stand-in capturing
@@ -48,6 +51,7 @@ from accd_gym.config import default_config, env_config
 from accd_gym.task import HELD_OUT_WAKE_SEEDS, TRAINING_WAKE_SEEDS
 from accd_gym.env import InAirCaptureEnv
 from accd_gym.vector import InAirCaptureVectorEnv
+from accd_gym.recording import Recording, RecordEpisode, record_episodes
 
 import gymnasium as _gym
 
@@ -109,6 +113,9 @@ __all__ = [
     "default_aero_table_json",
     "isa",
     "mix_flaps",
+    "record_episodes",
+    "Recording",
+    "RecordEpisode",
     "stand_in_body",
     "tether_config",
     "towed_tether",

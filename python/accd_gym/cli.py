@@ -136,13 +136,29 @@ def _evaluate(args: argparse.Namespace) -> int:
 
     results = evaluation.evaluate(args.policy, args.episodes, args.out, num_envs=args.num_envs, num_threads=args.num_threads,
                                   config=_env_overrides(args.env), progress=not args.quiet,
-                                  allow_unnormalized=args.allow_unnormalized)
+                                  allow_unnormalized=args.allow_unnormalized, replay=args.replay)
     for spec, doc in results["policies"].items():
         if doc.get("note"):
             print(f"note: {doc['note']}", file=sys.stderr)
     print((Path(args.out) / "summary.md").read_text())
     print(f"wrote {Path(args.out) / 'results.json'}, summary.md, trajectories.png, miss_distance_cdf.png")
+    for spec, pages in results.get("replays", {}).items():
+        for page in pages:
+            print(f"replay of {spec} ({page['pick']}, episode {page['episode']}, {page['outcome']}): {page['html']}")
     return 0 if results["policies"] else 1
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from accd_gym import replay
+
+    written = replay.run_replay(args.policy, args.episodes, args.out, seed=args.seed, config=_env_overrides(args.env),
+                                num_envs=args.num_envs, num_threads=args.num_threads, video=args.video,
+                                screenshot=args.screenshot, max_frames=args.max_frames,
+                                allow_unnormalized=args.allow_unnormalized, progress=not args.quiet, only=args.only)
+    for e in written:
+        files = ", ".join(e[k] for k in ("html", "npz", "mp4", "png") if k in e)
+        print(f"episode {e['episode']}: {e['outcome']} after {e['steps']} steps, miss {e['min_distance']:.3f} m: {files}")
+    return 0
 
 
 def _rollout(args: argparse.Namespace) -> int:
@@ -205,8 +221,32 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--env", help="environment config overrides as JSON, e.g. '{\"capture_window\": 30}'")
     p.add_argument("--allow-unnormalized", action="store_true",
                    help="evaluate a model without its vecnormalize.pkl (observations passed raw)")
+    p.add_argument("--replay", type=_nonnegative("--replay"), default=0, metavar="K",
+                   help="also write 3D replay pages of K episodes per policy (3: best, median, worst) to OUT/replays")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_evaluate)
+    p = sub.add_parser("replay", help="record episodes of a policy: .npz, a self-contained 3D replay page each, MP4")
+    p.add_argument("--policy", required=True, help="a baseline (zero, random, guidance) or a trained model")
+    p.add_argument("--episodes", type=_positive("--episodes"), default=1, help="episodes (default 1)")
+    p.add_argument("--out", default="runs/replay", help="output folder (default: runs/replay)")
+    p.add_argument("--seed", type=_seed, default=None,
+                   help="base seed of initial conditions and RLV motion (default: the evaluation's, 20240607)")
+    p.add_argument("--num-envs", type=_positive("--num-envs"), default=16,
+                   help="parallel episodes (default 16, as evaluate: episode k is evaluate's episode k)")
+    p.add_argument("--num-threads", type=_nonnegative("--num-threads"), default=0,
+                   help="threads stepping the envs (default 0: one per core)")
+    p.add_argument("--env", help="environment config overrides as JSON")
+    p.add_argument("--only", type=_nonnegative("--only"), action="append", metavar="K",
+                   help="write only episode K of the --episodes run (repeatable; the others run unrecorded)")
+    p.add_argument("--video", action="store_true", help="also write an MP4 per episode (imageio-ffmpeg)")
+    p.add_argument("--screenshot", action="store_true",
+                   help="also write a PNG of each page at the capture or the closest approach (headless chromium)")
+    p.add_argument("--max-frames", type=_positive("--max-frames"), default=1000,
+                   help="most 3D frames per page; longer recordings are decimated (default 1000)")
+    p.add_argument("--allow-unnormalized", action="store_true",
+                   help="run a model without its vecnormalize.pkl (observations passed raw)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_replay)
     p = sub.add_parser("rollout", help="run a policy for a few episodes headless and print a summary")
     p.add_argument("--policy", required=True, help="a baseline (zero, random, guidance) or a trained model")
     p.add_argument("--episodes", type=_positive("--episodes"), default=8, help="episodes (default 8)")
@@ -234,6 +274,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         print(f"accd-gym: error: {_one_line(e)}", file=sys.stderr)
         return 2
     except ModuleNotFoundError as e:
+        if e.name in ("plotly", "imageio_ffmpeg"):
+            print(f"accd-gym: error: `accd-gym {args.command}` needs the replay extra ({e}): pip install 'accd-gym[replay]'",
+                  file=sys.stderr)
+            return 2
         if e.name not in ("stable_baselines3", "torch", "tensorboard", "rich"):
             raise
         print(f"accd-gym: error: `accd-gym {args.command}` needs the sb3 extra ({e}): pip install 'accd-gym[sb3]'", file=sys.stderr)

@@ -332,10 +332,13 @@ def evaluate(
     progress: bool = True,
     dpi: int = 90,
     allow_unnormalized: bool = False,
+    replay: int = 0,
 ) -> dict[str, Any]:
     """Evaluates each policy spec on the same episodes; writes results.json, summary.md and plots.
 
-    ``wake_seeds`` defaults to the first ``episodes`` held-out wake seeds. Returns the results
+    ``wake_seeds`` defaults to the first ``episodes`` held-out wake seeds. ``replay`` = K > 0
+    also writes replay pages and recordings of K episodes per policy (best, median, worst, ...;
+    :func:`accd_gym.replay.write_evaluation_replays`) under ``out/replays/``. Returns the results
     document (also in ``out/results.json``).
     """
     if not policies:
@@ -365,6 +368,15 @@ def evaluate(
         results["policies"][spec] = {"summary": summarize(eps), "episodes": [e.metrics() for e in eps]}
         if getattr(policy, "note", None):
             results["policies"][spec]["note"] = policy.note
+    if replay:
+        from accd_gym.replay import write_evaluation_replays
+
+        results["replays"] = {
+            spec: write_evaluation_replays(spec, _label(spec), eps, replay, out / "replays", seed=seed,
+                                           wake_seeds=seeds[:episodes], num_envs=num_envs, num_threads=num_threads,
+                                           config=config, allow_unnormalized=allow_unnormalized)
+            for spec, eps in runs.items()
+        }
     (out / "results.json").write_text(json.dumps(results, indent=1))
     np.savez_compressed(out / "trajectories.npz", **{f"{_label(s)}__{e.index}": e.trajectory for s, eps in runs.items() for e in eps})
     plot_trajectories(runs, out / "trajectories.png", dpi=dpi)

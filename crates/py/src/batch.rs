@@ -15,7 +15,7 @@ use pyo3::types::{PyBytes, PyDict, PyTuple};
 use serde::{Deserialize, Serialize};
 
 use crate::arrays::{vector_to_py, vectors_to_py};
-use crate::capture::sim_to_py;
+use crate::capture::{sim_to_py, snapshot_dict};
 use crate::errors::{raise, Kind};
 use crate::signals::SignalCheck;
 
@@ -435,6 +435,32 @@ impl PyBatchEnv {
         d.set_item("time", s.time)?;
         d.set_item("distance", s.capture.distance)?;
         d.set_item("tension", s.attachment_tension)?;
+        Ok(d)
+    }
+
+    /// Everything a recording stores of env ``i``'s current state (TA frame, SI units): the keys
+    /// of ``CaptureSim.state`` (``time``, ``position``, ``velocity``, ``attitude``, ``euler``,
+    /// ``omega``, ``flap_deflection_deg``, ``flap_command_deg``, ``alpha``, ``beta``,
+    /// ``airspeed``, ``force``, ``moment``, ``capture_point``, ``capture_point_velocity``,
+    /// ``boom_tip``, ``boom_velocity``, ``distance``, ``relative_speed``, ``captured``,
+    /// ``attachment_tension``, ``aircraft_velocity``), plus ``joints`` (n+1, 3) m (the inboard end
+    /// of each segment, then the tip), ``tensions`` (n+1,) N at those joints (entry 0 at the
+    /// attachment, entry n the tip body's pull) and ``equilibrium`` (3,) m. Reading it leaves the
+    /// episode unchanged (``tests/test_recording.py``).
+    fn record_data<'py>(&mut self, py: Python<'py>, i: usize) -> PyResult<Bound<'py, PyDict>> {
+        let e = self.inner.episode_mut(i).map_err(batch_to_py)?;
+        let equilibrium = e.equilibrium().position;
+        let sim = e.sim_mut();
+        let s = sim.snapshot().map_err(sim_to_py)?;
+        let n = sim.tether_state().segments();
+        let mut joints = vec![nalgebra::Vector3::zeros(); n + 1];
+        sim.joint_positions(&mut joints).map_err(sim_to_py)?;
+        let mut tensions = vec![0.0; n + 1];
+        sim.tensions(&mut tensions).map_err(sim_to_py)?;
+        let d = snapshot_dict(py, &s)?;
+        d.set_item("joints", vectors_to_py(py, &joints))?;
+        d.set_item("tensions", PyArray1::from_vec(py, tensions))?;
+        d.set_item("equilibrium", vector_to_py(py, &equilibrium))?;
         Ok(d)
     }
 }

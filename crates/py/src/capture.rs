@@ -1,7 +1,7 @@
 //! `accd_gym.CaptureSim`: one capture episode's physics for scripted (non-RL) runs.
 
 use accd_sim::accd::mix;
-use accd_sim::{CaptureConfig, CaptureSim, Seeds, SimError};
+use accd_sim::{CaptureConfig, CaptureSim, Seeds, SimError, Snapshot};
 use accd_tether::TetherConfig;
 use nalgebra::Vector3;
 use pyo3::prelude::*;
@@ -353,35 +353,7 @@ impl PyCaptureSim {
     /// them and ``captured``; ``attachment_tension`` (N); ``aircraft_velocity`` (m/s).
     fn state<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let s = self.inner.snapshot().map_err(sim_to_py)?;
-        let d = PyDict::new(py);
-        let q = s.attitude.quaternion();
-        let (roll, pitch, yaw) = s.attitude.euler_angles();
-        d.set_item("time", s.time)?;
-        d.set_item("position", vector_to_py(py, &s.position))?;
-        d.set_item("velocity", vector_to_py(py, &s.velocity))?;
-        d.set_item("attitude", [q.w, q.i, q.j, q.k])?;
-        d.set_item("euler", [roll, pitch, yaw])?;
-        d.set_item("omega", vector_to_py(py, &s.omega))?;
-        d.set_item("flap_deflection_deg", s.deflection.map(f64::to_degrees))?;
-        d.set_item("flap_command_deg", s.command.map(f64::to_degrees))?;
-        d.set_item("alpha", s.loads.alpha)?;
-        d.set_item("beta", s.loads.beta)?;
-        d.set_item("airspeed", s.loads.airspeed)?;
-        d.set_item("force", vector_to_py(py, &s.loads.force))?;
-        d.set_item("moment", vector_to_py(py, &s.loads.moment))?;
-        d.set_item("capture_point", vector_to_py(py, &s.capture_point))?;
-        d.set_item(
-            "capture_point_velocity",
-            vector_to_py(py, &s.capture_point_velocity),
-        )?;
-        d.set_item("boom_tip", vector_to_py(py, &s.boom_tip))?;
-        d.set_item("boom_velocity", vector_to_py(py, &s.boom_velocity))?;
-        d.set_item("distance", s.capture.distance)?;
-        d.set_item("relative_speed", s.capture.relative_speed)?;
-        d.set_item("captured", s.capture.captured)?;
-        d.set_item("attachment_tension", s.attachment_tension)?;
-        d.set_item("aircraft_velocity", vector_to_py(py, &s.aircraft_velocity))?;
-        Ok(d)
+        snapshot_dict(py, &s)
     }
 
     /// Tether joint positions, shape (n + 1, 3), m (see :attr:`Tether.joint_positions`).
@@ -408,4 +380,38 @@ impl PyCaptureSim {
             self.seeds
         )
     }
+}
+
+/// A [`Snapshot`] as the dict of :meth:`CaptureSim.state` (its keys are documented there); shared
+/// with ``BatchEnv.record_data``.
+pub(crate) fn snapshot_dict<'py>(py: Python<'py>, s: &Snapshot) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    let q = s.attitude.quaternion();
+    let (roll, pitch, yaw) = s.attitude.euler_angles();
+    d.set_item("time", s.time)?;
+    d.set_item("position", vector_to_py(py, &s.position))?;
+    d.set_item("velocity", vector_to_py(py, &s.velocity))?;
+    d.set_item("attitude", [q.w, q.i, q.j, q.k])?;
+    d.set_item("euler", [roll, pitch, yaw])?;
+    d.set_item("omega", vector_to_py(py, &s.omega))?;
+    d.set_item("flap_deflection_deg", s.deflection.map(f64::to_degrees))?;
+    d.set_item("flap_command_deg", s.command.map(f64::to_degrees))?;
+    d.set_item("alpha", s.loads.alpha)?;
+    d.set_item("beta", s.loads.beta)?;
+    d.set_item("airspeed", s.loads.airspeed)?;
+    d.set_item("force", vector_to_py(py, &s.loads.force))?;
+    d.set_item("moment", vector_to_py(py, &s.loads.moment))?;
+    d.set_item("capture_point", vector_to_py(py, &s.capture_point))?;
+    d.set_item(
+        "capture_point_velocity",
+        vector_to_py(py, &s.capture_point_velocity),
+    )?;
+    d.set_item("boom_tip", vector_to_py(py, &s.boom_tip))?;
+    d.set_item("boom_velocity", vector_to_py(py, &s.boom_velocity))?;
+    d.set_item("distance", s.capture.distance)?;
+    d.set_item("relative_speed", s.capture.relative_speed)?;
+    d.set_item("captured", s.capture.captured)?;
+    d.set_item("attachment_tension", s.attachment_tension)?;
+    d.set_item("aircraft_velocity", vector_to_py(py, &s.aircraft_velocity))?;
+    Ok(d)
 }
