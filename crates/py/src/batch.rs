@@ -15,24 +15,9 @@ use pyo3::types::{PyBytes, PyDict, PyTuple};
 use serde::{Deserialize, Serialize};
 
 use crate::arrays::{vector_to_py, vectors_to_py};
-use crate::capture::{sim_to_py, snapshot_dict};
-use crate::errors::{raise, Kind};
+use crate::capture::snapshot_dict;
+use crate::errors::{raise, IntoPy, Kind};
 use crate::signals::SignalCheck;
-
-/// Maps batch errors to the Python exception tree (bad actions and shapes are `StateError`, a
-/// `ValueError`).
-fn batch_to_py(error: BatchError) -> PyErr {
-    match error {
-        BatchError::Sim(e) => sim_to_py(e),
-        BatchError::Action { .. } | BatchError::Shape { .. } | BatchError::ResetNeeded { .. } => {
-            raise(Kind::State, error.to_string())
-        }
-        BatchError::Env { .. } | BatchError::Threads(_) => {
-            raise(Kind::Simulation, error.to_string())
-        }
-        BatchError::Internal(message) => pyo3::exceptions::PyRuntimeError::new_err(message),
-    }
-}
 
 /// One set of output arrays.
 struct Buffers {
@@ -156,7 +141,7 @@ impl PyBatchEnv {
         num_threads: usize,
     ) -> PyResult<Self> {
         let mode = parse_autoreset(autoreset_mode)?;
-        let config = EnvConfig::from_json(config_json).map_err(sim_to_py)?;
+        let config = EnvConfig::from_json(config_json).py_err()?;
         let mut check = SignalCheck::new();
         let built = py.detach(|| {
             BatchEnv::new_interruptible(config, num_envs, seed, mode, num_threads, &mut || {
@@ -166,7 +151,7 @@ impl PyBatchEnv {
         if let Some(e) = check.take() {
             return Err(e);
         }
-        let inner = built.map_err(batch_to_py)?;
+        let inner = built.py_err()?;
         let n = inner.num_envs();
         Ok(PyBatchEnv {
             inner,
@@ -236,7 +221,7 @@ impl PyBatchEnv {
                     },
                 )
             })
-            .map_err(batch_to_py)?;
+            .py_err()?;
         }
         PyTuple::new(py, [obs.into_any(), wake.into_any()])
     }
@@ -292,7 +277,7 @@ impl PyBatchEnv {
                 autoreset: reset.as_slice_mut()?,
             };
             let inner = &mut self.inner;
-            py.detach(|| inner.step(a, buffers)).map_err(batch_to_py)?;
+            py.detach(|| inner.step(a, buffers)).py_err()?;
         }
         PyTuple::new(
             py,
@@ -325,7 +310,7 @@ impl PyBatchEnv {
                 ))
             }
         };
-        self.inner.set_wake_schedule(schedule).map_err(batch_to_py)
+        self.inner.set_wake_schedule(schedule).py_err()
     }
 
     /// The current wake schedule as ``(kind, seeds)``.
@@ -349,15 +334,14 @@ impl PyBatchEnv {
         seeded: bool,
     ) -> PyResult<Bound<'py, PyBytes>> {
         let kind = parse_kind(kind)?;
-        let hash = self.inner.config_hash().map_err(batch_to_py)?;
+        let hash = self.inner.config_hash().py_err()?;
         let state = EnvState {
             needs_reset,
             seeded,
             batch: self.inner.state(),
         };
         let n = self.inner.num_envs() as u64;
-        let bytes = state_format::encode(kind, &hash, n, &state)
-            .map_err(|e| sim_to_py(SimError::State(e)))?;
+        let bytes = state_format::encode(kind, &hash, n, &state).py_err()?;
         Ok(PyBytes::new(py, &bytes))
     }
 
@@ -372,20 +356,20 @@ impl PyBatchEnv {
             let expected = inner.expected_state(kind)?;
             let saved: EnvState = state_format::decode(state, &expected).map_err(SimError::from)?;
             inner.set_state(saved.batch)?;
-            Ok((saved.needs_reset, saved.seeded))
+            Ok::<_, BatchError>((saved.needs_reset, saved.seeded))
         })
-        .map_err(batch_to_py)
+        .py_err()
     }
 
     /// The current observation of env ``i`` (a new array).
     fn observation<'py>(&self, py: Python<'py>, i: usize) -> PyResult<Bound<'py, PyArray1<f32>>> {
-        let e = self.inner.episode(i).map_err(batch_to_py)?;
+        let e = self.inner.episode(i).py_err()?;
         Ok(PyArray1::from_slice(py, e.observation()))
     }
 
     /// Seeds of env ``i``'s current episode: ``{"initial", "wake", "rlv"}``.
     fn episode_seeds<'py>(&self, py: Python<'py>, i: usize) -> PyResult<Bound<'py, PyDict>> {
-        let s = self.inner.episode(i).map_err(batch_to_py)?.seeds();
+        let s = self.inner.episode(i).py_err()?.seeds();
         let d = PyDict::new(py);
         d.set_item("initial", s.initial)?;
         d.set_item("wake", s.wake)?;
@@ -398,7 +382,7 @@ impl PyBatchEnv {
         Ok(self
             .inner
             .episode(i)
-            .map_err(batch_to_py)?
+            .py_err()?
             .divergence()
             .map(str::to_owned))
     }
@@ -406,23 +390,19 @@ impl PyBatchEnv {
     /// Why env ``i``'s episode that ended in the last step diverged (``"same_step"`` autoreset,
     /// whose next episode has already started), or None.
     fn final_divergence(&self, i: usize) -> PyResult<Option<String>> {
-        Ok(self
-            .inner
-            .final_divergence(i)
-            .map_err(batch_to_py)?
-            .map(str::to_owned))
+        Ok(self.inner.final_divergence(i).py_err()?.map(str::to_owned))
     }
 
     /// What a picture of env ``i`` needs (TA frame, m): ``joints`` (n+1, 3), ``accd_position``,
     /// ``capture_point``, ``boom_tip``, ``equilibrium`` (3,), ``attitude`` (w, x, y, z),
     /// ``deflection_deg`` (4,), ``time`` s, ``distance`` m, ``tension`` N.
     fn render_data<'py>(&mut self, py: Python<'py>, i: usize) -> PyResult<Bound<'py, PyDict>> {
-        let e = self.inner.episode_mut(i).map_err(batch_to_py)?;
+        let e = self.inner.episode_mut(i).py_err()?;
         let equilibrium = e.equilibrium().position;
         let sim = e.sim_mut();
-        let s = sim.snapshot().map_err(sim_to_py)?;
+        let s = sim.snapshot().py_err()?;
         let mut joints = vec![nalgebra::Vector3::zeros(); sim.tether_state().segments() + 1];
-        sim.joint_positions(&mut joints).map_err(sim_to_py)?;
+        sim.joint_positions(&mut joints).py_err()?;
         let d = PyDict::new(py);
         d.set_item("joints", vectors_to_py(py, &joints))?;
         d.set_item("accd_position", vector_to_py(py, &s.position))?;
@@ -448,15 +428,15 @@ impl PyBatchEnv {
     /// attachment, entry n the tip body's pull) and ``equilibrium`` (3,) m. Reading it leaves the
     /// episode unchanged (``tests/test_recording.py``).
     fn record_data<'py>(&mut self, py: Python<'py>, i: usize) -> PyResult<Bound<'py, PyDict>> {
-        let e = self.inner.episode_mut(i).map_err(batch_to_py)?;
+        let e = self.inner.episode_mut(i).py_err()?;
         let equilibrium = e.equilibrium().position;
         let sim = e.sim_mut();
-        let s = sim.snapshot().map_err(sim_to_py)?;
+        let s = sim.snapshot().py_err()?;
         let n = sim.tether_state().segments();
         let mut joints = vec![nalgebra::Vector3::zeros(); n + 1];
-        sim.joint_positions(&mut joints).map_err(sim_to_py)?;
+        sim.joint_positions(&mut joints).py_err()?;
         let mut tensions = vec![0.0; n + 1];
-        sim.tensions(&mut tensions).map_err(sim_to_py)?;
+        sim.tensions(&mut tensions).py_err()?;
         let d = snapshot_dict(py, &s)?;
         d.set_item("joints", vectors_to_py(py, &joints))?;
         d.set_item("tensions", PyArray1::from_vec(py, tensions))?;
@@ -475,14 +455,14 @@ pub fn default_env_config_json() -> PyResult<String> {
 /// raises ConfigError naming the field, value and allowed range.
 #[pyfunction]
 pub fn env_config_json(config_json: &str) -> PyResult<String> {
-    let config = EnvConfig::from_json(config_json).map_err(sim_to_py)?;
+    let config = EnvConfig::from_json(config_json).py_err()?;
     serde_json::to_string(&config).map_err(|e| raise(Kind::Config, e.to_string()))
 }
 
 /// Lowest and highest reward of one agent step under a configuration (JSON).
 #[pyfunction]
 pub fn reward_bounds(config_json: &str) -> PyResult<(f64, f64)> {
-    let config = EnvConfig::from_json(config_json).map_err(sim_to_py)?;
+    let config = EnvConfig::from_json(config_json).py_err()?;
     Ok(config.reward.bounds(config.episode_steps()))
 }
 
@@ -490,7 +470,7 @@ pub fn reward_bounds(config_json: &str) -> PyResult<(f64, f64)> {
 /// rounded.
 #[pyfunction]
 pub fn episode_steps(config_json: &str) -> PyResult<u64> {
-    let config = EnvConfig::from_json(config_json).map_err(sim_to_py)?;
+    let config = EnvConfig::from_json(config_json).py_err()?;
     Ok(config.episode_steps())
 }
 

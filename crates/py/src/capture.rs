@@ -11,20 +11,6 @@ use crate::arrays::{vector_to_py, vectors_to_py};
 use crate::errors::{raise, IntoPy, Kind};
 use crate::signals::SignalCheck;
 
-/// Maps every simulation error to its Python class.
-pub fn sim_to_py(error: SimError) -> PyErr {
-    match error {
-        SimError::Tether(e) => crate::errors::to_py(e),
-        SimError::InvalidConfig { .. } | SimError::InvalidTable { .. } | SimError::Io { .. } => {
-            raise(Kind::Config, error.to_string())
-        }
-        SimError::Diverged { .. } | SimError::Interrupted { .. } => {
-            raise(Kind::Simulation, error.to_string())
-        }
-        SimError::State(_) => raise(Kind::State, error.to_string()),
-    }
-}
-
 fn merge(target: &mut serde_json::Value, patch: &serde_json::Value) {
     match (target.as_object_mut(), patch.as_object()) {
         (Some(t), Some(p)) => {
@@ -81,7 +67,7 @@ fn build(
         ..defaults
     };
     let Some(overrides) = overrides else {
-        base.validate().map_err(sim_to_py)?;
+        base.validate().py_err()?;
         return Ok(base);
     };
     check_finite_floats("", overrides)?;
@@ -94,9 +80,8 @@ fn build(
         .map_err(|e| raise(Kind::Config, format!("invalid config: {e}")))?;
     let mut merged = serde_json::to_value(&base).expect("a config serializes");
     merge(&mut merged, &patch);
-    let config: CaptureConfig =
-        accd_sim::task::parse_named(&merged.to_string()).map_err(sim_to_py)?;
-    config.validate().map_err(sim_to_py)?;
+    let config: CaptureConfig = accd_sim::task::parse_named(&merged.to_string()).py_err()?;
+    config.validate().py_err()?;
     Ok(config)
 }
 
@@ -239,7 +224,7 @@ impl PyCaptureSim {
         if let Some(e) = check.take() {
             return Err(e);
         }
-        result.map_err(sim_to_py)
+        result.py_err()
     }
 }
 
@@ -270,7 +255,7 @@ impl PyCaptureSim {
             rlv: seed,
         };
         Ok(PyCaptureSim {
-            inner: CaptureSim::new(&config, seeds).map_err(sim_to_py)?,
+            inner: CaptureSim::new(&config, seeds).py_err()?,
             seeds,
         })
     }
@@ -352,7 +337,7 @@ impl PyCaptureSim {
     /// velocity; ``boom_tip`` and ``boom_velocity``; ``distance`` and ``relative_speed`` between
     /// them and ``captured``; ``attachment_tension`` (N); ``aircraft_velocity`` (m/s).
     fn state<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let s = self.inner.snapshot().map_err(sim_to_py)?;
+        let s = self.inner.snapshot().py_err()?;
         snapshot_dict(py, &s)
     }
 
@@ -361,7 +346,7 @@ impl PyCaptureSim {
     fn joint_positions<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, numpy::PyArray2<f64>>> {
         let n = self.inner.config().tether.segments;
         let mut out = vec![Vector3::zeros(); n + 1];
-        self.inner.joint_positions(&mut out).map_err(sim_to_py)?;
+        self.inner.joint_positions(&mut out).py_err()?;
         Ok(vectors_to_py(py, &out))
     }
 
@@ -369,7 +354,7 @@ impl PyCaptureSim {
     fn tensions<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, numpy::PyArray1<f64>>> {
         let n = self.inner.config().tether.segments;
         let mut out = vec![0.0; n + 1];
-        self.inner.tensions(&mut out).map_err(sim_to_py)?;
+        self.inner.tensions(&mut out).py_err()?;
         Ok(numpy::PyArray1::from_vec(py, out))
     }
 

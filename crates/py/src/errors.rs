@@ -13,6 +13,8 @@
 //! The classes are defined in Python (multiple inheritance from the built-ins) and looked up here
 //! when an error is raised, which is rare, so no caching is needed.
 
+use accd_batch::BatchError;
+use accd_sim::{SimError, StateError};
 use accd_tether::TetherError;
 use pyo3::prelude::*;
 use pyo3::types::PyType;
@@ -50,24 +52,77 @@ pub fn raise(kind: Kind, message: impl Into<String>) -> PyErr {
     })
 }
 
-/// Maps every core error variant to its Python class.
-pub fn to_py(error: TetherError) -> PyErr {
-    let kind = match &error {
-        TetherError::InvalidConfig { .. } | TetherError::ConfigParse { .. } => Kind::Config,
-        TetherError::WrongSize { .. } | TetherError::InvalidState { .. } => Kind::State,
-        TetherError::Diverged { .. } | TetherError::Interrupted { .. } => Kind::Simulation,
-    };
-    raise(kind, error.to_string())
+/// A core error with its place in the Python exception tree: every crate's error enum is mapped
+/// here and nowhere else.
+pub trait ToPy {
+    /// The class of `accd_gym.errors` this error raises; `None` for a bug (a `RuntimeError`).
+    fn kind(&self) -> Option<Kind>;
+
+    /// The Python exception: the class of [`ToPy::kind`] with the error's message.
+    fn to_py(&self) -> PyErr
+    where
+        Self: std::fmt::Display,
+    {
+        match self.kind() {
+            Some(kind) => raise(kind, self.to_string()),
+            None => pyo3::exceptions::PyRuntimeError::new_err(self.to_string()),
+        }
+    }
+}
+
+impl ToPy for TetherError {
+    fn kind(&self) -> Option<Kind> {
+        Some(match self {
+            TetherError::InvalidConfig { .. } | TetherError::ConfigParse { .. } => Kind::Config,
+            TetherError::WrongSize { .. } | TetherError::InvalidState { .. } => Kind::State,
+            TetherError::Diverged { .. } | TetherError::Interrupted { .. } => Kind::Simulation,
+        })
+    }
+}
+
+impl ToPy for StateError {
+    fn kind(&self) -> Option<Kind> {
+        Some(Kind::State)
+    }
+}
+
+impl ToPy for SimError {
+    fn kind(&self) -> Option<Kind> {
+        match self {
+            SimError::Tether(e) => e.kind(),
+            SimError::InvalidConfig { .. }
+            | SimError::InvalidTable { .. }
+            | SimError::Io { .. } => Some(Kind::Config),
+            SimError::Diverged { .. } | SimError::Interrupted { .. } => Some(Kind::Simulation),
+            SimError::State(e) => e.kind(),
+        }
+    }
+}
+
+impl ToPy for BatchError {
+    /// Bad actions and shapes are `StateError` (a `ValueError`); one env's error maps as its
+    /// cause does; a panic in a step (a bug) is a `RuntimeError`.
+    fn kind(&self) -> Option<Kind> {
+        match self {
+            BatchError::Sim(e) => e.kind(),
+            BatchError::Action { .. }
+            | BatchError::Shape { .. }
+            | BatchError::ResetNeeded { .. } => Some(Kind::State),
+            BatchError::Env { source, .. } => source.kind(),
+            BatchError::Threads(_) => Some(Kind::Simulation),
+            BatchError::Internal(_) => None,
+        }
+    }
 }
 
 /// `Result` conversion into `PyResult`.
 pub trait IntoPy<T> {
-    /// Converts the error, if any, with [`to_py`].
+    /// Converts the error, if any, with [`ToPy::to_py`].
     fn py_err(self) -> PyResult<T>;
 }
 
-impl<T> IntoPy<T> for Result<T, TetherError> {
+impl<T, E: ToPy + std::fmt::Display> IntoPy<T> for Result<T, E> {
     fn py_err(self) -> PyResult<T> {
-        self.map_err(to_py)
+        self.map_err(|e| e.to_py())
     }
 }

@@ -9,7 +9,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyFloat};
 
 use crate::arrays::{floats_from_py, vector_from_py, vector_to_py, vectors_from_py, vectors_to_py};
-use crate::errors::{raise, IntoPy, Kind};
+use crate::errors::{raise, IntoPy, Kind, ToPy};
 use crate::signals::SignalCheck;
 
 /// A config from a preset name and a dict of overrides (unknown keys and bad values raise
@@ -65,7 +65,7 @@ fn build_config(
                 None => raise(Kind::Config, format!("invalid tether config: {message}")),
             }
         }
-        other => crate::errors::to_py(other),
+        other => other.to_py(),
     })?;
     // The configs of this module are for stepping: the same rule as `Tether::new`.
     config.validate_for_stepping().py_err()?;
