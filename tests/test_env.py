@@ -346,3 +346,37 @@ def test_python_code_reads_the_observation_by_name():
             if pattern.search(line):
                 offenders.append(f"{path.name}:{no}: {line.strip()}")
     assert not offenders, offenders
+
+
+@pytest.mark.parametrize("make", ["single", "vector", "sb3"])
+def test_an_env_construction_validates_its_config_once(make):
+    """Issue 11: the configuration is validated once per env construction (it used to be eight
+    times), from one crossing of the keyword arguments into Rust."""
+    from accd_gym import _core
+    from accd_gym.sb3 import AccdVecEnv
+    from accd_gym.vector import InAirCaptureVectorEnv
+
+    kwargs = {"capture_window": 1.0, "initial": {"settle_time": 1.0}}
+    before = _core.validation_passes()
+    if make == "single":
+        env = accd_gym.InAirCaptureEnv(**kwargs)
+    elif make == "vector":
+        env = InAirCaptureVectorEnv(num_envs=3, **kwargs)
+    else:
+        env = AccdVecEnv(num_envs=3, **kwargs)
+    assert _core.validation_passes() - before == 1
+    env.close()
+
+
+def test_the_validated_config_object_pickles_and_compares():
+    import pickle
+
+    from accd_gym.config import valid_config
+
+    a = valid_config(capture_window=5.0)
+    b = pickle.loads(pickle.dumps(a))
+    assert a == b and b.episode_steps == 50
+    assert json.loads(b.to_json())["capture_window"] == 5.0
+    assert a != valid_config(capture_window=6.0)
+    with pytest.raises(accd_gym.ConfigError, match="capture_window"):
+        valid_config(capture_window=-1.0)

@@ -72,17 +72,32 @@ def env_config(config: Optional[Mapping[str, Any]] = None, **overrides: Any) -> 
     A string ``tether`` is taken as a tether preset. Raises :class:`~accd_gym.ConfigError`
     naming the field, the value and the allowed range (unknown keys included).
     """
+    return json.loads(valid_config(config, self_contained_tables=False, **overrides).to_json())
+
+
+def valid_config(
+    config: Optional[Mapping[str, Any]] = None, *, self_contained_tables: bool = True, **overrides: Any
+) -> _core.EnvConfig:
+    """The validated configuration object the envs are built from (``accd_gym._core.EnvConfig``):
+    ``config`` and keyword overrides merged, a string ``tether`` taken as a preset, a user
+    aerodynamic table given by path replaced by its contents (with ``self_contained_tables``, so
+    that pickles and saved states need no file), then sent to the core as one JSON document and
+    validated there once. The envs take it as it is; ``.to_json()`` gives it back. Picklable.
+    Raises :class:`~accd_gym.ConfigError` naming the field, the value and the allowed range.
+    """
     merged: dict[str, Any] = dict(config or {})
     merged.update(overrides)
     tether = merged.get("tether")
     if isinstance(tether, str):
         merged["tether"] = _core.tether_config(tether)
     _check_finite(merged, "")
+    if self_contained_tables:
+        merged = self_contained(merged)
     try:
         text = json.dumps(merged, default=_plain, allow_nan=False)
     except (TypeError, ValueError) as e:
         raise ConfigError(f"invalid config: {e}") from None
-    return json.loads(_core.env_config_json(text))
+    return _core.EnvConfig(text)
 
 
 def self_contained(config: Mapping[str, Any]) -> dict[str, Any]:
@@ -91,7 +106,8 @@ def self_contained(config: Mapping[str, Any]) -> dict[str, Any]:
     reads as the table itself). For pickles and saved envs that must load on another machine.
     Raises ConfigError when the file cannot be read."""
     out = json.loads(json.dumps(config, default=_plain))
-    table = (out.get("accd") or {}).get("aero_table")
+    accd = out.get("accd")
+    table = accd.get("aero_table") if isinstance(accd, dict) else None
     if isinstance(table, str) and not table.lstrip().startswith("{"):
         try:
             with open(table) as f:
@@ -106,4 +122,4 @@ def config_json(config: Mapping[str, Any]) -> str:
     return json.dumps(config, default=_plain)
 
 
-__all__ = ["default_config", "env_config", "config_json", "self_contained"]
+__all__ = ["default_config", "env_config", "valid_config", "config_json", "self_contained"]

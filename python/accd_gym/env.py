@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import json
+
 from typing import Any, Optional
 
 import gymnasium as gym
 import numpy as np
 
 from accd_gym import _core
-from accd_gym.config import config_json, env_config, self_contained
+from accd_gym.config import valid_config
 from accd_gym.core_env import CoreEnvMixin
 from accd_gym.task import (
     action_space,
@@ -153,10 +155,12 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
                 f"invalid config: `render_mode` = {render_mode!r} is outside the allowed range {self.metadata['render_modes']} or None"
             )
         self.render_mode = render_mode
-        # A user aerodynamic table is kept as its contents: pickles and saved states need no file.
-        self._config = self_contained(env_config(config))
+        # Validated once; a user aerodynamic table is kept as its contents: pickles and saved
+        # states need no file.
+        valid = valid_config(config)
+        self._config = json.loads(valid.to_json())
         self.metadata = dict(self.metadata, render_fps=1.0 / self._config["agent_step"])
-        self._core = _core.BatchEnv(config_json(self._config), 1, random_seed(), "next_step", 1)
+        self._core = _core.BatchEnv(valid, 1, random_seed(), "next_step", 1)
         self.observation_space = observation_space()
         self.action_space = action_space()
         self._viewer = None

@@ -267,7 +267,7 @@ def iter_recordings(
     the episodes end; ``rec.meta["episode"]`` is its index), so that callers can write and drop
     them one at a time."""
     from accd_gym import _core
-    from accd_gym.config import config_json, env_config, self_contained
+    from accd_gym.config import valid_config
     from accd_gym.evaluation import EVAL_BASE_SEED, load_policy
     from accd_gym.task import HELD_OUT_WAKE_SEEDS, check_actions, check_seed, wake_options
 
@@ -293,9 +293,10 @@ def iter_recordings(
     label = _policy_label(policy)
     if isinstance(policy, str):
         policy = load_policy(policy, seed=policy_seed)
-    cfg = self_contained(env_config(config or {}))
+    valid = valid_config(config or {})
+    cfg = json.loads(valid.to_json())
     n = max(1, min(int(num_envs), episodes))
-    core = _core.BatchEnv(config_json(cfg), n, base, "disabled", int(num_threads))
+    core = _core.BatchEnv(valid, n, base, "disabled", int(num_threads))
     wake_options(core, {"wake_seeds": [int(s) for s in wake_seeds[:episodes]]})
     obs, _ = core.reset(base, None)
     obs = obs.copy()

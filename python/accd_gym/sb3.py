@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import json
+
 from typing import Any, Optional, Sequence, Union
 
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
 from accd_gym import _core
-from accd_gym.config import config_json, env_config, self_contained
+from accd_gym.config import valid_config
 from accd_gym.core_env import CoreEnvMixin
 from accd_gym.errors import ConfigError
 from accd_gym.task import (
@@ -63,10 +65,12 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
                 f"invalid config: `render_mode` = {render_mode!r} is outside the allowed range 'rgb_array' or None"
             )
         self.render_mode = render_mode
-        # A user aerodynamic table is kept as its contents: pickles and saved states need no file.
-        self._config = self_contained(env_config(config))
+        # Validated once; a user aerodynamic table is kept as its contents: pickles and saved
+        # states need no file.
+        valid = valid_config(config)
+        self._config = json.loads(valid.to_json())
         base = random_seed() if seed is None else check_seed(seed)
-        self._core = _core.BatchEnv(config_json(self._config), int(num_envs), base, "same_step", int(num_threads))
+        self._core = _core.BatchEnv(valid, int(num_envs), base, "same_step", int(num_threads))
         self._actions: Optional[np.ndarray] = None
         self._base_seed: Optional[int] = None if seed is None else base
         self._pending_options: dict[str, Any] = {}

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 from typing import Any, Optional, Sequence, Union
 
 import gymnasium as gym
@@ -10,7 +12,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from accd_gym import _core
-from accd_gym.config import config_json, env_config, self_contained
+from accd_gym.config import valid_config
 from accd_gym.core_env import CoreEnvMixin
 from accd_gym.errors import ConfigError
 from accd_gym.task import (
@@ -110,10 +112,12 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
             raise ConfigError(
                 f"invalid config: `render_mode` = {render_mode!r} is outside the allowed range 'rgb_array' or None"
             )
-        # A user aerodynamic table is kept as its contents: pickles and saved states need no file.
-        self._config = self_contained(env_config(config))
+        # Validated once; a user aerodynamic table is kept as its contents: pickles and saved
+        # states need no file.
+        valid = valid_config(config)
+        self._config = json.loads(valid.to_json())
         check_max_episode_steps(max_episode_steps, self._config)
-        self._core = _core.BatchEnv(config_json(self._config), int(num_envs), random_seed(), _MODES[mode], int(num_threads))
+        self._core = _core.BatchEnv(valid, int(num_envs), random_seed(), _MODES[mode], int(num_threads))
         self.num_envs = self._core.num_envs
         self.render_mode = render_mode
         self.metadata = {

@@ -20,8 +20,14 @@ fn bench(c: &mut Criterion) {
     for (scheme, config) in [("default", EnvConfig::default()), ("fast", fast())] {
         for &n in &[1usize, 16, 256] {
             for &threads in &[1usize, 0] {
-                let mut env =
-                    BatchEnv::new(config.clone(), n, 1, Autoreset::SameStep, threads).unwrap();
+                let mut env = BatchEnv::new(
+                    config.clone().validated().unwrap(),
+                    n,
+                    1,
+                    Autoreset::SameStep,
+                    threads,
+                )
+                .unwrap();
                 let label = format!("{scheme}-n{n}-threads{}", env.threads());
                 let actions: Vec<f32> = (0..n * ACT_DIM)
                     .map(|k| ((k % 7) as f32 - 3.0) / 4.0)

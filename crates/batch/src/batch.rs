@@ -9,7 +9,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::Arc;
 
 use accd_sim::state_format::{self, EpisodeState, Expected, StateError, StateKind};
-use accd_sim::{EnvConfig, Episode, Equilibrium, Outcome, SimError, ACT_DIM, OBS_DIM};
+use accd_sim::{EnvConfig, Episode, Equilibrium, Outcome, SimError, Valid, ACT_DIM, OBS_DIM};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -177,7 +177,7 @@ struct Slot {
 
 /// N episodes of one config.
 pub struct BatchEnv {
-    config: Arc<EnvConfig>,
+    config: Arc<Valid<EnvConfig>>,
     equilibrium: Arc<Equilibrium>,
     slots: Vec<Slot>,
     schedule: WakeSchedule,
@@ -193,7 +193,7 @@ impl BatchEnv {
     /// `num_envs` envs of `config`, env `i` seeded with base `seed + i`, stepped on
     /// `threads` threads of its own pool (0: one per core).
     pub fn new(
-        config: EnvConfig,
+        config: Valid<EnvConfig>,
         num_envs: usize,
         seed: u64,
         autoreset: Autoreset,
@@ -207,7 +207,7 @@ impl BatchEnv {
     /// The envs' estimated memory ([`EnvConfig::bytes_per_env`]) must fit the budget of
     /// [`crate::memory::budget_bytes`].
     pub fn new_interruptible(
-        config: EnvConfig,
+        config: Valid<EnvConfig>,
         num_envs: usize,
         seed: u64,
         autoreset: Autoreset,
@@ -220,7 +220,6 @@ impl BatchEnv {
         if threads > 1024 {
             return Err(SimError::invalid_config("num_threads", threads, "[0, 1024]").into());
         }
-        config.validate()?;
         crate::memory::check_budget(&config, num_envs)?;
         let config = Arc::new(config);
         let equilibrium = Arc::new(Equilibrium::settle_interruptible(&config, interrupted)?);

@@ -25,7 +25,7 @@ struct Runner {
 
 impl Runner {
     fn new(n: usize, threads: usize, mode: Autoreset) -> Runner {
-        let env = BatchEnv::new(config(), n, 11, mode, threads).unwrap();
+        let env = BatchEnv::new(config().validated().unwrap(), n, 11, mode, threads).unwrap();
         Runner {
             env,
             s: StepOutputs::new(n),
@@ -323,7 +323,7 @@ fn bad_actions_and_shapes_are_named_and_step_nothing() {
     assert!(e.contains("actions") && e.contains("12"), "{e}");
     assert_eq!(r.env.episode(0).unwrap().steps(), 0);
     assert!(r.env.episode(3).is_err());
-    assert!(BatchEnv::new(config(), 0, 1, Autoreset::SameStep, 1).is_err());
+    assert!(BatchEnv::new(config().validated().unwrap(), 0, 1, Autoreset::SameStep, 1).is_err());
 }
 
 #[test]
@@ -349,7 +349,7 @@ fn a_saved_batch_continues_bit_for_bit_and_foreign_states_are_refused() {
     assert!(c.env.load(&saved[..saved.len() - 3]).is_err());
     let mut other = config();
     other.capture_window = 3.0;
-    let mut d = BatchEnv::new(other, 3, 1, Autoreset::SameStep, 1).unwrap();
+    let mut d = BatchEnv::new(other.validated().unwrap(), 3, 1, Autoreset::SameStep, 1).unwrap();
     assert!(d
         .load(&saved)
         .unwrap_err()

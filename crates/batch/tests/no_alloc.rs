@@ -40,7 +40,7 @@ fn batch_steps_allocate_nothing() {
             ..EnvConfig::default()
         };
         let n = 6;
-        let mut env = BatchEnv::new(config, n, 3, mode, 2).unwrap();
+        let mut env = BatchEnv::new(config.validated().unwrap(), n, 3, mode, 2).unwrap();
         let actions: Vec<f32> = (0..n * ACT_DIM)
             .map(|k| ((k % 5) as f32 - 2.0) / 3.0)
             .collect();

@@ -31,9 +31,15 @@ fn a_batch_over_the_budget_is_a_config_error_naming_the_estimate() {
         err.contains("`num_envs` = 65536") && err.contains("MiB per env") && err.contains("budget"),
         "{err}"
     );
-    let err = BatchEnv::new(low_and_slow(), 65_536, 0, Autoreset::SameStep, 1)
-        .err()
-        .expect("refused");
+    let err = BatchEnv::new(
+        low_and_slow().validated().unwrap(),
+        65_536,
+        0,
+        Autoreset::SameStep,
+        1,
+    )
+    .err()
+    .expect("refused");
     assert!(matches!(
         err,
         BatchError::Sim(SimError::InvalidConfig { ref field, .. }) if field == "num_envs"
@@ -45,7 +51,7 @@ fn a_batch_over_the_budget_is_a_config_error_naming_the_estimate() {
 fn construction_stops_when_interrupted() {
     let mut calls = 0;
     let err = BatchEnv::new_interruptible(
-        EnvConfig::default(),
+        EnvConfig::default().validated().unwrap(),
         2,
         0,
         Autoreset::SameStep,

@@ -8,7 +8,7 @@ use accd_batch::{
     HELD_OUT_WAKE_SEEDS, TRAINING_WAKE_SEEDS,
 };
 use accd_sim::state_format::{self, StateKind};
-use accd_sim::{EnvConfig, SimError, ACT_DIM, OBSERVATION, OBS_BOUND, OBS_DIM};
+use accd_sim::{EnvConfig, SimError, Valid, ACT_DIM, OBSERVATION, OBS_BOUND, OBS_DIM};
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyTuple};
@@ -16,6 +16,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::arrays::{vector_to_py, vectors_to_py};
 use crate::capture::snapshot_dict;
+use crate::config::PyEnvConfig;
 use crate::errors::{raise, IntoPy, Kind};
 use crate::signals::SignalCheck;
 
@@ -127,21 +128,33 @@ fn parse_autoreset(mode: &str) -> PyResult<Autoreset> {
 
 #[pymethods]
 impl PyBatchEnv {
-    /// ``num_envs`` episodes of the config ``config_json`` (an ``EnvConfig`` as JSON), env ``i``
-    /// seeded with base ``seed + i``; autoreset ``"same_step"``, ``"next_step"`` or ``"disabled"``;
-    /// ``num_threads`` threads of its own (0: one per core).
+    /// ``num_envs`` episodes of ``config`` (a validated ``EnvConfig``, used as it is, or an
+    /// ``EnvConfig`` as JSON, validated here), env ``i`` seeded with base ``seed + i``; autoreset
+    /// ``"same_step"``, ``"next_step"`` or ``"disabled"``; ``num_threads`` threads of its own (0:
+    /// one per core).
     #[new]
-    #[pyo3(signature = (config_json, num_envs, seed, autoreset_mode = "same_step", num_threads = 0))]
+    #[pyo3(signature = (config, num_envs, seed, autoreset_mode = "same_step", num_threads = 0))]
     fn new(
         py: Python<'_>,
-        config_json: &str,
+        config: &Bound<'_, PyAny>,
         num_envs: usize,
         seed: u64,
         autoreset_mode: &str,
         num_threads: usize,
     ) -> PyResult<Self> {
         let mode = parse_autoreset(autoreset_mode)?;
-        let config = EnvConfig::from_json(config_json).py_err()?;
+        let config = match config.cast::<PyEnvConfig>() {
+            Ok(valid) => Valid::clone(&valid.get().inner),
+            Err(_) => {
+                let text: &str = config.extract().map_err(|_| {
+                    raise(
+                        Kind::Config,
+                        "invalid config: a BatchEnv takes an EnvConfig or its JSON text",
+                    )
+                })?;
+                EnvConfig::from_json(text).py_err()?
+            }
+        };
         let mut check = SignalCheck::new();
         let built = py.detach(|| {
             BatchEnv::new_interruptible(config, num_envs, seed, mode, num_threads, &mut || {

@@ -1,7 +1,7 @@
 //! `accd_gym.CaptureSim`: one capture episode's physics for scripted (non-RL) runs.
 
 use accd_sim::accd::mix;
-use accd_sim::{CaptureConfig, CaptureSim, Seeds, SimError, Snapshot};
+use accd_sim::{CaptureConfig, CaptureSim, Seeds, SimError, Snapshot, Valid};
 use accd_tether::TetherConfig;
 use nalgebra::Vector3;
 use pyo3::prelude::*;
@@ -56,7 +56,7 @@ fn build(
     tether_preset: &str,
     calm: bool,
     overrides: Option<&Bound<'_, PyDict>>,
-) -> PyResult<CaptureConfig> {
+) -> PyResult<Valid<CaptureConfig>> {
     let defaults = if calm {
         CaptureConfig::calm()
     } else {
@@ -67,8 +67,7 @@ fn build(
         ..defaults
     };
     let Some(overrides) = overrides else {
-        base.validate().py_err()?;
-        return Ok(base);
+        return base.validated().py_err();
     };
     check_finite_floats("", overrides)?;
     let text: String = py
@@ -81,8 +80,7 @@ fn build(
     let mut merged = serde_json::to_value(&base).expect("a config serializes");
     merge(&mut merged, &patch);
     let config: CaptureConfig = accd_sim::task::parse_named(&merged.to_string()).py_err()?;
-    config.validate().py_err()?;
-    Ok(config)
+    config.validated().py_err()
 }
 
 /// Flap deflections (right, left, top, bottom) from pitch, yaw and roll commands, in the unit of

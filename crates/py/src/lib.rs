@@ -21,6 +21,7 @@
 mod arrays;
 mod batch;
 mod capture;
+mod config;
 mod errors;
 mod signals;
 mod tether;
@@ -33,6 +34,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<tether::PyTether>()?;
     m.add_class::<capture::PyCaptureSim>()?;
+    m.add_class::<config::PyEnvConfig>()?;
+    m.add_function(wrap_pyfunction!(config::validation_passes, m)?)?;
     batch::register(m)?;
     m.add_function(wrap_pyfunction!(capture::mix_flaps, m)?)?;
     m.add_function(wrap_pyfunction!(capture::default_aero_table_json, m)?)?;

@@ -28,7 +28,7 @@ fn bench(c: &mut Criterion) {
             wake: 42,
             rlv: 3,
         };
-        let mut sim = CaptureSim::new(&config, seeds).unwrap();
+        let mut sim = CaptureSim::new(&config.clone().validated().unwrap(), seeds).unwrap();
         sim.step_many(2000, [0.0; 4]).unwrap();
         group.bench_function(name, |b| {
             b.iter(|| sim.step([0.01, -0.01, 0.02, 0.0]).unwrap())

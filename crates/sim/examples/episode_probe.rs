@@ -8,7 +8,7 @@ fn time(label: &str, config: EnvConfig, steps: usize) {
     let mut config = config;
     config.boom.capture_radius = 1e-6;
     config.capture_window = 1000.0;
-    let config = Arc::new(config);
+    let config = Arc::new(config.validated().unwrap());
     let eq = Arc::new(Equilibrium::settle(&config).unwrap());
     let mut ep = Episode::new(
         config,

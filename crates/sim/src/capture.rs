@@ -25,6 +25,7 @@ use crate::boom::{Boom, BoomConfig, CaptureStatus};
 use crate::error::{Result, SimError};
 use crate::state_format::{check_len, AirState, CaptureState, StateError};
 use crate::turbulence::{Turbulence, TurbulenceConfig};
+use crate::valid::Valid;
 use crate::wake::{AirSampling, Wake, WakeConfig};
 use crate::wake_field::WakeField;
 
@@ -126,8 +127,9 @@ impl Default for CaptureConfig {
 }
 
 impl CaptureConfig {
-    /// Checks every part.
+    /// Checks every part (counted by [`crate::valid::validation_passes`]).
     pub fn validate(&self) -> Result<()> {
+        crate::valid::count_validation_pass();
         self.tether.validate()?;
         if self.tether.tip_mass != 0.0 {
             return Err(SimError::invalid_config(
@@ -153,10 +155,15 @@ impl CaptureConfig {
     }
 
     /// Parses JSON (unknown keys are errors) and validates.
-    pub fn from_json(text: &str) -> Result<Self> {
+    pub fn from_json(text: &str) -> Result<Valid<Self>> {
         let config: CaptureConfig = parse_json(text, "(document)")?;
-        config.validate()?;
-        Ok(config)
+        config.validated()
+    }
+
+    /// The configuration, validated ([`CaptureConfig::validate`]): what the simulation takes.
+    pub fn validated(self) -> Result<Valid<Self>> {
+        self.validate()?;
+        Ok(Valid::trusted(self))
     }
 
     /// The tether with the ACCD's mass at its tip.
@@ -440,8 +447,7 @@ impl CaptureSim {
     /// A new episode with the aerodynamic model, wake and turbulence of the config (turbulence
     /// from the wake seed): the tether trails straight back (the paper's initial condition), the
     /// ACCD flies level with the aircraft, flaps neutral, t = 0.
-    pub fn new(config: &CaptureConfig, seeds: Seeds) -> Result<Self> {
-        config.validate()?;
+    pub fn new(config: &Valid<CaptureConfig>, seeds: Seeds) -> Result<Self> {
         let aero = Arc::new(config.accd.aero_model()?);
         let airspeed = config.aircraft.airspeed;
         let wake = Wake::from_config(&config.wake, airspeed)?;
@@ -453,12 +459,11 @@ impl CaptureSim {
 
     /// A new episode with a given (shared) aerodynamic model and air disturbance.
     pub fn with_parts(
-        config: &CaptureConfig,
+        config: &Valid<CaptureConfig>,
         seeds: Seeds,
         aero: Arc<AeroModel>,
         disturbance: Box<dyn AirDisturbance>,
     ) -> Result<Self> {
-        config.validate()?;
         let tether_config = config.tether_with_tip();
         let mut model = TetherModel::new(&tether_config)?;
         let tether = TetherState::straight(tether_config.segments, V3::new(-1.0, 0.0, 0.0), 0.0)?;
@@ -472,7 +477,7 @@ impl CaptureSim {
             inertia: config.accd.principal_inertia(),
             capture_offset,
             boom: Boom::new(&config.boom, seeds.rlv, capture.x),
-            config: config.clone(),
+            config: CaptureConfig::clone(config),
             model,
             aero,
             tether,

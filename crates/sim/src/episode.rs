@@ -14,6 +14,7 @@ use crate::rng::Stream;
 use crate::state_format::{check_len, EpisodeState};
 use crate::task::{observe, tilt, EnvConfig, ObservationInputs, ACT_DIM, OBS_DIM};
 use crate::turbulence::AmbientTurbulence;
+use crate::valid::Valid;
 
 type V3 = Vector3<f64>;
 
@@ -34,19 +35,21 @@ pub struct Equilibrium {
 
 impl Equilibrium {
     /// Settles the config's system open loop (turbulence off).
-    pub fn settle(config: &EnvConfig) -> Result<Equilibrium> {
+    pub fn settle(config: &Valid<EnvConfig>) -> Result<Equilibrium> {
         Equilibrium::settle_interruptible(config, &mut || false)
     }
 
     /// [`Equilibrium::settle`], asking `interrupted()` after every physics step and stopping
     /// with [`SimError::Interrupted`] when it returns true.
     pub fn settle_interruptible(
-        config: &EnvConfig,
+        config: &Valid<EnvConfig>,
         interrupted: &mut dyn FnMut() -> bool,
     ) -> Result<Equilibrium> {
-        let mut capture = config.capture();
+        let mut capture = config.capture().into_inner();
         capture.turbulence.wake_turbulence = false;
         capture.turbulence.ambient = AmbientTurbulence::None;
+        // Switching the turbulence off keeps every rule (no rule asks for turbulence).
+        let capture = Valid::trusted(capture);
         let mut sim = CaptureSim::new(&capture, Seeds::default())?;
         let steps = (config.initial.settle_time / sim.time_step()).round() as usize;
         for _ in 0..steps {
@@ -99,7 +102,7 @@ pub struct Outcome {
 /// One episode: the physics, the task's bookkeeping, the latest observation.
 #[derive(Clone)]
 pub struct Episode {
-    config: Arc<EnvConfig>,
+    config: Arc<Valid<EnvConfig>>,
     equilibrium: Arc<Equilibrium>,
     sim: CaptureSim,
     /// Scratch for the perturbed initial state.
@@ -121,11 +124,10 @@ impl Episode {
     /// An episode of `config` starting around `equilibrium` (see [`Equilibrium::settle`]),
     /// reset with `seeds`.
     pub fn new(
-        config: Arc<EnvConfig>,
+        config: Arc<Valid<EnvConfig>>,
         equilibrium: Arc<Equilibrium>,
         seeds: Seeds,
     ) -> Result<Episode> {
-        config.validate()?;
         let sim = CaptureSim::new(&config.capture(), seeds)?;
         let mut episode = Episode {
             start: equilibrium.tether.clone(),

@@ -22,6 +22,7 @@ pub mod rng;
 pub mod state_format;
 pub mod task;
 pub mod turbulence;
+pub mod valid;
 pub mod wake;
 pub mod wake_field;
 
@@ -39,6 +40,7 @@ pub use task::{
     OBS_BOUND, OBS_DIM,
 };
 pub use turbulence::{AmbientTurbulence, LaneStreams, Turbulence, TurbulenceConfig};
+pub use valid::Valid;
 pub use wake::{
     AirSampling, AnalyticWake, Wake, WakeConfig, WakeSample, WakeTable, WakeTableData,
     WakeTableFiles, WakeTables,

@@ -48,6 +48,7 @@ use crate::boom::BoomConfig;
 use crate::capture::{CaptureConfig, Snapshot};
 use crate::error::{Result, SimError};
 use crate::turbulence::TurbulenceConfig;
+use crate::valid::Valid;
 use crate::wake::WakeConfig;
 use accd_tether::TetherConfig;
 
@@ -518,10 +519,16 @@ impl EnvConfig {
 
     /// Parses JSON (unknown keys are errors) and validates. A value of the wrong type is named
     /// by its dotted field (see [`locate_parse_error`]).
-    pub fn from_json(text: &str) -> Result<Self> {
+    pub fn from_json(text: &str) -> Result<Valid<Self>> {
         let config: EnvConfig = parse_named(text)?;
-        config.validate()?;
-        Ok(config)
+        config.validated()
+    }
+
+    /// The configuration, validated ([`EnvConfig::validate`]): what the episode and the batch
+    /// env take.
+    pub fn validated(self) -> Result<Valid<Self>> {
+        self.validate()?;
+        Ok(Valid::trusted(self))
     }
 
     /// Estimated heap bytes of one env (episode) of this configuration: the turbulence's gust
@@ -614,6 +621,13 @@ impl EnvConfig {
             }
         }
         Ok(())
+    }
+}
+
+impl Valid<EnvConfig> {
+    /// The physics part, valid with it ([`EnvConfig::validate`] checks it whole).
+    pub fn capture(&self) -> Valid<CaptureConfig> {
+        Valid::trusted(EnvConfig::capture(self))
     }
 }
 

@@ -14,7 +14,7 @@ fn forward_acceleration_loads_the_tether_and_changes_the_free_stream() {
         end: 45.0,
         acceleration: [a, 0.0, 0.0],
     }];
-    let mut sim = CaptureSim::new(&config, Seeds::default()).unwrap();
+    let mut sim = CaptureSim::new(&config.clone().validated().unwrap(), Seeds::default()).unwrap();
     sim.step_many(4000, [0.0; 4]).unwrap();
     let before = sim.snapshot().unwrap();
     sim.step_many(250, [0.0; 4]).unwrap();

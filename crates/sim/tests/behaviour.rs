@@ -12,7 +12,7 @@ const DEG: f64 = std::f64::consts::PI / 180.0;
 
 /// An episode advanced `seconds` with neutral flaps from the straight trailing start.
 fn settled(config: &CaptureConfig, seconds: f64) -> CaptureSim {
-    let mut sim = CaptureSim::new(config, Seeds::default()).unwrap();
+    let mut sim = CaptureSim::new(&config.clone().validated().unwrap(), Seeds::default()).unwrap();
     let steps = (seconds / sim.time_step()).round() as usize;
     sim.step_many(steps, [0.0; 4]).unwrap();
     sim
@@ -142,7 +142,7 @@ fn torque_free_accd_conserves_rotational_energy_and_angular_momentum() {
         time_step: 0.002,
         ..config.tether
     };
-    let mut sim = CaptureSim::new(&config, Seeds::default()).unwrap();
+    let mut sim = CaptureSim::new(&config.clone().validated().unwrap(), Seeds::default()).unwrap();
     let tether = config.tether_with_tip();
     let s_eq = (tether.total_mass() + tether.tip_mass) * tether.gravity / tether.axial_stiffness;
     sim.set_tether_state(
@@ -198,7 +198,7 @@ fn wake_downwash_at_8_degrees_pushes_the_accd_down() {
         config.wake.alpha_deg = alpha;
         config.turbulence.wake_turbulence = turbulence;
         let mut sim = CaptureSim::new(
-            &config,
+            &config.validated().unwrap(),
             Seeds {
                 initial: 0,
                 wake: 7,

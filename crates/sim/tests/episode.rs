@@ -15,7 +15,7 @@ fn seeds(k: u64) -> Seeds {
 }
 
 fn episode(config: EnvConfig, k: u64) -> Episode {
-    let config = Arc::new(config);
+    let config = Arc::new(config.validated().unwrap());
     let eq = Arc::new(Equilibrium::settle(&config).unwrap());
     Episode::new(config, eq, seeds(k)).unwrap()
 }
@@ -209,7 +209,7 @@ fn a_diverging_simulation_ends_with_a_flag_and_the_last_good_observation() {
         serde_json::from_str(&accd_sim::AeroModel::accd().to_json()).unwrap();
     table["damping"]["clp"] = (-1e5).into();
     config.accd.aero_table = Some(table.to_string());
-    let config = Arc::new(config);
+    let config = Arc::new(config.validated().unwrap());
     let eq = Arc::new(Equilibrium::settle(&config).unwrap());
     let mut ep = Episode::new(config, eq, seeds(1)).unwrap();
     let mut diverged = None;

@@ -83,7 +83,7 @@ fn capture_episode_steps_without_allocating() {
     let mut config = accd_sim::CaptureConfig::default();
     config.turbulence.ambient = AmbientTurbulence::Light;
     let mut sim = accd_sim::CaptureSim::new(
-        &config,
+        &config.clone().validated().unwrap(),
         accd_sim::Seeds {
             initial: 1,
             wake: 2,
@@ -113,14 +113,18 @@ fn capture_episode_steps_without_allocating() {
 #[test]
 fn rl_episodes_step_and_reset_without_allocating() {
     use std::sync::Arc;
-    let config = Arc::new(accd_sim::EnvConfig {
-        capture_window: 1.0,
-        initial: accd_sim::task::InitialConfig {
-            settle_time: 10.0,
+    let config = Arc::new(
+        accd_sim::EnvConfig {
+            capture_window: 1.0,
+            initial: accd_sim::task::InitialConfig {
+                settle_time: 10.0,
+                ..Default::default()
+            },
             ..Default::default()
-        },
-        ..Default::default()
-    });
+        }
+        .validated()
+        .unwrap(),
+    );
     let eq = Arc::new(accd_sim::Equilibrium::settle(&config).unwrap());
     let seeds = |k: u64| accd_sim::Seeds {
         initial: k,

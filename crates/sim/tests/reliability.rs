@@ -34,14 +34,18 @@ fn a_flap_limit_beyond_the_default_table_is_refused() {
 
 #[test]
 fn the_default_step_is_one_rk4_step_and_fine_tethers_substep() {
-    let mut sim = CaptureSim::new(&CaptureConfig::default(), Seeds::default()).unwrap();
+    let mut sim = CaptureSim::new(
+        &CaptureConfig::default().validated().unwrap(),
+        Seeds::default(),
+    )
+    .unwrap();
     for _ in 0..2000 {
         assert_eq!(sim.substeps(), 1, "t = {}", sim.time());
         sim.step([0.0; 4]).unwrap();
     }
     let mut fine = CaptureConfig::calm();
     fine.tether.segments = 300;
-    let mut sim = CaptureSim::new(&fine, Seeds::default()).unwrap();
+    let mut sim = CaptureSim::new(&fine.clone().validated().unwrap(), Seeds::default()).unwrap();
     let mut most = 1;
     for _ in 0..2000 {
         most = most.max(sim.substeps());

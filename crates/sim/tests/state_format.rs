@@ -41,10 +41,11 @@ fn per_lane() -> CaptureConfig {
 #[test]
 fn a_saved_simulation_continues_bit_for_bit() {
     for config in [CaptureConfig::default(), per_lane(), CaptureConfig::calm()] {
-        let mut a = CaptureSim::new(&config, seeds()).unwrap();
+        let mut a = CaptureSim::new(&config.clone().validated().unwrap(), seeds()).unwrap();
         run(&mut a, 0, 120);
         let saved = a.save().unwrap();
-        let mut b = CaptureSim::new(&config, Seeds::default()).unwrap();
+        let mut b =
+            CaptureSim::new(&config.clone().validated().unwrap(), Seeds::default()).unwrap();
         b.load(&saved).unwrap();
         assert_eq!(run(&mut a, 120, 150), run(&mut b, 120, 150));
         assert_eq!(a.state(), b.state());
@@ -54,10 +55,10 @@ fn a_saved_simulation_continues_bit_for_bit() {
 #[test]
 fn foreign_corrupted_and_truncated_states_change_nothing() {
     let config = CaptureConfig::default();
-    let mut a = CaptureSim::new(&config, seeds()).unwrap();
+    let mut a = CaptureSim::new(&config.clone().validated().unwrap(), seeds()).unwrap();
     run(&mut a, 0, 30);
     let saved = a.save().unwrap();
-    let mut b = CaptureSim::new(&config, Seeds::default()).unwrap();
+    let mut b = CaptureSim::new(&config.clone().validated().unwrap(), Seeds::default()).unwrap();
     run(&mut b, 0, 5);
     let before = b.state();
     let state_error = |r: Result<(), SimError>| match r {
@@ -75,7 +76,7 @@ fn foreign_corrupted_and_truncated_states_change_nothing() {
         state_error(b.load(&saved[..saved.len() - 1])),
         StateError::Truncated { .. }
     ));
-    let calm = CaptureSim::new(&CaptureConfig::calm(), seeds()).unwrap();
+    let calm = CaptureSim::new(&CaptureConfig::calm().validated().unwrap(), seeds()).unwrap();
     assert!(matches!(
         state_error(b.load(&calm.save().unwrap())),
         StateError::Config { .. }
@@ -105,7 +106,7 @@ fn foreign_corrupted_and_truncated_states_change_nothing() {
 #[test]
 fn per_lane_states_check_their_lanes() {
     let config = per_lane();
-    let mut a = CaptureSim::new(&config, seeds()).unwrap();
+    let mut a = CaptureSim::new(&config.clone().validated().unwrap(), seeds()).unwrap();
     run(&mut a, 0, 20);
     let good = a.state();
     let lanes = |s: &mut accd_sim::state_format::CaptureState| match &mut s.air {
