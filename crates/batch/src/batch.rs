@@ -8,7 +8,8 @@
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::Arc;
 
-use accd_sim::state_format::{self, EpisodeState, Expected, StateError, StateKind};
+use accd_sim::episode::EpisodeState;
+use accd_sim::state_format::{self, Expected, StateError, StateKind};
 use accd_sim::{EnvConfig, Episode, Equilibrium, Outcome, SimError, Valid, ACT_DIM, OBS_DIM};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};

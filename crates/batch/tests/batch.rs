@@ -374,7 +374,7 @@ fn a_state_that_fails_in_its_last_env_changes_no_env() {
     assert_eq!(b.env.state(), before, "nothing half-applied");
     // Another wrong part, inside the turbulence.
     let mut bad = a.env.state();
-    if let accd_sim::state_format::AirState::Turbulence(t) = &mut bad.envs[1].episode.sim.air {
+    if let accd_sim::AirState::Turbulence(t) = &mut bad.envs[1].episode.sim.air {
         t.ring.pop();
     } else {
         panic!("the default config has turbulence");

@@ -79,7 +79,7 @@ fn build(
         .map_err(|e| raise(Kind::Config, format!("invalid config: {e}")))?;
     let mut merged = serde_json::to_value(&base).expect("a config serializes");
     merge(&mut merged, &patch);
-    let config: CaptureConfig = accd_sim::task::parse_named(&merged.to_string()).py_err()?;
+    let config: CaptureConfig = accd_sim::config::parse_named(&merged.to_string()).py_err()?;
     config.validated().py_err()
 }
 

@@ -55,7 +55,7 @@ fn build_config(
                 .next()
                 .unwrap_or(&message)
                 .to_string();
-            match accd_sim::task::locate_parse_error::<TetherConfig>(&merged) {
+            match accd_sim::config::locate_parse_error::<TetherConfig>(&merged) {
                 Some((field, value)) => raise(
                     Kind::Config,
                     format!(

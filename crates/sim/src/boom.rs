@@ -26,8 +26,7 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, SimError};
-use crate::rng::{NormalSampler, Stream, RLV_STREAM};
-use crate::state_format::BoomState;
+use crate::rng::{NormalSampler, Stream, StreamState, RLV_STREAM};
 
 type V3 = Vector3<f64>;
 
@@ -307,6 +306,27 @@ impl CaptureStatus {
                 && relative_speed <= config.max_closing_speed,
         }
     }
+}
+
+/// The RLV's boom ([`crate::boom::Boom`]), TA frame, SI.
+///
+/// Part of the state format: a change is a change of [`crate::state_format::FORMAT_VERSION`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct BoomState {
+    /// Formation offset of the tip, m.
+    pub base: [f64; 3],
+    /// Drift phases, rad.
+    pub phase: [f64; 3],
+    /// Gauss-Markov perturbation, m.
+    pub perturbation: [f64; 3],
+    /// Tip at the last step, m.
+    pub previous_tip: [f64; 3],
+    /// Tip velocity estimate, m/s.
+    pub velocity: [f64; 3],
+    /// Along-track position of the approaching tip, m.
+    pub along: f64,
+    /// The RLV stream.
+    pub stream: StreamState,
 }
 
 #[cfg(test)]

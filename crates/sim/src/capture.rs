@@ -14,166 +14,28 @@
 
 use std::sync::Arc;
 
-use accd_tether::{Atmosphere, Rk4, Surroundings, System, TetherConfig, TetherModel, TetherState};
+use accd_tether::{Atmosphere, Rk4, Surroundings, System, TetherModel, TetherState};
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::accd::{aero_loads, angular_acceleration, AccdConfig, AccdState, Actuators, AeroLoads};
+use crate::accd::{aero_loads, angular_acceleration, AccdState, Actuators, AeroLoads};
 use crate::aero::AeroModel;
+use crate::air::{AirDisturbance, AirState};
 use crate::aircraft::AircraftConfig;
-use crate::boom::{Boom, BoomConfig, CaptureStatus};
+use crate::boom::{Boom, BoomState, CaptureStatus};
+use crate::config::CaptureConfig;
 use crate::error::{Result, SimError};
-use crate::state_format::{check_len, AirState, CaptureState, StateError};
-use crate::turbulence::{Turbulence, TurbulenceConfig};
+use crate::rng::Seeds;
+use crate::state_format::check_len;
+use crate::turbulence::Turbulence;
 use crate::valid::Valid;
-use crate::wake::{AirSampling, Wake, WakeConfig};
+use crate::wake::{AirSampling, Wake};
 use crate::wake_field::WakeField;
 
 type V3 = Vector3<f64>;
 
 /// ISA sea-level density, kg/m^3: the densest air an episode meets, for stability estimates.
 const SEA_LEVEL_DENSITY: f64 = 1.225;
-
-/// Disturbances of the air relative to the free stream (wake, turbulence), anywhere in the TA
-/// frame. `velocity` must be a pure function during a step; `advance` moves time-dependent
-/// parts (turbulence) forward once per step.
-pub trait AirDisturbance: Send + Sync {
-    /// Velocity added to the free stream at `position` (TA frame, m), m/s.
-    fn velocity(&self, time: f64, position: &V3) -> V3;
-
-    /// Advances internal state from `time` to `time + dt`.
-    fn advance(&mut self, _time: f64, _dt: f64) -> Result<()> {
-        Ok(())
-    }
-
-    /// Restarts at time 0 with the random streams of `wake_seed`. Must not allocate.
-    fn reset(&mut self, _wake_seed: u64) {}
-
-    /// Declares points that will be sampled during the coming step (before any of them is):
-    /// a disturbance that generates its field lazily generates it there. Must not allocate.
-    fn prepare(&mut self, _points: &[V3]) {}
-
-    /// Declares that the disturbance may be sampled anywhere (the stepper cannot say where
-    /// beforehand). Must not allocate.
-    fn prepare_all(&mut self) {}
-
-    /// A boxed copy (the episode is cloned for snapshots).
-    fn clone_box(&self) -> Box<dyn AirDisturbance>;
-
-    /// The time-dependent state ([`AirState::Steady`] for a steady disturbance).
-    fn state(&self) -> AirState {
-        AirState::Steady
-    }
-
-    /// Restores a state from `state` of a disturbance built from the same config; checks it
-    /// first and changes nothing on an error.
-    fn set_state(&mut self, state: AirState) -> Result<(), StateError> {
-        match state {
-            AirState::Steady => Ok(()),
-            AirState::Turbulence(_) => Err(StateError::invalid(
-                "air",
-                "the state of a turbulent wake",
-                "the state of a steady disturbance",
-            )),
-        }
-    }
-}
-
-/// No disturbance: the free stream alone.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct CalmAir;
-
-impl AirDisturbance for CalmAir {
-    fn velocity(&self, _time: f64, _position: &V3) -> V3 {
-        V3::zeros()
-    }
-
-    fn clone_box(&self) -> Box<dyn AirDisturbance> {
-        Box::new(*self)
-    }
-}
-
-/// Everything that defines an episode's physics. Missing keys take their defaults.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct CaptureConfig {
-    /// The tether (Table 3 by default). Its `tip_mass` must stay 0: the ACCD's mass is at the tip.
-    pub tether: TetherConfig,
-    /// The capturing device.
-    pub accd: AccdConfig,
-    /// The towing aircraft.
-    pub aircraft: AircraftConfig,
-    /// The RLV's boom.
-    pub boom: BoomConfig,
-    /// The towing aircraft's mean wake (on by default, at 8 degrees angle of attack).
-    pub wake: WakeConfig,
-    /// Wake and ambient turbulence (wake turbulence on by default, ambient off).
-    pub turbulence: TurbulenceConfig,
-}
-
-impl Default for CaptureConfig {
-    /// The capture mission: Table 3's tether, the default ACCD and boom, the aircraft at 185 m/s
-    /// and 6000 m, its wake at 8 degrees angle of attack with wake turbulence.
-    fn default() -> Self {
-        CaptureConfig {
-            tether: TetherConfig::table3(),
-            accd: AccdConfig::default(),
-            aircraft: AircraftConfig::default(),
-            boom: BoomConfig::default(),
-            wake: WakeConfig::default(),
-            turbulence: TurbulenceConfig::default(),
-        }
-    }
-}
-
-impl CaptureConfig {
-    /// Checks every part (counted by [`crate::valid::validation_passes`]).
-    pub fn validate(&self) -> Result<()> {
-        crate::valid::count_validation_pass();
-        self.tether.validate()?;
-        if self.tether.tip_mass != 0.0 {
-            return Err(SimError::invalid_config(
-                "tether.tip_mass",
-                self.tether.tip_mass,
-                "0 kg (the ACCD's mass, accd.mass, is the tip mass)",
-            ));
-        }
-        self.accd.validate()?;
-        self.aircraft.validate()?;
-        self.boom.validate()?;
-        self.wake.validate()?;
-        self.turbulence.validate()?;
-        crate::task::check_cross_fields(self)
-    }
-
-    /// The paper's open-loop setting (section 4): no wake, no turbulence ("no wake unless stated").
-    pub fn calm() -> Self {
-        let mut config = CaptureConfig::default();
-        config.wake.enabled = false;
-        config.turbulence.wake_turbulence = false;
-        config
-    }
-
-    /// Parses JSON (unknown keys are errors) and validates.
-    pub fn from_json(text: &str) -> Result<Valid<Self>> {
-        let config: CaptureConfig = parse_json(text, "(document)")?;
-        config.validated()
-    }
-
-    /// The configuration, validated ([`CaptureConfig::validate`]): what the simulation takes.
-    pub fn validated(self) -> Result<Valid<Self>> {
-        self.validate()?;
-        Ok(Valid::trusted(self))
-    }
-
-    /// The tether with the ACCD's mass at its tip.
-    pub fn tether_with_tip(&self) -> TetherConfig {
-        TetherConfig {
-            tip_mass: self.accd.mass,
-            ..self.tether.clone()
-        }
-    }
-}
 
 /// The capture point (the ACCD's tail, `offset` from its centre of gravity in body axes) and its
 /// velocity, from the tether tip's (the centre of gravity's) position and velocity and the ACCD's
@@ -184,23 +46,6 @@ fn capture_point(position: &V3, velocity: &V3, accd: &AccdState, offset: &V3) ->
         position + attitude.transform_vector(offset),
         velocity + attitude.transform_vector(&accd.omega.cross(offset)),
     )
-}
-
-/// Parses a JSON config document; serde's message (unknown field, wrong type, with the line and
-/// column) becomes an [`SimError::InvalidConfig`] for `what`.
-pub(crate) fn parse_json<T: serde::de::DeserializeOwned>(text: &str, _what: &str) -> Result<T> {
-    crate::task::parse_named(text)
-}
-
-/// The seeds of an episode's independent random streams.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-pub struct Seeds {
-    /// Initial conditions.
-    pub initial: u64,
-    /// Wake turbulence (the "wake seed").
-    pub wake: u64,
-    /// RLV motion (the boom).
-    pub rlv: u64,
 }
 
 /// The air as seen during one step.
@@ -799,7 +644,7 @@ impl CaptureSim {
         self.refresh()
     }
 
-    /// RK4 substeps of the next step ([`TetherConfig::substeps_for`]) under the load of the
+    /// RK4 substeps of the next step ([`accd_tether::TetherConfig::substeps_for`]) under the load of the
     /// current state ([`accd_tether::config::StepLoad::of_state`], the ACCD as tip mass), with
     /// sea-level density (an upper bound) at the aircraft's airspeed. One for the default
     /// configuration.
@@ -899,4 +744,33 @@ impl CaptureSim {
     pub fn joint_positions(&self, out: &mut [V3]) -> Result<()> {
         Ok(self.model.joint_positions(&self.tether.q, out)?)
     }
+}
+
+/// One capture simulation's dynamic state ([`crate::CaptureSim`]), TA frame, SI.
+///
+/// Part of the state format: a change is a change of [`crate::state_format::FORMAT_VERSION`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CaptureState {
+    /// Time of the last state set from outside, s.
+    pub time_origin: f64,
+    /// Physics steps since then.
+    pub steps: u64,
+    /// Simulation time, s.
+    pub time: f64,
+    /// Tether coordinates `[s, phi_1, psi_1, ...]` (m, rad).
+    pub q: Vec<f64>,
+    /// Their rates.
+    pub qd: Vec<f64>,
+    /// ACCD attitude, body to TA frame, as `[i, j, k, w]`.
+    pub attitude: [f64; 4],
+    /// Body rates (p, q, r), rad/s.
+    pub omega: [f64; 3],
+    /// Flap commands, rad.
+    pub flap_command: [f64; 4],
+    /// Flap deflections, rad.
+    pub flap_deflection: [f64; 4],
+    /// The boom.
+    pub boom: BoomState,
+    /// The air disturbance.
+    pub air: AirState,
 }

@@ -6,12 +6,13 @@ use std::sync::Arc;
 
 use accd_tether::TetherState;
 use nalgebra::{UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
 
 use crate::accd::AccdState;
-use crate::capture::{CaptureSim, Seeds, Snapshot};
+use crate::capture::{CaptureSim, CaptureState, Snapshot};
 use crate::error::{Result, SimError};
-use crate::rng::Stream;
-use crate::state_format::{check_len, EpisodeState};
+use crate::rng::{Seeds, Stream};
+use crate::state_format::check_len;
 use crate::task::{observe, tilt, EnvConfig, ObservationInputs, ACT_DIM, OBS_DIM};
 use crate::turbulence::AmbientTurbulence;
 use crate::valid::Valid;
@@ -418,4 +419,27 @@ impl Episode {
         self.divergence = state.divergence;
         Ok(())
     }
+}
+
+/// One RL episode's state ([`crate::Episode`]).
+///
+/// Part of the state format: a change is a change of [`crate::state_format::FORMAT_VERSION`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EpisodeState {
+    /// The physics.
+    pub sim: CaptureState,
+    /// Agent steps taken.
+    pub steps: u64,
+    /// The episode's seeds.
+    pub seeds: Seeds,
+    /// The last action (clipped), for the smoothness cost.
+    pub previous_action: [f64; ACT_DIM],
+    /// The latest observation.
+    pub observation: Vec<f32>,
+    /// Distance from the capture point to the boom tip at the last step, m.
+    pub distance: f64,
+    /// The episode has ended.
+    pub done: bool,
+    /// Why it diverged, if it did.
+    pub divergence: Option<String>,
 }

@@ -7,17 +7,32 @@
 //!
 //! Frames and units as in `accd_tether`: SI, TA frame with x forward, y starboard, z down, origin
 //! at the tether attachment.
+//!
+//! # Modules, by concept (no import cycle: `tests/module_graph.rs`)
+//! * configuration: [`config`] (the physics' [`CaptureConfig`], its cross-field rules, reading
+//!   JSON documents), [`valid`] (a validated configuration, what the constructors take);
+//! * tables: [`interp`] (grid look-ups), [`aero`] (the ACCD's coefficient tables);
+//! * the air: [`air`] (the [`AirDisturbance`] interface), [`wake`] (mean wake: tables and the
+//!   analytic model), [`turbulence`], [`wake_field`] (wake + turbulence as one field);
+//! * bodies and scene: [`accd`] (the capturing device, flaps, loads), [`aircraft`], [`boom`];
+//! * the simulation: [`capture`] (the coupled step, one RK4 of [`accd_tether::Rk4`]), [`rng`]
+//!   (named, seeded streams), [`state_format`] (the snapshot format; each state type lives
+//!   beside its owner);
+//! * the task: [`task`] (task configuration, observation table, reward, episode end),
+//!   [`episode`] (one RL episode).
 
 #![warn(missing_docs)]
 
 pub mod accd;
 pub mod aero;
+pub mod air;
 pub mod aircraft;
 pub mod boom;
 pub mod capture;
+pub mod config;
 pub mod episode;
 pub mod error;
-mod interp;
+pub mod interp;
 pub mod rng;
 pub mod state_format;
 pub mod task;
@@ -28,12 +43,14 @@ pub mod wake_field;
 
 pub use accd::{AccdConfig, AccdState};
 pub use aero::AeroModel;
+pub use air::{AirDisturbance, AirState};
 pub use aircraft::AircraftConfig;
 pub use boom::{BoomConfig, CaptureStatus};
-pub use capture::{AirDisturbance, CalmAir, CaptureConfig, CaptureSim, Seeds, Snapshot};
+pub use capture::{CaptureSim, CaptureState, Snapshot};
+pub use config::CaptureConfig;
 pub use episode::{Episode, Equilibrium, Outcome};
 pub use error::SimError;
-pub use rng::NormalSampler;
+pub use rng::{NormalSampler, Seeds};
 pub use state_format::StateError;
 pub use task::{
     observation_index, EnvConfig, ObservationField, ObservationInputs, ACT_DIM, OBSERVATION,

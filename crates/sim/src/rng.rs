@@ -25,8 +25,6 @@ use rand_core::{Rng, SeedableRng};
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
-use crate::state_format::{ChaChaState, StreamState};
-
 /// ChaCha stream label of the wake turbulence lanes ("WAKELANE" in ASCII).
 pub const WAKE_LANES_STREAM: u64 = u64::from_be_bytes(*b"WAKELANE");
 /// ChaCha stream label of the ambient turbulence ("AMBIENT " in ASCII).
@@ -144,6 +142,42 @@ impl Stream {
         self.spare = Some(r * s);
         r * c
     }
+}
+
+/// The seeds of an episode's independent random streams.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct Seeds {
+    /// Initial conditions.
+    pub initial: u64,
+    /// Wake turbulence (the "wake seed").
+    pub wake: u64,
+    /// RLV motion (the boom).
+    pub rlv: u64,
+}
+
+/// The position of a ChaCha8 generator ([`rand_chacha::ChaCha8Rng`]).
+///
+/// Part of the state format: a change is a change of [`crate::state_format::FORMAT_VERSION`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ChaChaState {
+    /// The 256-bit key (the seed expanded by SplitMix64, [`crate::rng::stream_rng`]).
+    pub seed: [u8; 32],
+    /// The ChaCha stream (nonce), the label of the use.
+    pub stream: u64,
+    /// The word position (32-bit words consumed).
+    pub word_pos: u128,
+}
+
+/// A [`crate::rng::Stream`]: its generator and the spare Box-Muller deviate (the sampler is
+/// configuration).
+///
+/// Part of the state format: a change is a change of [`crate::state_format::FORMAT_VERSION`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct StreamState {
+    /// The generator.
+    pub chacha: ChaChaState,
+    /// The second deviate of the last Box-Muller pair, not yet returned.
+    pub spare: Option<f64>,
 }
 
 #[cfg(test)]

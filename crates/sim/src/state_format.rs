@@ -39,12 +39,9 @@
 //! [postcard]: https://docs.rs/postcard
 
 use serde::de::DeserializeOwned;
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 use sha2::{Digest, Sha256};
 use thiserror::Error;
-
-use crate::capture::Seeds;
-use crate::task::ACT_DIM;
 
 /// The first 8 bytes of every state.
 pub const MAGIC: [u8; 8] = *b"ACCDSNAP";
@@ -433,140 +430,21 @@ pub fn decode<T: DeserializeOwned>(bytes: &[u8], expected: &Expected) -> Result<
     Ok(value)
 }
 
-// ---- The state types. Any change here is a change of the format: bump FORMAT_VERSION. ----
-
-/// The position of a ChaCha8 generator ([`rand_chacha::ChaCha8Rng`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub struct ChaChaState {
-    /// The 256-bit key (the seed expanded by SplitMix64, [`crate::rng::stream_rng`]).
-    pub seed: [u8; 32],
-    /// The ChaCha stream (nonce), the label of the use.
-    pub stream: u64,
-    /// The word position (32-bit words consumed).
-    pub word_pos: u128,
-}
-
-/// A [`crate::rng::Stream`]: its generator and the spare Box-Muller deviate (the sampler is
-/// configuration).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct StreamState {
-    /// The generator.
-    pub chacha: ChaChaState,
-    /// The second deviate of the last Box-Muller pair, not yet returned.
-    pub spare: Option<f64>,
-}
-
-/// The RLV's boom ([`crate::boom::Boom`]), TA frame, SI.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct BoomState {
-    /// Formation offset of the tip, m.
-    pub base: [f64; 3],
-    /// Drift phases, rad.
-    pub phase: [f64; 3],
-    /// Gauss-Markov perturbation, m.
-    pub perturbation: [f64; 3],
-    /// Tip at the last step, m.
-    pub previous_tip: [f64; 3],
-    /// Tip velocity estimate, m/s.
-    pub velocity: [f64; 3],
-    /// Along-track position of the approaching tip, m.
-    pub along: f64,
-    /// The RLV stream.
-    pub stream: StreamState,
-}
-
-/// Which wake lanes are generated, with [`crate::LaneStreams::PerLane`].
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct LaneState {
-    /// One stream per lane.
-    pub streams: Vec<StreamState>,
-    /// The generated lanes, in the order they were generated.
-    pub generated: Vec<u64>,
-    /// Lane rectangle `[iy0, iy1, iz0, iz1]` whose lanes are all generated.
-    pub covered: Option<[u64; 4]>,
-}
-
-/// The turbulence ([`crate::Turbulence`]).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct TurbulenceState {
-    /// The wake seed of the current history.
-    pub seed: u64,
-    /// Time since the last reset, s.
-    pub time: f64,
-    /// Grid index of the newest generated time.
-    pub newest: i64,
-    /// The frozen history (slot-major ring of every channel).
-    pub ring: Vec<f32>,
-    /// The current value of every channel.
-    pub processes: Vec<f64>,
-    /// The shared stream of the wake lanes.
-    pub wake_stream: StreamState,
-    /// The ambient turbulence's stream.
-    pub ambient_stream: StreamState,
-    /// Per-lane streams (`None` unless [`crate::LaneStreams::PerLane`] with wake turbulence).
-    pub lanes: Option<LaneState>,
-}
-
-/// The time-dependent state of an air disturbance ([`crate::AirDisturbance`]).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub enum AirState {
-    /// A steady disturbance (or none): nothing changes with time.
-    Steady,
-    /// A wake with turbulence ([`crate::WakeField`]).
-    Turbulence(Box<TurbulenceState>),
-}
-
-/// One capture simulation's dynamic state ([`crate::CaptureSim`]), TA frame, SI.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct CaptureState {
-    /// Time of the last state set from outside, s.
-    pub time_origin: f64,
-    /// Physics steps since then.
-    pub steps: u64,
-    /// Simulation time, s.
-    pub time: f64,
-    /// Tether coordinates `[s, phi_1, psi_1, ...]` (m, rad).
-    pub q: Vec<f64>,
-    /// Their rates.
-    pub qd: Vec<f64>,
-    /// ACCD attitude, body to TA frame, as `[i, j, k, w]`.
-    pub attitude: [f64; 4],
-    /// Body rates (p, q, r), rad/s.
-    pub omega: [f64; 3],
-    /// Flap commands, rad.
-    pub flap_command: [f64; 4],
-    /// Flap deflections, rad.
-    pub flap_deflection: [f64; 4],
-    /// The boom.
-    pub boom: BoomState,
-    /// The air disturbance.
-    pub air: AirState,
-}
-
-/// One RL episode's state ([`crate::Episode`]).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct EpisodeState {
-    /// The physics.
-    pub sim: CaptureState,
-    /// Agent steps taken.
-    pub steps: u64,
-    /// The episode's seeds.
-    pub seeds: Seeds,
-    /// The last action (clipped), for the smoothness cost.
-    pub previous_action: [f64; ACT_DIM],
-    /// The latest observation.
-    pub observation: Vec<f32>,
-    /// Distance from the capture point to the boom tip at the last step, m.
-    pub distance: f64,
-    /// The episode has ended.
-    pub done: bool,
-    /// Why it diverged, if it did.
-    pub divergence: Option<String>,
-}
+// The state types live beside their owners (rng, boom, turbulence, air, capture, episode), each
+// documented as part of the format: any change of one is a change of the format (bump FORMAT_VERSION; the layout is pinned
+// by `payload_layout_is_pinned`).
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::air::AirState;
+    use crate::boom::BoomState;
+    use crate::capture::CaptureState;
+    use crate::episode::EpisodeState;
+    use crate::rng::{ChaChaState, Seeds, StreamState};
+    use crate::task::ACT_DIM;
+    use crate::turbulence::{LaneState, TurbulenceState};
+    use serde::Deserialize;
 
     #[derive(Debug, PartialEq, Serialize, Deserialize)]
     struct Sample {

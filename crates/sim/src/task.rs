@@ -45,7 +45,8 @@ use serde::{Deserialize, Serialize};
 use crate::accd::AccdConfig;
 use crate::aircraft::AircraftConfig;
 use crate::boom::BoomConfig;
-use crate::capture::{CaptureConfig, Snapshot};
+use crate::capture::Snapshot;
+use crate::config::{check, check_positive, parse_named, CaptureConfig};
 use crate::error::{Result, SimError};
 use crate::turbulence::TurbulenceConfig;
 use crate::valid::Valid;
@@ -518,7 +519,7 @@ impl EnvConfig {
     }
 
     /// Parses JSON (unknown keys are errors) and validates. A value of the wrong type is named
-    /// by its dotted field (see [`locate_parse_error`]).
+    /// by its dotted field (see [`crate::config::locate_parse_error`]).
     pub fn from_json(text: &str) -> Result<Valid<Self>> {
         let config: EnvConfig = parse_named(text)?;
         config.validated()
@@ -629,175 +630,6 @@ impl Valid<EnvConfig> {
     pub fn capture(&self) -> Valid<CaptureConfig> {
         Valid::trusted(EnvConfig::capture(self))
     }
-}
-
-/// Rules between the fields of a physics configuration (each field's own range is checked by
-/// its part): the flap limit within the default aerodynamic table's deflection range (a user
-/// table is checked when loaded, [`crate::accd::AccdConfig::aero_model`]), and a tether step
-/// that substepping can keep stable at the tension the tow is estimated to reach
-/// ([`accd_tether::TetherConfig::check_stability`]).
-pub fn check_cross_fields(config: &CaptureConfig) -> Result<()> {
-    if config.accd.aero_table.is_none() {
-        let range = crate::aero::DEFAULT_DEFLECTION_LIMIT_DEG;
-        if config.accd.flap_limit_deg > range {
-            return Err(SimError::invalid_config(
-                "accd.flap_limit_deg",
-                config.accd.flap_limit_deg,
-                &format!("(0, {range}] deg: the default aerodynamic table covers deflections up to {range} deg (give accd.aero_table for more)"),
-            ));
-        }
-    }
-    let (tension, density, airspeed) = estimated_peak_load(config);
-    config
-        .tether
-        .check_stability(tension, density, airspeed, config.accd.mass)
-        .map_err(|e| match e {
-            accd_tether::TetherError::InvalidConfig {
-                field,
-                value,
-                allowed,
-            } => SimError::InvalidConfig {
-                field: format!("tether.{field}"),
-                value,
-                allowed: format!(
-                    "{allowed} (the tension estimated from the weight of tether and accd.mass = {} kg \
-                     and the drag at aircraft.airspeed = {} m/s)",
-                    config.accd.mass, config.aircraft.airspeed
-                ),
-            },
-            other => other.into(),
-        })
-}
-
-/// A rough peak tension of the tow (N) with the air it flies in (sea-level density, an upper
-/// bound, and the airspeed): the weight of tether and ACCD plus the skin friction and cross-flow
-/// drag of the whole tether, for the stability check at validation. The step itself substeps
-/// from the actual tension ([`crate::CaptureSim::substeps`]).
-pub fn estimated_peak_load(config: &CaptureConfig) -> (f64, f64, f64) {
-    const DENSITY: f64 = 1.225;
-    let t = &config.tether;
-    let v = config.aircraft.airspeed;
-    let q = 0.5 * DENSITY * v * v;
-    let drag = q
-        * t.diameter
-        * t.length
-        * (std::f64::consts::PI * t.tangential_drag_coefficient + t.normal_drag_coefficient);
-    let weight = (t.total_mass() + config.accd.mass) * t.gravity;
-    (weight + drag, DENSITY, v)
-}
-
-/// Deserializes a config document; on failure the error names the dotted field whose value
-/// could not be read (see [`locate_parse_error`]), the value and the expected type.
-pub fn parse_named<T: serde::de::DeserializeOwned>(text: &str) -> Result<T> {
-    match serde_json::from_str::<T>(text) {
-        Ok(v) => Ok(v),
-        Err(e) => {
-            let message = strip_position(&e.to_string());
-            let Ok(value) = serde_json::from_str::<serde_json::Value>(text) else {
-                return Err(SimError::InvalidConfig {
-                    field: "(document)".into(),
-                    value: "not JSON".into(),
-                    allowed: format!("a JSON object ({message})"),
-                });
-            };
-            if !value.is_object() {
-                return Err(SimError::invalid_config(
-                    "(document)",
-                    short(&value),
-                    "a JSON object of configuration keys",
-                ));
-            }
-            Err(match locate_parse_error::<T>(&value) {
-                Some((field, v)) => SimError::InvalidConfig {
-                    field,
-                    value: short(&v),
-                    allowed: message,
-                },
-                None => SimError::InvalidConfig {
-                    field: "(document)".into(),
-                    value: String::new(),
-                    allowed: message,
-                },
-            })
-        }
-    }
-}
-
-/// A JSON value printed, cut to 60 characters.
-fn short(v: &serde_json::Value) -> String {
-    let s = v.to_string();
-    if s.chars().count() > 60 {
-        format!("{}...", s.chars().take(57).collect::<String>())
-    } else {
-        s
-    }
-}
-
-/// serde_json's message without " at line L column C" (positions in a merged document mean
-/// nothing to the user).
-fn strip_position(message: &str) -> String {
-    message
-        .split(" at line ")
-        .next()
-        .unwrap_or(message)
-        .to_string()
-}
-
-/// The dotted path and value of the first field of `document` that `T` cannot read: every
-/// struct of the configuration fills missing keys with defaults, so a document with one key
-/// alone (nested objects narrowed the same way) fails exactly when that key's value is bad.
-pub fn locate_parse_error<T: serde::de::DeserializeOwned>(
-    document: &serde_json::Value,
-) -> Option<(String, serde_json::Value)> {
-    fn wrap(path: &[String], leaf: serde_json::Value) -> serde_json::Value {
-        path.iter().rev().fold(leaf, |inner, key| {
-            let mut m = serde_json::Map::new();
-            m.insert(key.clone(), inner);
-            serde_json::Value::Object(m)
-        })
-    }
-    fn walk<T: serde::de::DeserializeOwned>(
-        path: &mut Vec<String>,
-        value: &serde_json::Map<String, serde_json::Value>,
-    ) -> Option<(String, serde_json::Value)> {
-        for (k, v) in value {
-            path.push(k.clone());
-            let alone = wrap(path, v.clone());
-            if serde_json::from_value::<T>(alone).is_err() {
-                // Narrow into an object only where the field takes one (`{}` reads as defaults).
-                let takes_object = serde_json::from_value::<T>(wrap(
-                    path,
-                    serde_json::Value::Object(serde_json::Map::new()),
-                ))
-                .is_ok();
-                if let (Some(inner), true) = (v.as_object(), takes_object) {
-                    if let Some(found) = walk::<T>(path, inner) {
-                        return Some(found);
-                    }
-                }
-                return Some((path.join("."), v.clone()));
-            }
-            path.pop();
-        }
-        None
-    }
-    walk::<T>(&mut Vec::new(), document.as_object()?)
-}
-
-/// `v` in (0, hi].
-fn check_positive(name: &str, v: f64, hi: f64, allowed: &str) -> Result<()> {
-    if !(v.is_finite() && v > 0.0 && v <= hi) {
-        return Err(SimError::invalid_config(name, v, allowed));
-    }
-    Ok(())
-}
-
-/// `v` in [lo, hi].
-fn check(name: &str, v: f64, lo: f64, hi: f64, allowed: &str) -> Result<()> {
-    if !(v.is_finite() && v >= lo && v <= hi) {
-        return Err(SimError::invalid_config(name, v, allowed));
-    }
-    Ok(())
 }
 
 /// Angle between the body's nose (body x) and the flight direction (TA x), rad.

@@ -78,8 +78,9 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, SimError};
+use crate::rng::StreamState;
 use crate::rng::{NormalSampler, Stream, AMBIENT_STREAM, WAKE_LANES_STREAM};
-use crate::state_format::{check_len, LaneState, StateError, TurbulenceState};
+use crate::state_format::{check_len, StateError};
 
 /// MIL-F-8785C turbulence length scale above 2000 ft (1750 ft), m.
 pub const MIL_LENGTH_SCALE_M: f64 = 533.4;
@@ -929,4 +930,40 @@ impl Turbulence {
         }
         v
     }
+}
+
+/// Which wake lanes are generated, with [`crate::LaneStreams::PerLane`].
+///
+/// Part of the state format: a change is a change of [`crate::state_format::FORMAT_VERSION`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LaneState {
+    /// One stream per lane.
+    pub streams: Vec<StreamState>,
+    /// The generated lanes, in the order they were generated.
+    pub generated: Vec<u64>,
+    /// Lane rectangle `[iy0, iy1, iz0, iz1]` whose lanes are all generated.
+    pub covered: Option<[u64; 4]>,
+}
+
+/// The turbulence ([`crate::Turbulence`]).
+///
+/// Part of the state format: a change is a change of [`crate::state_format::FORMAT_VERSION`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TurbulenceState {
+    /// The wake seed of the current history.
+    pub seed: u64,
+    /// Time since the last reset, s.
+    pub time: f64,
+    /// Grid index of the newest generated time.
+    pub newest: i64,
+    /// The frozen history (slot-major ring of every channel).
+    pub ring: Vec<f32>,
+    /// The current value of every channel.
+    pub processes: Vec<f64>,
+    /// The shared stream of the wake lanes.
+    pub wake_stream: StreamState,
+    /// The ambient turbulence's stream.
+    pub ambient_stream: StreamState,
+    /// Per-lane streams (`None` unless [`crate::LaneStreams::PerLane`] with wake turbulence).
+    pub lanes: Option<LaneState>,
 }

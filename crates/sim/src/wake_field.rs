@@ -16,8 +16,9 @@ use accd_tether::{Atmosphere, Surroundings};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
+use crate::air::{AirDisturbance, AirState};
 use crate::error::{Result, SimError};
-use crate::state_format::{AirState, StateError};
+use crate::state_format::StateError;
 use crate::turbulence::{Turbulence, TurbulenceConfig};
 use crate::wake::{Wake, WakeConfig, WakeTables};
 
@@ -182,7 +183,7 @@ impl Surroundings for WakeField {
 
 /// The wake and its turbulence as the disturbance of a capture episode, whose free stream and
 /// density come from the towing aircraft instead (the field's own are not used there).
-impl crate::capture::AirDisturbance for WakeField {
+impl AirDisturbance for WakeField {
     fn velocity(&self, _time: f64, position: &Vector3<f64>) -> Vector3<f64> {
         let w = self.wake.sample(position);
         w.velocity + self.turbulence.sample(position, w.tke)
@@ -221,7 +222,7 @@ impl crate::capture::AirDisturbance for WakeField {
         }
     }
 
-    fn clone_box(&self) -> Box<dyn crate::capture::AirDisturbance> {
+    fn clone_box(&self) -> Box<dyn AirDisturbance> {
         Box::new(self.clone())
     }
 

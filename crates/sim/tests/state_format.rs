@@ -2,7 +2,8 @@
 //! continues bit for bit (per-stage and per-lane turbulence alike), and a corrupted, truncated
 //! or foreign blob is a [`SimError::State`] that leaves the simulation as it was.
 
-use accd_sim::state_format::{self, AirState, StateError, StateKind};
+use accd_sim::state_format::{self, StateError, StateKind};
+use accd_sim::AirState;
 use accd_sim::{CaptureConfig, CaptureSim, LaneStreams, Seeds, SimError};
 
 fn seeds() -> Seeds {
@@ -109,14 +110,14 @@ fn per_lane_states_check_their_lanes() {
     let mut a = CaptureSim::new(&config.clone().validated().unwrap(), seeds()).unwrap();
     run(&mut a, 0, 20);
     let good = a.state();
-    let lanes = |s: &mut accd_sim::state_format::CaptureState| match &mut s.air {
+    let lanes = |s: &mut accd_sim::CaptureState| match &mut s.air {
         AirState::Turbulence(t) => t.lanes.as_mut().expect("per-lane streams").clone(),
         AirState::Steady => unreachable!(),
     };
     let mut s = good.clone();
     let generated = lanes(&mut s).generated;
     assert!(!generated.is_empty(), "the tether's lanes are generated");
-    let with = |f: &dyn Fn(&mut accd_sim::state_format::LaneState)| {
+    let with = |f: &dyn Fn(&mut accd_sim::turbulence::LaneState)| {
         let mut s = good.clone();
         if let AirState::Turbulence(t) = &mut s.air {
             f(t.lanes.as_mut().unwrap());

@@ -1,0 +1,272 @@
+//! The physics configuration ([`CaptureConfig`]: tether, ACCD, aircraft, boom, wake,
+//! turbulence), the rules between its fields, and the reading of configuration documents (JSON
+//! with unknown keys refused and a bad value named by its dotted path). The task's configuration
+//! ([`crate::EnvConfig`]) builds on it.
+
+use accd_tether::TetherConfig;
+use serde::{Deserialize, Serialize};
+
+use crate::accd::AccdConfig;
+use crate::aircraft::AircraftConfig;
+use crate::boom::BoomConfig;
+use crate::error::{Result, SimError};
+use crate::turbulence::TurbulenceConfig;
+use crate::valid::Valid;
+use crate::wake::WakeConfig;
+
+/// Everything that defines an episode's physics. Missing keys take their defaults.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CaptureConfig {
+    /// The tether (Table 3 by default). Its `tip_mass` must stay 0: the ACCD's mass is at the tip.
+    pub tether: TetherConfig,
+    /// The capturing device.
+    pub accd: AccdConfig,
+    /// The towing aircraft.
+    pub aircraft: AircraftConfig,
+    /// The RLV's boom.
+    pub boom: BoomConfig,
+    /// The towing aircraft's mean wake (on by default, at 8 degrees angle of attack).
+    pub wake: WakeConfig,
+    /// Wake and ambient turbulence (wake turbulence on by default, ambient off).
+    pub turbulence: TurbulenceConfig,
+}
+
+impl Default for CaptureConfig {
+    /// The capture mission: Table 3's tether, the default ACCD and boom, the aircraft at 185 m/s
+    /// and 6000 m, its wake at 8 degrees angle of attack with wake turbulence.
+    fn default() -> Self {
+        CaptureConfig {
+            tether: TetherConfig::table3(),
+            accd: AccdConfig::default(),
+            aircraft: AircraftConfig::default(),
+            boom: BoomConfig::default(),
+            wake: WakeConfig::default(),
+            turbulence: TurbulenceConfig::default(),
+        }
+    }
+}
+
+impl CaptureConfig {
+    /// Checks every part (counted by [`crate::valid::validation_passes`]).
+    pub fn validate(&self) -> Result<()> {
+        crate::valid::count_validation_pass();
+        self.tether.validate()?;
+        if self.tether.tip_mass != 0.0 {
+            return Err(SimError::invalid_config(
+                "tether.tip_mass",
+                self.tether.tip_mass,
+                "0 kg (the ACCD's mass, accd.mass, is the tip mass)",
+            ));
+        }
+        self.accd.validate()?;
+        self.aircraft.validate()?;
+        self.boom.validate()?;
+        self.wake.validate()?;
+        self.turbulence.validate()?;
+        check_cross_fields(self)
+    }
+
+    /// The paper's open-loop setting (section 4): no wake, no turbulence ("no wake unless stated").
+    pub fn calm() -> Self {
+        let mut config = CaptureConfig::default();
+        config.wake.enabled = false;
+        config.turbulence.wake_turbulence = false;
+        config
+    }
+
+    /// Parses JSON (unknown keys are errors) and validates.
+    pub fn from_json(text: &str) -> Result<Valid<Self>> {
+        let config: CaptureConfig = parse_json(text, "(document)")?;
+        config.validated()
+    }
+
+    /// The configuration, validated ([`CaptureConfig::validate`]): what the simulation takes.
+    pub fn validated(self) -> Result<Valid<Self>> {
+        self.validate()?;
+        Ok(Valid::trusted(self))
+    }
+
+    /// The tether with the ACCD's mass at its tip.
+    pub fn tether_with_tip(&self) -> TetherConfig {
+        TetherConfig {
+            tip_mass: self.accd.mass,
+            ..self.tether.clone()
+        }
+    }
+}
+
+/// Parses a JSON config document; serde's message (unknown field, wrong type, with the line and
+/// column) becomes an [`SimError::InvalidConfig`] for `what`.
+pub(crate) fn parse_json<T: serde::de::DeserializeOwned>(text: &str, _what: &str) -> Result<T> {
+    parse_named(text)
+}
+
+/// Rules between the fields of a physics configuration (each field's own range is checked by
+/// its part): the flap limit within the default aerodynamic table's deflection range (a user
+/// table is checked when loaded, [`crate::accd::AccdConfig::aero_model`]), and a tether step
+/// that substepping can keep stable at the tension the tow is estimated to reach
+/// ([`accd_tether::TetherConfig::check_stability`]).
+pub fn check_cross_fields(config: &CaptureConfig) -> Result<()> {
+    if config.accd.aero_table.is_none() {
+        let range = crate::aero::DEFAULT_DEFLECTION_LIMIT_DEG;
+        if config.accd.flap_limit_deg > range {
+            return Err(SimError::invalid_config(
+                "accd.flap_limit_deg",
+                config.accd.flap_limit_deg,
+                &format!("(0, {range}] deg: the default aerodynamic table covers deflections up to {range} deg (give accd.aero_table for more)"),
+            ));
+        }
+    }
+    let (tension, density, airspeed) = estimated_peak_load(config);
+    config
+        .tether
+        .check_stability(tension, density, airspeed, config.accd.mass)
+        .map_err(|e| match e {
+            accd_tether::TetherError::InvalidConfig {
+                field,
+                value,
+                allowed,
+            } => SimError::InvalidConfig {
+                field: format!("tether.{field}"),
+                value,
+                allowed: format!(
+                    "{allowed} (the tension estimated from the weight of tether and accd.mass = {} kg \
+                     and the drag at aircraft.airspeed = {} m/s)",
+                    config.accd.mass, config.aircraft.airspeed
+                ),
+            },
+            other => other.into(),
+        })
+}
+
+/// A rough peak tension of the tow (N) with the air it flies in (sea-level density, an upper
+/// bound, and the airspeed): the weight of tether and ACCD plus the skin friction and cross-flow
+/// drag of the whole tether, for the stability check at validation. The step itself substeps
+/// from the actual tension ([`crate::CaptureSim::substeps`]).
+pub fn estimated_peak_load(config: &CaptureConfig) -> (f64, f64, f64) {
+    const DENSITY: f64 = 1.225;
+    let t = &config.tether;
+    let v = config.aircraft.airspeed;
+    let q = 0.5 * DENSITY * v * v;
+    let drag = q
+        * t.diameter
+        * t.length
+        * (std::f64::consts::PI * t.tangential_drag_coefficient + t.normal_drag_coefficient);
+    let weight = (t.total_mass() + config.accd.mass) * t.gravity;
+    (weight + drag, DENSITY, v)
+}
+
+/// Deserializes a config document; on failure the error names the dotted field whose value
+/// could not be read (see [`locate_parse_error`]), the value and the expected type.
+pub fn parse_named<T: serde::de::DeserializeOwned>(text: &str) -> Result<T> {
+    match serde_json::from_str::<T>(text) {
+        Ok(v) => Ok(v),
+        Err(e) => {
+            let message = strip_position(&e.to_string());
+            let Ok(value) = serde_json::from_str::<serde_json::Value>(text) else {
+                return Err(SimError::InvalidConfig {
+                    field: "(document)".into(),
+                    value: "not JSON".into(),
+                    allowed: format!("a JSON object ({message})"),
+                });
+            };
+            if !value.is_object() {
+                return Err(SimError::invalid_config(
+                    "(document)",
+                    short(&value),
+                    "a JSON object of configuration keys",
+                ));
+            }
+            Err(match locate_parse_error::<T>(&value) {
+                Some((field, v)) => SimError::InvalidConfig {
+                    field,
+                    value: short(&v),
+                    allowed: message,
+                },
+                None => SimError::InvalidConfig {
+                    field: "(document)".into(),
+                    value: String::new(),
+                    allowed: message,
+                },
+            })
+        }
+    }
+}
+
+/// A JSON value printed, cut to 60 characters.
+fn short(v: &serde_json::Value) -> String {
+    let s = v.to_string();
+    if s.chars().count() > 60 {
+        format!("{}...", s.chars().take(57).collect::<String>())
+    } else {
+        s
+    }
+}
+
+/// serde_json's message without " at line L column C" (positions in a merged document mean
+/// nothing to the user).
+fn strip_position(message: &str) -> String {
+    message
+        .split(" at line ")
+        .next()
+        .unwrap_or(message)
+        .to_string()
+}
+
+/// The dotted path and value of the first field of `document` that `T` cannot read: every
+/// struct of the configuration fills missing keys with defaults, so a document with one key
+/// alone (nested objects narrowed the same way) fails exactly when that key's value is bad.
+pub fn locate_parse_error<T: serde::de::DeserializeOwned>(
+    document: &serde_json::Value,
+) -> Option<(String, serde_json::Value)> {
+    fn wrap(path: &[String], leaf: serde_json::Value) -> serde_json::Value {
+        path.iter().rev().fold(leaf, |inner, key| {
+            let mut m = serde_json::Map::new();
+            m.insert(key.clone(), inner);
+            serde_json::Value::Object(m)
+        })
+    }
+    fn walk<T: serde::de::DeserializeOwned>(
+        path: &mut Vec<String>,
+        value: &serde_json::Map<String, serde_json::Value>,
+    ) -> Option<(String, serde_json::Value)> {
+        for (k, v) in value {
+            path.push(k.clone());
+            let alone = wrap(path, v.clone());
+            if serde_json::from_value::<T>(alone).is_err() {
+                // Narrow into an object only where the field takes one (`{}` reads as defaults).
+                let takes_object = serde_json::from_value::<T>(wrap(
+                    path,
+                    serde_json::Value::Object(serde_json::Map::new()),
+                ))
+                .is_ok();
+                if let (Some(inner), true) = (v.as_object(), takes_object) {
+                    if let Some(found) = walk::<T>(path, inner) {
+                        return Some(found);
+                    }
+                }
+                return Some((path.join("."), v.clone()));
+            }
+            path.pop();
+        }
+        None
+    }
+    walk::<T>(&mut Vec::new(), document.as_object()?)
+}
+
+/// `v` in (0, hi].
+pub(crate) fn check_positive(name: &str, v: f64, hi: f64, allowed: &str) -> Result<()> {
+    if !(v.is_finite() && v > 0.0 && v <= hi) {
+        return Err(SimError::invalid_config(name, v, allowed));
+    }
+    Ok(())
+}
+
+/// `v` in [lo, hi].
+pub(crate) fn check(name: &str, v: f64, lo: f64, hi: f64, allowed: &str) -> Result<()> {
+    if !(v.is_finite() && v >= lo && v <= hi) {
+        return Err(SimError::invalid_config(name, v, allowed));
+    }
+    Ok(())
+}
