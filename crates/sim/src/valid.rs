@@ -51,8 +51,9 @@ pub(crate) fn count_validation_pass() {
     VALIDATION_PASSES.fetch_add(1, Ordering::Relaxed);
 }
 
-/// Full validations of a physics configuration so far in this process (see
-/// [`VALIDATION_PASSES`]).
+/// Full validations of a physics configuration so far in this process (every
+/// [`crate::CaptureConfig::validate`], which every [`crate::EnvConfig::validate`] includes): a
+/// diagnostic that shows a configuration is checked once per env construction.
 pub fn validation_passes() -> u64 {
     VALIDATION_PASSES.load(Ordering::Relaxed)
 }
