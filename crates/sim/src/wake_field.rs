@@ -194,8 +194,8 @@ impl AirDisturbance for WakeField {
     }
 
     /// Restarts the turbulence; with per-lane streams no lane is generated until
-    /// [`crate::capture::AirDisturbance::prepare`] declares the points sampled (or
-    /// [`crate::capture::AirDisturbance::prepare_all`]).
+    /// [`crate::air::AirDisturbance::prepare`] declares the points sampled (or
+    /// [`crate::air::AirDisturbance::prepare_all`]).
     fn reset(&mut self, wake_seed: u64) {
         self.turbulence.reset(wake_seed);
     }
