@@ -641,7 +641,7 @@ impl TetherConfig {
                  axial_damping_per_mass = {} and an estimated peak tension of {:.3e} N give a \
                  fastest mode needing {k} RK4 substeps (at most {MAX_SUBSTEPS} are taken; the \
                  largest stable step is {stable:.3e} s): use fewer segments, a longer tether or a \
-                 shorter time_step",
+                 shorter time_step{}",
                 stable * MAX_SUBSTEPS as f64,
                 self.segments,
                 self.length,
@@ -651,7 +651,13 @@ impl TetherConfig {
                 self.joint_damping_per_mass,
                 self.axial_stiffness,
                 self.axial_damping_per_mass,
-                tension
+                tension,
+                if self.is_distributed() {
+                    " (elasticity = distributed: its axial elements n k, n c_s are the stiff \
+                     modes; the attachment model steps far coarser)"
+                } else {
+                    ""
+                }
             ),
         ))
     }
