@@ -1,13 +1,17 @@
 //! Cost of one right-hand-side evaluation and one RK4 step, for Table 3's tether towed with the
 //! stand-in capturing device (aerodynamics on): the O(n) recursive solver (the hot path) at
-//! n = 10, 30, 100, 300 and the dense O(n^3) reference at n = 10, 30, 100.
+//! n = 10, 30, 100, 300 and the dense O(n^3) reference at n = 10, 30, 100; and the distributed
+//! elasticity (`elasticity: "distributed"`) by both solvers at n = 30, 100, where `rk4_step` is one
+//! step of the largest stable length (its stiff axial modes allow about 1e-5 s at n = 30 with
+//! Table 3's damping; printed when the bench starts).
 //!
 //! Run: `cargo bench -p accd-tether --bench tether -- --warm-up-time 1 --measurement-time 3`
 //! (results and machine in BENCHMARKS.md at the repository root).
 
 use std::hint::black_box;
 
-use accd_tether::{reference, Solver, Tether, TetherConfig};
+use accd_tether::config::{StepLoad, RK4_STABILITY_LIMIT};
+use accd_tether::{reference, Elasticity, Solver, Tether, TetherConfig};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 
 /// The towed reference case with `n` segments and the given solver, advanced 20 s so that the
@@ -59,9 +63,79 @@ fn group(c: &mut Criterion, name: &str, solver: Solver, sizes: &[usize]) {
     group.finish();
 }
 
+/// The towed attachment-model state of [`towed`] in the distributed layout, the attachment
+/// element's stretch shared equally by the n elements (the same tension in each), with a time
+/// step of 0.9 of the largest stable one for the chain at rest under its weight.
+fn towed_distributed(n: usize, solver: Solver) -> (Tether, accd_tether::UniformFlow) {
+    let (att, flow) = towed(n, Solver::Recursive);
+    let cfg = TetherConfig {
+        elasticity: Elasticity::Distributed,
+        ..att.config().clone()
+    };
+    let load = StepLoad::at_rest(
+        &cfg,
+        cfg.static_tension(),
+        flow.density,
+        185.0,
+        cfg.tip_mass,
+    );
+    let cfg = TetherConfig {
+        time_step: 0.9 * RK4_STABILITY_LIMIT / cfg.fastest_rate(&load),
+        ..cfg
+    };
+    let mut state = att.state().to_distributed().unwrap();
+    let (s, sd) = (state.q[0] / n as f64, state.qd[0] / n as f64);
+    state.q[0] = s;
+    state.qd[0] = sd;
+    for k in 1..n {
+        state.q[2 * n + k] = s;
+        state.qd[2 * n + k] = sd;
+    }
+    let mut tether = Tether::new(&cfg).unwrap();
+    tether.set_state(state).unwrap();
+    tether.model_mut().set_solver(solver);
+    eprintln!(
+        "distributed, n = {n}: time_step {:.3e} s, {} substep(s)",
+        cfg.time_step,
+        tether.substeps(&flow)
+    );
+    (tether, flow)
+}
+
 fn bench(c: &mut Criterion) {
     group(c, "recursive", Solver::Recursive, &[10, 30, 100, 300]);
     group(c, "dense", Solver::Dense, &[10, 30, 100]);
+    let mut dist = c.benchmark_group("distributed");
+    for (name, solver) in [("recursive", Solver::Recursive), ("dense", Solver::Dense)] {
+        for n in [30usize, 100] {
+            let (tether, flow) = towed_distributed(n, solver);
+            let state = tether.state().clone();
+            let mut model = tether.clone();
+            let model = model.model_mut();
+            let mut qdd = vec![0.0; model.dofs()];
+            dist.bench_with_input(BenchmarkId::new(format!("{name}_rhs"), n), &n, |b, _| {
+                b.iter(|| {
+                    model
+                        .accelerations(
+                            state.time,
+                            black_box(&state.q),
+                            black_box(&state.qd),
+                            &flow,
+                            &mut qdd,
+                        )
+                        .unwrap();
+                    black_box(&qdd);
+                })
+            });
+            let mut stepper = tether.clone();
+            dist.bench_with_input(
+                BenchmarkId::new(format!("{name}_rk4_step"), n),
+                &n,
+                |b, _| b.iter(|| stepper.step(black_box(&flow)).unwrap()),
+            );
+        }
+    }
+    dist.finish();
 }
 
 criterion_group!(benches, bench);

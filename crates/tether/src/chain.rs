@@ -268,6 +268,28 @@ impl ChainState {
         Ok(())
     }
 
+    /// The distributed elasticity's centres, their velocities and the tip, after
+    /// [`ChainState::kinematics`] (whose prefix sums carry segment 1's stretch only): segment k's
+    /// rod starts `s_k e_k` beyond its joint, with `s_k` and `s_k'` from `stretch(k)`.
+    pub fn stretch_centres(&mut self, l: f64, stretch: impl Fn(usize) -> (f64, f64)) {
+        let n = self.n;
+        let half = 0.5 * l;
+        let mut p = V3::zeros();
+        let mut pv = V3::zeros();
+        for k in 0..n {
+            let (e, e_dot) = (self.e.get(k), self.e_dot.get(k));
+            let (s, sd) = stretch(k);
+            p += e * s;
+            pv += e * sd + e_dot * s;
+            self.com.set(k, p + e * half);
+            self.com_vel.set(k, pv + e_dot * half);
+            p += e * l;
+            pv += e_dot * l;
+        }
+        self.tip = p;
+        self.tip_vel = pv;
+    }
+
     /// The loads pass (see the module documentation), after [`ChainState::kinematics`]. Errors if
     /// a joint has folded back on itself.
     #[inline(always)]

@@ -60,6 +60,55 @@ pub struct TetherConfig {
     pub gravity: f64,
     /// Fixed RK4 step, s (0, 1]. Default 0.01 (paper section 4).
     pub time_step: f64,
+    /// Where the axial elasticity sits (JSON `"attachment"` or `"distributed"`). Default
+    /// `"attachment"`: the paper's simplified model, one visco-elastic element at the attachment
+    /// point (2n + 1 coordinates). `"distributed"`: the paper's full model (section 2.3.6), a
+    /// spring-damper in every segment with stiffness `n k` and damping `n c_s`, so that the static
+    /// stretch under a tip load is the same (3n coordinates; see [`crate::dynamics`]). Omitted from
+    /// the JSON when it is the default, so that default configurations serialize as before.
+    #[serde(skip_serializing_if = "Elasticity::is_attachment")]
+    pub elasticity: Elasticity,
+}
+
+/// Where the tether's axial elasticity sits ([`TetherConfig::elasticity`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Elasticity {
+    /// One visco-elastic element (k, c_s) at the attachment point, along segment 1: the paper's
+    /// simplified model and the default.
+    #[default]
+    Attachment,
+    /// A visco-elastic element (n k, n c_s) at the inboard end of every segment: the paper's full
+    /// model.
+    Distributed,
+}
+
+impl Elasticity {
+    /// Whether this is the default, [`Elasticity::Attachment`].
+    pub fn is_attachment(&self) -> bool {
+        *self == Elasticity::Attachment
+    }
+
+    /// The name used in JSON.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Elasticity::Attachment => "attachment",
+            Elasticity::Distributed => "distributed",
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for Elasticity {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        let name = String::deserialize(d)?;
+        match name.as_str() {
+            "attachment" => Ok(Elasticity::Attachment),
+            "distributed" => Ok(Elasticity::Distributed),
+            other => Err(serde::de::Error::custom(format!(
+                "invalid value of `elasticity`: {other:?}; allowed: \"attachment\" or \"distributed\""
+            ))),
+        }
+    }
 }
 
 impl Default for TetherConfig {
@@ -125,13 +174,14 @@ impl StepLoad {
         density: f64,
         airspeed: f64,
     ) -> StepLoad {
-        let elastic = config.axial_stiffness * state.q[0];
+        let elastic = config.element_stiffness() * state.q[0];
         let tension = elastic
             .abs()
-            .max((elastic + config.axial_damping() * state.qd[0]).abs())
+            .max((elastic + config.element_damping() * state.qd[0]).abs())
             .max((config.total_mass() + tip_mass) * config.gravity);
-        let max_rate = state
-            .qd
+        // The angle rates only (the distributed model's stretch rates follow them in qd).
+        let angles = state.qd.len().min(2 * config.segments + 1);
+        let max_rate = state.qd[..angles]
             .iter()
             .skip(1)
             .fold(0.0, |m: f64, v| m.max(v.abs()));
@@ -200,6 +250,7 @@ impl TetherConfig {
             breaking_tension: 550e3,
             gravity: STANDARD_GRAVITY,
             time_step: 0.01,
+            elasticity: Elasticity::Attachment,
         }
     }
 
@@ -229,6 +280,7 @@ impl TetherConfig {
             breaking_tension: 100e3,
             gravity: STANDARD_GRAVITY,
             time_step: 0.01,
+            elasticity: Elasticity::Attachment,
         }
     }
 
@@ -466,9 +518,36 @@ impl TetherConfig {
         self.axial_damping_per_mass * self.total_mass()
     }
 
-    /// Number of generalized coordinates, 2n + 1.
+    /// Number of generalized coordinates: 2n + 1 for the attachment element, 3n for the
+    /// distributed elasticity.
     pub fn dofs(&self) -> usize {
-        2 * self.segments + 1
+        match self.elasticity {
+            Elasticity::Attachment => 2 * self.segments + 1,
+            Elasticity::Distributed => 3 * self.segments,
+        }
+    }
+
+    /// Whether the elasticity is distributed over the segments.
+    pub fn is_distributed(&self) -> bool {
+        self.elasticity == Elasticity::Distributed
+    }
+
+    /// Stiffness of one axial element, N/m: k at the attachment, n k per segment when
+    /// distributed (n springs n k in series are k).
+    pub fn element_stiffness(&self) -> f64 {
+        match self.elasticity {
+            Elasticity::Attachment => self.axial_stiffness,
+            Elasticity::Distributed => self.segments as f64 * self.axial_stiffness,
+        }
+    }
+
+    /// Damping of one axial element, N s/m: c_s at the attachment, n c_s per segment when
+    /// distributed.
+    pub fn element_damping(&self) -> f64 {
+        match self.elasticity {
+            Elasticity::Attachment => self.axial_damping(),
+            Elasticity::Distributed => self.segments as f64 * self.axial_damping(),
+        }
     }
 
     /// Magnitude of the fastest eigenvalue of the linearised chain under `load`, 1/s.
@@ -509,7 +588,20 @@ impl TetherConfig {
         );
         let m_a = load.axial_mass.max(self.segment_mass());
         let axial = mode(self.axial_stiffness / m_a, self.axial_damping() / m_a);
-        zigzag.max(axial) + 2.0 * load.max_rate.abs()
+        let fastest = zigzag.max(axial);
+        let fastest = if self.is_distributed() {
+            // The highest axial mode of n rods of mass m joined by springs n k and dampers n c_s:
+            // by Gershgorin's theorem the stiffness and damping matrices' eigenvalues (per unit
+            // mass) are at most 4 n k / m and 4 n c_s / m, i.e. omega_max <= 2 sqrt(n k / m).
+            let m = self.segment_mass();
+            fastest.max(mode(
+                4.0 * self.element_stiffness() / m,
+                4.0 * self.element_damping() / m,
+            ))
+        } else {
+            fastest
+        };
+        fastest + 2.0 * load.max_rate.abs()
     }
 
     /// RK4 substeps per [`TetherConfig::time_step`] that keep `|lambda| dt / k` within
@@ -549,7 +641,7 @@ impl TetherConfig {
                  axial_damping_per_mass = {} and an estimated peak tension of {:.3e} N give a \
                  fastest mode needing {k} RK4 substeps (at most {MAX_SUBSTEPS} are taken; the \
                  largest stable step is {stable:.3e} s): use fewer segments, a longer tether or a \
-                 shorter time_step",
+                 shorter time_step{}",
                 stable * MAX_SUBSTEPS as f64,
                 self.segments,
                 self.length,
@@ -559,7 +651,13 @@ impl TetherConfig {
                 self.joint_damping_per_mass,
                 self.axial_stiffness,
                 self.axial_damping_per_mass,
-                tension
+                tension,
+                if self.is_distributed() {
+                    " (elasticity = distributed: its axial elements n k, n c_s are the stiff \
+                     modes; the attachment model steps far coarser)"
+                } else {
+                    ""
+                }
             ),
         ))
     }

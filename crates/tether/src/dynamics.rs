@@ -45,6 +45,10 @@
 //! `v = v_air(c_i) - c_i'`, split into `v_t = (v . e_i) e_i` and `v_n = v - v_t`:
 //! `F = 1/2 rho d l (C_n |v_n| v_n + pi C_t |v_t| v_t)`.
 //!
+//! The distributed elasticity ([`crate::Elasticity::Distributed`]: an element in every segment,
+//! 3n coordinates) has its own kinematics and both solvers in [`crate::distributed`]; every method
+//! here takes either layout.
+//!
 //! All of `Q` costs O(n) through suffix sums; the dense solve of `M` costs O(n^3) and is the
 //! reference formulation ([`Solver::Dense`]). The hot path ([`Solver::Recursive`], the default)
 //! solves the same equations in O(n) by the articulated-body recursion of [`crate::recursive`].
@@ -55,6 +59,7 @@ use crate::arith::{Madd, Plain};
 use crate::chain::{ChainState, LoadConstants};
 use crate::config::TetherConfig;
 use crate::direction::DirectionJet;
+use crate::distributed::{self, stretch_index};
 use crate::error::{Result, TetherError};
 use crate::recursive::{self, Articulated, ChainConstants};
 use crate::surroundings::Surroundings;
@@ -68,7 +73,7 @@ pub struct Energy {
     pub kinetic: f64,
     /// Gravitational potential, zero at the attachment's height (z down, so it is negative below).
     pub gravity: f64,
-    /// Strain energy of the axial element, k s^2 / 2.
+    /// Strain energy of the axial element, k s^2 / 2 (the sum over the elements when distributed).
     pub axial: f64,
     /// Strain energy of the bending springs.
     pub bending: f64,
@@ -111,6 +116,11 @@ pub struct TetherModel {
     /// 1/2 pi d l C_t, m^2: times rho |v_t| v_t gives the skin friction.
     tangential_drag: f64,
     solver: Solver,
+    /// Whether the elasticity is distributed ([`crate::distributed`]).
+    distributed: bool,
+    /// Stiffness and damping of one distributed element, n k and n c_s.
+    element_k: f64,
+    element_c: f64,
     ws: Workspace,
 }
 
@@ -126,6 +136,8 @@ struct Workspace {
     mass: Vec<f64>,
     /// Per-segment results of the recursive solver's backward sweep.
     articulated: Vec<Articulated>,
+    /// The same for the distributed elasticity (empty otherwise).
+    axial: Vec<distributed::Articulated>,
 }
 
 impl TetherModel {
@@ -158,8 +170,16 @@ impl TetherModel {
                 tip_acc0: V3::zeros(),
                 mass: Vec::new(),
                 articulated: vec![Articulated::default(); n],
+                axial: if config.is_distributed() {
+                    vec![distributed::Articulated::default(); n]
+                } else {
+                    Vec::new()
+                },
             },
             solver: Solver::default(),
+            distributed: config.is_distributed(),
+            element_k: config.element_stiffness(),
+            element_c: config.element_damping(),
             config: config.clone(),
         })
     }
@@ -174,9 +194,43 @@ impl TetherModel {
         self.n
     }
 
-    /// Number of generalized coordinates 2n + 1.
+    /// Number of generalized coordinates: 2n + 1, or 3n with the distributed elasticity.
     pub fn dofs(&self) -> usize {
-        2 * self.n + 1
+        if self.distributed {
+            3 * self.n
+        } else {
+            2 * self.n + 1
+        }
+    }
+
+    /// Whether the elasticity is distributed over the segments ([`crate::distributed`]).
+    pub fn is_distributed(&self) -> bool {
+        self.distributed
+    }
+
+    /// Stretch of segment k's element and its rate, (m, m/s): segment 1's is the attachment
+    /// element's `s`; the other segments have none unless the elasticity is distributed.
+    #[inline(always)]
+    fn stretch(&self, q: &[f64], qd: &[f64], k: usize) -> (f64, f64) {
+        if k == 0 {
+            (q[0], qd[0])
+        } else if self.distributed {
+            let i = stretch_index(self.n, k);
+            (q[i], qd[i])
+        } else {
+            (0.0, 0.0)
+        }
+    }
+
+    fn distributed_constants(&self) -> distributed::Constants {
+        distributed::Constants {
+            l: self.l,
+            m: self.m,
+            rod_inertia: self.rod_inertia,
+            tip_mass: self.tip_mass,
+            k: self.element_k,
+            c: self.element_c,
+        }
     }
 
     fn check_len(&self, what: &'static str, v: &[f64]) -> Result<()> {
@@ -218,14 +272,41 @@ impl TetherModel {
         surroundings: &S,
     ) -> Result<S::TipReport> {
         let constants = self.load_constants();
+        let (distributed, n) = (self.distributed, self.n);
         let chain = &mut self.ws.chain;
         chain.kinematics::<M>(time, self.l, q, qd)?;
+        if distributed {
+            chain.stretch_centres(self.l, |k| {
+                let i = stretch_index(n, k);
+                (q[i], qd[i])
+            });
+        }
         chain.loads::<M, S>(time, &constants, surroundings)
     }
 
     /// Walks the chain with the state's positions and velocities: calls `visit(e, e_dot, centre,
     /// centre velocity)` per segment and returns the tip's position and velocity.
     fn walk(&self, q: &[f64], qd: &[f64], mut visit: impl FnMut(V3, V3, V3, V3)) -> (V3, V3) {
+        if self.distributed {
+            let mut p = V3::zeros();
+            let mut pv = V3::zeros();
+            for k in 0..self.n {
+                let jet = DirectionJet::new(q[1 + 2 * k], q[2 + 2 * k]);
+                let e_dot = jet.rate(qd[1 + 2 * k], qd[2 + 2 * k]);
+                let (s, sd) = self.stretch(q, qd, k);
+                p += jet.e * s;
+                pv += jet.e * sd + e_dot * s;
+                visit(
+                    jet.e,
+                    e_dot,
+                    p + jet.e * (0.5 * self.l),
+                    pv + e_dot * (0.5 * self.l),
+                );
+                p += jet.e * self.l;
+                pv += e_dot * self.l;
+            }
+            return (p, pv);
+        }
         let (s, sd) = (q[0], qd[0]);
         let mut p = V3::zeros();
         let mut pv = V3::zeros();
@@ -379,8 +460,18 @@ impl TetherModel {
         self.check_len("qd", qd)?;
         self.check_len("qdd", qdd)?;
         let report = self.prepare::<Plain, S>(time, q, qd, surroundings)?;
-        self.generalized_forces(q, qd, qdd);
-        self.assemble_mass(q[0]);
+        if self.distributed {
+            let c = self.distributed_constants();
+            let dim = self.dofs();
+            if self.ws.mass.len() != dim * dim {
+                self.ws.mass.resize(dim * dim, 0.0);
+            }
+            distributed::generalized_forces(&c, &self.ws.chain, q, qd, qdd);
+            distributed::assemble_mass(&c, &self.ws.chain, q, &mut self.ws.mass);
+        } else {
+            self.generalized_forces(q, qd, qdd);
+            self.assemble_mass(q[0]);
+        }
         let dim = self.dofs();
         cholesky_in_place(&mut self.ws.mass, dim).map_err(|col| TetherError::Diverged {
             time,
@@ -443,6 +534,13 @@ impl TetherModel {
         self.check_len("q", q)?;
         self.check_len("qd", qd)?;
         self.check_len("qdd", qdd)?;
+        if self.distributed {
+            let c = self.distributed_constants();
+            let report = self.prepare::<M, S>(time, q, qd, surroundings)?;
+            let ws = &mut self.ws;
+            distributed::solve(time, &c, &ws.chain, q, qd, &mut ws.axial, qdd, tensions)?;
+            return Ok(report);
+        }
         let constants = ChainConstants {
             l: self.l,
             m: self.m,
@@ -470,8 +568,16 @@ impl TetherModel {
     pub fn mass_matrix(&mut self, q: &[f64]) -> Result<DMatrix<f64>> {
         self.check_len("q", q)?;
         self.ws.chain.directions(q);
-        self.assemble_mass(q[0]);
         let dim = self.dofs();
+        if self.distributed {
+            let c = self.distributed_constants();
+            if self.ws.mass.len() != dim * dim {
+                self.ws.mass.resize(dim * dim, 0.0);
+            }
+            distributed::assemble_mass(&c, &self.ws.chain, q, &mut self.ws.mass);
+        } else {
+            self.assemble_mass(q[0]);
+        }
         Ok(DMatrix::from_fn(dim, dim, |r, c| {
             let (r, c) = if r >= c { (r, c) } else { (c, r) };
             self.ws.mass[r * dim + c]
@@ -498,10 +604,20 @@ impl TetherModel {
         });
         kinetic += 0.5 * self.tip_mass * tip_vel.norm_squared();
         height += self.tip_mass * tip.z;
+        let axial = if self.distributed {
+            (0..self.n)
+                .map(|k| {
+                    let s = self.stretch(q, qd, k).0;
+                    0.5 * self.element_k * s * s
+                })
+                .sum()
+        } else {
+            0.5 * self.k * q[0] * q[0]
+        };
         Ok(Energy {
             kinetic,
             gravity: -self.gravity * height,
-            axial: 0.5 * self.k * q[0] * q[0],
+            axial,
             bending,
         })
     }
@@ -533,6 +649,23 @@ impl TetherModel {
                 .map(|_| ());
         }
         self.accelerations_dense(time, q, qd, surroundings, qdd)?;
+        if self.distributed {
+            // A massless element carries its own force: the tension at the inboard end of
+            // segment k is n k s_k + n c_s s_k' (the element's equation of motion); the tip's
+            // pull is Newton's law for the tip body with the accelerations just solved.
+            let mut acc = V3::zeros();
+            let ch = &self.ws.chain;
+            for k in 0..self.n {
+                let (s, sd) = self.stretch(q, qd, k);
+                let i = stretch_index(self.n, k);
+                tensions[k] = self.element_k * s + self.element_c * sd;
+                let (e, ep, es) = (ch.e.get(k), ch.e_phi.get(k), ch.e_psi.get(k));
+                let edd = ch.w.get(k) + ep * qdd[1 + 2 * k] + es * qdd[2 + 2 * k];
+                acc += e * qdd[i] + ch.e_dot.get(k) * (2.0 * sd) + edd * (s + self.l);
+            }
+            tensions[self.n] = (ch.tip_force - acc * self.tip_mass).dot(&ch.e.get(self.n - 1));
+            return Ok(());
+        }
         let ws = &self.ws;
         let (s, sd, sdd) = (q[0], qd[0], qdd[0]);
         let ch = &ws.chain;
@@ -571,6 +704,18 @@ impl TetherModel {
                 expected: self.n + 1,
                 found: out.len(),
             });
+        }
+        if self.distributed {
+            // Here entry k is the inboard end of segment k's rod, past its element.
+            let mut p = V3::zeros();
+            for k in 0..self.n {
+                let e = crate::direction::direction(q[1 + 2 * k], q[2 + 2 * k]);
+                p += e * self.stretch(q, q, k).0;
+                out[k] = p;
+                p += e * self.l;
+            }
+            out[self.n] = p;
+            return Ok(());
         }
         let mut p = crate::direction::direction(q[1], q[2]) * q[0];
         out[0] = p;
@@ -612,11 +757,24 @@ impl TetherModel {
         {
             // SAFETY: the processor has AVX2 and FMA, checked just above.
             unsafe { self.kinematics_avx2(q, qd)? };
+            self.stretch_batch(q, qd);
             return Ok(self.copy_centres(centres));
         }
         let l = self.l;
         self.ws.chain.kinematics::<Plain>(0.0, l, q, qd)?;
+        self.stretch_batch(q, qd);
         Ok(self.copy_centres(centres))
+    }
+
+    /// The distributed elasticity's centres after the kinematics pass (nothing otherwise).
+    fn stretch_batch(&mut self, q: &[f64], qd: &[f64]) {
+        if self.distributed {
+            let n = self.n;
+            self.ws.chain.stretch_centres(self.l, |k| {
+                let i = stretch_index(n, k);
+                (q[i], qd[i])
+            });
+        }
     }
 
     #[cfg(target_arch = "x86_64")]

@@ -3,7 +3,8 @@
 //! The 3D multibody tether of DLR's In-Air Capturing concept (Singh et al., "Multibody modelling
 //! of tether and capture system for dynamic simulations of In-Air Capturing"; section numbers
 //! below refer to that paper): a chain of `n` rigid segments hung from the towing aircraft
-//! through one axial visco-elastic element, with nonlinear bending springs and Rayleigh damping
+//! through one axial visco-elastic element (or, as an option, one in every segment:
+//! [`Elasticity`], [`distributed`]), with nonlinear bending springs and Rayleigh damping
 //! at the joints, per-segment aerodynamics, the aircraft's acceleration as a rheonomous
 //! constraint, and a tip body (the capturing device) at the free end.
 //!
@@ -26,6 +27,7 @@ pub mod atmosphere;
 mod chain;
 pub mod config;
 pub mod direction;
+pub mod distributed;
 pub mod dynamics;
 pub mod error;
 pub mod integrator;
@@ -38,7 +40,7 @@ pub mod tether;
 mod trig;
 
 pub use atmosphere::Atmosphere;
-pub use config::{TetherConfig, STANDARD_GRAVITY};
+pub use config::{Elasticity, TetherConfig, STANDARD_GRAVITY};
 pub use direction::DirectionJet;
 pub use dynamics::{Energy, Solver, TetherModel};
 pub use error::{Result, TetherError};

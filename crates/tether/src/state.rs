@@ -127,9 +127,34 @@ impl TetherState {
         Ok(state)
     }
 
-    /// Number of segments.
+    /// Number of segments of the attachment layout (2n + 1 coordinates); for the distributed
+    /// layout (3n) ask the config.
     pub fn segments(&self) -> usize {
         self.q.len() / 2
+    }
+
+    /// This state (attachment layout, 2n + 1 coordinates) in the distributed elasticity's layout
+    /// ([`crate::distributed`], 3n coordinates): the same geometry and rates, with the
+    /// elongation on segment 1's element and the elements of segments 2 ... n unstretched.
+    /// Errors if the state is not in the attachment layout.
+    pub fn to_distributed(&self) -> Result<TetherState> {
+        if self.q.len() != self.qd.len() || self.q.len() % 2 != 1 {
+            return Err(TetherError::WrongSize {
+                what: "q (attachment layout, 2n + 1)",
+                expected: 2 * self.segments() + 1,
+                found: self.q.len(),
+            });
+        }
+        let n = self.segments();
+        let mut q = self.q.clone();
+        let mut qd = self.qd.clone();
+        q.resize(3 * n, 0.0);
+        qd.resize(3 * n, 0.0);
+        Ok(TetherState {
+            time: self.time,
+            q,
+            qd,
+        })
     }
 
     /// Elongation s of the axial element, m.
@@ -148,7 +173,8 @@ impl TetherState {
             .rate(self.qd[1 + 2 * k], self.qd[2 + 2 * k])
     }
 
-    /// Checks that every value is finite and no segment sits at the coordinate singularity.
+    /// Checks that every value is finite and no segment sits at the coordinate singularity
+    /// (attachment layout, 2n + 1 coordinates).
     pub fn validate(&self) -> Result<()> {
         if self.q.len() != self.qd.len() || self.q.len() % 2 != 1 {
             return Err(TetherError::WrongSize {
@@ -157,6 +183,31 @@ impl TetherState {
                 found: self.qd.len(),
             });
         }
+        self.validate_values(self.segments())
+    }
+
+    /// [`TetherState::validate`] for a state of `segments` segments in either layout (2n + 1
+    /// coordinates for the attachment element, 3n for the distributed elasticity).
+    pub fn validate_for(&self, segments: usize) -> Result<()> {
+        let n = segments;
+        if self.q.len() != 2 * n + 1 && self.q.len() != 3 * n {
+            return Err(TetherError::WrongSize {
+                what: "q",
+                expected: 2 * n + 1,
+                found: self.q.len(),
+            });
+        }
+        if self.qd.len() != self.q.len() {
+            return Err(TetherError::WrongSize {
+                what: "qd",
+                expected: self.q.len(),
+                found: self.qd.len(),
+            });
+        }
+        self.validate_values(n)
+    }
+
+    fn validate_values(&self, segments: usize) -> Result<()> {
         check_finite("time", self.time)?;
         for (name, v) in [("q", &self.q), ("qd", &self.qd)] {
             if let Some(i) = v.iter().position(|x| !x.is_finite()) {
@@ -167,7 +218,7 @@ impl TetherState {
                 });
             }
         }
-        for k in 0..self.segments() {
+        for k in 0..segments {
             let psi = self.q[2 + 2 * k];
             if psi.cos().abs() < MIN_COS_PSI {
                 return Err(TetherError::InvalidState {

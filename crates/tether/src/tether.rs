@@ -39,6 +39,11 @@ impl Tether {
         config.validate_for_stepping()?;
         let model = TetherModel::new(config)?;
         let state = TetherState::straight(config.segments, Vector3::new(-1.0, 0.0, 0.0), 0.0)?;
+        let state = if config.is_distributed() {
+            state.to_distributed()?
+        } else {
+            state
+        };
         Ok(Tether {
             rk4: Rk4::new(model.dofs(), 0),
             qdd: vec![0.0; model.dofs()],
@@ -73,7 +78,7 @@ impl Tether {
                 found: state.q.len(),
             });
         }
-        state.validate()?;
+        state.validate_for(self.model.segments())?;
         self.time_origin = state.time;
         self.steps = 0;
         self.state = state;
@@ -193,9 +198,10 @@ impl Tether {
             .tensions(s.time, &s.q, &s.qd, surroundings, &mut self.qdd, out)
     }
 
-    /// Tension of the axial element at the attachment, k s + c_s s', N.
+    /// Tension of the axial element at the attachment, k s + c_s s' (segment 1's element,
+    /// n k s_1 + n c_s s_1', when distributed), N.
     pub fn attachment_tension(&self) -> f64 {
         let c = self.config();
-        c.axial_stiffness * self.state.q[0] + c.axial_damping() * self.state.qd[0]
+        c.element_stiffness() * self.state.q[0] + c.element_damping() * self.state.qd[0]
     }
 }

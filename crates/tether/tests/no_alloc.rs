@@ -95,3 +95,40 @@ fn stepping_does_not_allocate() {
     let after = allocations();
     assert_eq!(after - before, 0, "{} allocations", after - before);
 }
+
+#[test]
+fn distributed_stepping_does_not_allocate() {
+    let (cfg, flow) = reference::towed_table3();
+    let cfg = accd_tether::TetherConfig {
+        elasticity: accd_tether::Elasticity::Distributed,
+        time_step: 2e-4,
+        ..cfg
+    };
+    let mut tether = Tether::new(&cfg).unwrap();
+    let mut tensions = vec![0.0; cfg.segments + 1];
+    let mut joints = vec![nalgebra::Vector3::zeros(); cfg.segments + 1];
+    let mut centres = vec![nalgebra::Vector3::zeros(); cfg.segments];
+    tether.step(&flow).unwrap();
+    let mut model = TetherModel::new(&cfg).unwrap();
+    let state = tether.state().clone();
+    let mut qdd = vec![0.0; model.dofs()];
+    model
+        .accelerations_dense(state.time, &state.q, &state.qd, &flow, &mut qdd)
+        .unwrap();
+    let before = allocations();
+    for _ in 0..20 {
+        tether.step(&flow).unwrap();
+        tether.tensions(&flow, &mut tensions).unwrap();
+        tether.joint_positions(&mut joints).unwrap();
+        let _ = tether.energy();
+        let _ = tether.tip_state();
+        model
+            .accelerations_dense(state.time, &state.q, &state.qd, &flow, &mut qdd)
+            .unwrap();
+        model
+            .centres_and_tip_batch(&state.q, &state.qd, &mut centres)
+            .unwrap();
+    }
+    let after = allocations();
+    assert_eq!(after - before, 0, "{} allocations", after - before);
+}
