@@ -57,7 +57,8 @@ def connect(address: Optional[str] = "local", *, num_cpus: Optional[int] = None)
     if ray.is_initialized():
         return ray
     if address in (None, "", "local"):
-        ray.init(num_cpus=num_cpus, include_dashboard=False, log_to_driver=False)
+        # Bound to loopback: a local instance needs no other interface.
+        ray.init(num_cpus=num_cpus, include_dashboard=False, log_to_driver=False, _node_ip_address="127.0.0.1")
     else:
         ray.init(address=address, log_to_driver=False)
     return ray

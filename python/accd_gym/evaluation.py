@@ -176,7 +176,8 @@ def _algo_of(model_path: Path) -> str:
 def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False) -> Any:
     """A policy from a baseline name (``zero``, ``random``, ``guidance``), a guidance tuning file
     (``training/guidance_tuning*.json``: the controller with its winning gains) or a model path
-    (see :class:`SB3Policy` for ``allow_unnormalized``)."""
+    (see :class:`SB3Policy` for ``allow_unnormalized``; an RLlib run or checkpoint folder gives an
+    :class:`accd_gym.rllib.RLlibPolicy`)."""
     from accd_gym.baselines import BASELINES, guidance_from_tuning, make_baseline
 
     if spec in BASELINES:
@@ -184,6 +185,10 @@ def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False) -
     if spec.endswith(".json") and Path(spec).is_file():
         return guidance_from_tuning(spec)
     if Path(spec).exists():
+        from accd_gym.rllib import RLlibPolicy, is_rllib_run
+
+        if is_rllib_run(spec):
+            return RLlibPolicy(spec)
         return SB3Policy(spec, allow_unnormalized=allow_unnormalized)
     return make_baseline(spec, seed)  # raises ConfigError naming the allowed names
 
