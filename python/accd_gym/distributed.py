@@ -25,6 +25,7 @@ Ray stays optional: importing this module does not import Ray; the functions tha
 
 from __future__ import annotations
 
+import copy
 import math
 import os
 import socket
@@ -103,6 +104,7 @@ def _run_part(
     from accd_gym.evaluation import run_episode_range
 
     t0 = time.perf_counter()
+    policy = copy.deepcopy(policy)  # Ray hands arguments over read-only; the policy keeps per-env state
     wake = None if wake_seeds is None else _WakeSlice(wake_seeds, start)
     episodes = run_episode_range(policy, start, stop, seed=seed, wake_seeds=wake, batch=batch,
                                  num_threads=num_threads, config=config)
