@@ -112,3 +112,30 @@ def test_iqm_and_bootstrap_interval_against_closed_forms():
     # Resampling two values: the mean is 0, 0.5 or 1 with probabilities 1/4, 1/2, 1/4.
     assert (lo, hi) == (0.0, 1.0)
     assert bootstrap_interval([0.1, 0.4, 0.8]) == bootstrap_interval([0.1, 0.4, 0.8])  # fixed generator
+
+
+def test_without_ray_everything_else_works_and_ray_options_say_which_extra(tmp_path):
+    """Ray stays optional: with ``ray`` unimportable the package, the new modules and a local
+    evaluation work, and ``--ray`` / an RLlib config exit with status 2 naming the ray extra."""
+    import subprocess
+    import sys
+
+    code = f"""
+import sys, json
+sys.modules['ray'] = None  # any `import ray` now raises ModuleNotFoundError
+import accd_gym, accd_gym.distributed, accd_gym.rllib, accd_gym.sweep
+from accd_gym.cli import main
+args = ['evaluate', '--policy', 'zero', '--episodes', '2', '--num-envs', '2', '--num-threads', '1',
+        '--env', json.dumps({SHORT!r}), '--quiet', '--out', {str(tmp_path / 'e')!r}]
+assert main(args) == 0
+assert main(args + ['--ray']) == 2
+assert main(['train', '--config', 'training/rllib_ppo.json', '--out', {str(tmp_path / 'r')!r}, '--quiet']) == 2
+assert main(['sweep', '--config', 'training/sweep_seeds.json', '--out', {str(tmp_path / 's')!r}]) == 2
+print('ok')
+"""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=root, timeout=300)
+    assert done.returncode == 0 and done.stdout.strip().endswith("ok"), done.stderr[-3000:]
+    assert done.stderr.count("needs the ray extra") == 3 and "pip install 'accd-gym[ray]'" in done.stderr
