@@ -45,7 +45,8 @@ else:
     wall, eps = time.perf_counter() - t, runs["p"]
 s = summarize(eps)
 print(json.dumps({{"wall_s": wall, "captures": s["captures"], "steps": sum(e.steps for e in eps),
-                  "tasks": len(info.get("tasks", [])), "episodes_per_task": info.get("episodes_per_task")}}))
+                  "tasks": len(info.get("tasks", [])), "episodes_per_task": info.get("episodes_per_task"),
+                  "task_wall_s_sum": sum(t["wall_time_s"] for t in info.get("tasks", []))}}))
 """
     t0 = time.perf_counter()
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)

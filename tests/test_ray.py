@@ -34,18 +34,29 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _processes_under(folder: str) -> list[int]:
-    """PIDs of this machine's processes whose command line names ``folder`` (ours by construction)."""
-    pids = []
+    """PIDs of this machine's processes whose command line names ``folder`` (ours by construction),
+    and their descendants (Ray's workers and agents retitle themselves ``ray::...``)."""
+    named, parent = set(), {}
     for entry in os.listdir("/proc"):
         if not entry.isdigit() or int(entry) == os.getpid():
             continue
         try:
             cmd = Path(f"/proc/{entry}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+            stat = Path(f"/proc/{entry}/stat").read_text()
         except OSError:
             continue
+        parent[int(entry)] = int(stat.rsplit(")", 1)[1].split()[1])
         if folder in cmd:
-            pids.append(int(entry))
-    return pids
+            named.add(int(entry))
+    found = set(named)
+    grew = True
+    while grew:
+        grew = False
+        for pid, ppid in parent.items():
+            if ppid in found and pid not in found:
+                found.add(pid)
+                grew = True
+    return sorted(found)
 
 
 def _kill(pids: list[int]) -> None:

@@ -221,7 +221,13 @@ def _trial(params: dict[str, Any]) -> None:
            "capture_rate": s["capture_rate"], "capture_rate_ci95": s["capture_rate_ci95"],
            "miss_distance_median_m": s["miss_distance_m"]["median"], "run": str(run)}
     (run / "eval.json").write_text(json.dumps({"summary": s, "trial": doc}, indent=1))
-    tune.report({k: v for k, v in doc.items() if isinstance(v, (int, float)) and not isinstance(v, bool)})
+    # The driver builds its table from the reported metrics: no shared filesystem needed for it.
+    tune.report({k: v for k, v in doc.items() if k not in ("point", "capture_rate_ci95")})
+
+
+#: The trial metrics the table is made of (reported by each trial through Tune).
+_REPORTED = ("trial", "seed", "trainer", "algo", "timesteps", "status", "train_wall_s", "steps_per_s", "episodes",
+             "captures", "capture_rate", "miss_distance_median_m", "run")
 
 
 def aggregate(trials: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -269,6 +275,7 @@ def run(config: dict[str, Any] | str | Path, out: str | Path, *, progress: bool 
     """Runs a sweep (a validated config or its file) into ``out``; returns the sweep document
     (also ``out/sweep.json``; the table in ``out/summary.md``)."""
     from accd_gym import distributed
+    from accd_gym.evaluation import wilson_interval
 
     cfg = config if isinstance(config, dict) else load_config(config)
     cfg = validate_config(cfg)
@@ -293,9 +300,11 @@ def run(config: dict[str, Any] | str | Path, out: str | Path, *, progress: bool 
     for result in grid:
         params = result.config
         name = trial_name(params["seed"], params["point"])
-        doc_path = out / "trials" / name / "eval.json"
-        if result.error is None and doc_path.is_file():
-            trials.append(json.loads(doc_path.read_text())["trial"])
+        m = result.metrics or {}
+        if result.error is None and "capture_rate" in m:
+            t = {k: m[k] for k in _REPORTED if k in m}
+            t.update(point=params["point"], capture_rate_ci95=list(wilson_interval(int(m["captures"]), int(m["episodes"]))))
+            trials.append(t)
         else:
             failed.append({"trial": name, "seed": params["seed"], "point": params["point"],
                            "error": " ".join(str(result.error).split())[:200]})
