@@ -129,6 +129,7 @@ args = ['evaluate', '--policy', 'zero', '--episodes', '2', '--num-envs', '2', '-
         '--env', json.dumps({SHORT!r}), '--quiet', '--out', {str(tmp_path / 'e')!r}]
 assert main(args) == 0
 assert main(args + ['--ray']) == 2
+assert main(args + ['--ray-chunk', '2']) == 2  # needs --ray
 assert main(['train', '--config', 'training/rllib_ppo.json', '--out', {str(tmp_path / 'r')!r}, '--quiet']) == 2
 assert main(['sweep', '--config', 'training/sweep_seeds.json', '--out', {str(tmp_path / 's')!r}]) == 2
 print('ok')
@@ -138,4 +139,5 @@ print('ok')
     root = Path(__file__).resolve().parents[1]
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=root, timeout=300)
     assert done.returncode == 0 and done.stdout.strip().endswith("ok"), done.stderr[-3000:]
+    assert "--ray-chunk sets the episodes per Ray task; it needs --ray" in done.stderr
     assert done.stderr.count("needs the ray extra") == 3 and "pip install 'accd-gym[ray]'" in done.stderr

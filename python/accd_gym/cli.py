@@ -169,6 +169,9 @@ def _env_overrides(text: Optional[str]) -> dict:
 def _evaluate(args: argparse.Namespace) -> int:
     from accd_gym import evaluation
 
+    if args.ray_chunk is not None and args.ray is None:
+        raise _usage("--ray-chunk sets the episodes per Ray task; it needs --ray")
+
     results = evaluation.evaluate(args.policy, args.episodes, args.out, num_envs=args.num_envs, num_threads=args.num_threads,
                                   config=_env_overrides(args.env), progress=not args.quiet,
                                   allow_unnormalized=args.allow_unnormalized, ray_address=args.ray,
