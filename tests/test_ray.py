@@ -71,9 +71,12 @@ def _kill(pids: list[int]) -> None:
 def cluster():
     """The module's local Ray instance (2 CPUs); shut down, and its processes checked gone, after."""
     temp = tempfile.mkdtemp(prefix="accdray_", dir="/tmp")
+    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}  # ray.init sets SIGTERM's
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, _node_ip_address="127.0.0.1", _temp_dir=temp)
     yield ray
     ray.shutdown()
+    for sig, handler in handlers.items():  # later tests rely on Python's own handlers
+        signal.signal(sig, handler)
     deadline = time.monotonic() + 20
     while _processes_under(temp) and time.monotonic() < deadline:
         time.sleep(0.5)
@@ -204,7 +207,11 @@ def test_a_sweep_of_two_tiny_trials_writes_its_table(cluster, tmp_path):
                                  "algo_kwargs": {"n_steps": 16, "batch_size": 32, "n_epochs": 1},
                                  "policy_kwargs": {"net_arch": [16, 16]}, "checkpoint_every": 10_000}))
     cfg = sweep.validate_config({"train_config": str(train), "seeds": [0, 1], "episodes": 4, "num_envs": 4})
+    sigint = signal.getsignal(signal.SIGINT)
     doc = sweep.run(cfg, tmp_path / "sweep", progress=False)
+    # Regression: Tune leaves its own SIGINT handler behind (Ctrl+C then no longer raised
+    # KeyboardInterrupt: the interrupt tests of test_reliability.py hung after this test).
+    assert signal.getsignal(signal.SIGINT) is sigint
     assert not doc["failed"] and [t["seed"] for t in doc["trials"]] == [0, 1]
     rates = [t["capture_rate"] for t in doc["trials"]]
     (agg,) = doc["aggregates"]

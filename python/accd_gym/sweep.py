@@ -271,6 +271,25 @@ def summary_markdown(doc: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _signal_handlers() -> dict[int, Any]:
+    """This process's SIGINT/SIGTERM/SIGUSR1 handlers (none off the main thread)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGUSR1)}
+
+
+def _restore_signal_handlers(kept: dict[int, Any]) -> None:
+    """Puts back handlers saved by :func:`_signal_handlers`."""
+    import signal
+
+    for sig, handler in kept.items():
+        if handler is not None:
+            signal.signal(sig, handler)
+
+
 def run(config: dict[str, Any] | str | Path, out: str | Path, *, progress: bool = True) -> dict[str, Any]:
     """Runs a sweep (a validated config or its file) into ``out``; returns the sweep document
     (also ``out/sweep.json``; the table in ``out/summary.md``)."""
@@ -295,7 +314,13 @@ def run(config: dict[str, Any] | str | Path, out: str | Path, *, progress: bool 
         tune_config=tune.TuneConfig(max_concurrent_trials=cfg["max_concurrent_trials"] or None),
         run_config=tune.RunConfig(storage_path=str(out / "tune"), name="sweep", verbose=1 if progress else 0),
     )
-    grid = tuner.fit()
+    # Tune installs its own SIGINT (and SIGUSR1) handler and leaves it after the run; restore
+    # ours, or the next Ctrl+C in this process would not raise KeyboardInterrupt.
+    kept = _signal_handlers()
+    try:
+        grid = tuner.fit()
+    finally:
+        _restore_signal_handlers(kept)
     trials, failed = [], []
     for result in grid:
         params = result.config
