@@ -4,6 +4,8 @@
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
+# The test extras plus Ray (tests/test_ray.py); ACCD_EXTRAS=test runs without Ray (those tests skip).
+export ACCD_EXTRAS="${ACCD_EXTRAS:-test,ray}"
 source scripts/setup.sh
 
 echo "== cargo fmt --check"

@@ -60,21 +60,38 @@ class ZeroPolicy:
 
 
 class RandomPolicy:
-    """Uniform random flap commands in [-1, 1], drawn from a seeded numpy generator."""
+    """Uniform random flap commands in [-1, 1], drawn from seeded numpy generators.
+
+    Outside an evaluation one generator (``seed``) draws every row. In an evaluation
+    (:func:`accd_gym.evaluation.run_episode_range` calls :meth:`start_episodes`) each episode
+    ``k`` draws from its own generator seeded ``(seed, k)``, so its actions do not depend on
+    which env of which batch runs it.
+    """
 
     name = "random"
 
     def __init__(self, seed: int = 0) -> None:
         self.seed = int(seed)
         self._rng = np.random.default_rng(self.seed)
+        self._rows: Optional[list[np.random.Generator]] = None
 
     def predict(self, obs: Any) -> np.ndarray:
         """Independent uniform commands per env and flap (shape (N, 4))."""
         n = _check_obs(obs).shape[0]
+        if self._rows is not None and len(self._rows) == n:
+            return np.stack([g.uniform(-1.0, 1.0, size=ACT_DIM) for g in self._rows]).astype(np.float32)
         return self._rng.uniform(-1.0, 1.0, size=(n, ACT_DIM)).astype(np.float32)
 
     def reset(self, mask: Optional[np.ndarray] = None) -> None:
-        """Stateless apart from the generator, which keeps running."""
+        """Stateless apart from the generators, which keep running."""
+
+    def start_episodes(self, rows: np.ndarray, episodes: np.ndarray) -> None:
+        """Gives each env ``rows`` selects the generator of episode ``episodes[i]``: ``(seed, k)``."""
+        rows = np.asarray(rows, dtype=bool)
+        if self._rows is None or len(self._rows) != rows.shape[0]:
+            self._rows = [np.random.default_rng([self.seed, 0]) for _ in range(rows.shape[0])]
+        for i in np.flatnonzero(rows):
+            self._rows[i] = np.random.default_rng([self.seed, int(episodes[i])])
 
 
 def quaternion_to_euler(q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -48,22 +48,57 @@ def _train(args: argparse.Namespace) -> int:
         if args.config is not None or args.timesteps is not None or args.seed is not None:
             raise _usage("--resume continues a run with its own config; drop --config, --timesteps and --seed")
         out = Path(args.resume)
+        from accd_gym.rllib import is_rllib_run
+
+        if is_rllib_run(out):
+            raise _usage(f"--resume {str(out)!r}: resuming an RLlib run is not supported; its checkpoints/ restore with "
+                         "ray.rllib.algorithms.Algorithm.from_checkpoint")
         meta = training.resume(out, progress=not args.quiet)
     else:
         if args.out is None:
             raise _usage("train needs --out RUN (or --resume RUN)")
         out = Path(args.out)
-        cfg = training.load_config(args.config or "training/ppo.json", seed=args.seed)
-        meta = training.train(cfg, out, timesteps=args.timesteps, progress=not args.quiet)
+        if _is_rllib_config(args.config):
+            from accd_gym import rllib
+
+            meta = rllib.train(rllib.load_config(args.config, seed=args.seed), out, timesteps=args.timesteps,
+                               progress=not args.quiet)
+        else:
+            cfg = training.load_config(args.config or "training/ppo.json", seed=args.seed)
+            meta = training.train(cfg, out, timesteps=args.timesteps, progress=not args.quiet)
     if meta["status"] == "interrupted":
         print(f"accd-gym: training interrupted ({meta['interrupted_by']}) at {meta['timesteps']} of "
               f"{meta['config']['total_timesteps']} steps; checkpoint {meta['checkpoint']} written; "
               f"continue with: accd-gym train --resume {out}", file=sys.stderr)
         return 130
+    if meta.get("trainer") == "rllib":
+        print(f"trained RLlib {meta['algo'].upper()} for {meta['timesteps']} steps in {meta['wall_time_s']} s "
+              f"({meta['steps_per_s']} steps/s); wrote {out / 'final_model'}, TensorBoard logs in {out / 'tb'}")
+        return 0
     print(f"trained {meta['algo'].upper()} for {meta['timesteps']} steps in {meta['wall_time_s']} s "
           f"({meta['steps_per_s']} steps/s); wrote {out / 'final_model.zip'}, "
           f"{out / 'vecnormalize.pkl'}, TensorBoard logs in {out / 'tb'}")
     return 0
+
+
+def _is_rllib_config(path: Optional[str]) -> bool:
+    """Whether the training config file at ``path`` asks for the RLlib trainer (a file that cannot
+    be read is left to the loader's error)."""
+    from accd_gym.rllib import is_rllib_config
+
+    try:
+        return path is not None and is_rllib_config(json.loads(Path(path).read_text()))
+    except (OSError, ValueError):
+        return False
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from accd_gym import sweep
+
+    doc = sweep.run(args.config, args.out, progress=not args.quiet)
+    print((Path(args.out) / "summary.md").read_text())
+    print(f"wrote {Path(args.out) / 'sweep.json'}, summary.md, trial run folders in {Path(args.out) / 'trials'}")
+    return 0 if not doc["failed"] else 1
 
 
 class _UsageError(Exception):
@@ -134,9 +169,13 @@ def _env_overrides(text: Optional[str]) -> dict:
 def _evaluate(args: argparse.Namespace) -> int:
     from accd_gym import evaluation
 
+    if args.ray_chunk is not None and args.ray is None:
+        raise _usage("--ray-chunk sets the episodes per Ray task; it needs --ray")
+
     results = evaluation.evaluate(args.policy, args.episodes, args.out, num_envs=args.num_envs, num_threads=args.num_threads,
                                   config=_env_overrides(args.env), progress=not args.quiet,
-                                  allow_unnormalized=args.allow_unnormalized, replay=args.replay)
+                                  allow_unnormalized=args.allow_unnormalized, replay=args.replay,
+                                  ray_address=args.ray, ray_chunk=args.ray_chunk)
     for spec, doc in results["policies"].items():
         if doc.get("note"):
             print(f"note: {doc['note']}", file=sys.stderr)
@@ -201,7 +240,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("export-aero", help="write the default ACCD aerodynamic tables (JSON) to start your own")
     p.add_argument("--out", default="accd-aero.json", help="output file (default: accd-aero.json)")
     p.set_defaults(func=_export_aero)
-    p = sub.add_parser("train", help="train PPO or SAC on the capture task (stable-baselines3)")
+    p = sub.add_parser("train", help="train PPO or SAC on the capture task (stable-baselines3, or RLlib PPO for a config with \"trainer\": \"rllib\")")
     p.add_argument("--config", help="training config, JSON (default: training/ppo.json)")
     p.add_argument("--out", help="run folder: model, VecNormalize statistics, checkpoints, TensorBoard logs")
     p.add_argument("--resume", metavar="RUN",
@@ -223,6 +262,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="evaluate a model without its vecnormalize.pkl (observations passed raw)")
     p.add_argument("--replay", type=_nonnegative("--replay"), default=0, metavar="K",
                    help="also write 3D replay pages of K episodes per policy (3: best, median, worst) to OUT/replays")
+    p.add_argument("--ray", nargs="?", const="local", metavar="ADDRESS",
+                   help="run the episodes as Ray tasks: 'local' (default), 'auto' or HOST:PORT of a cluster "
+                        "(needs the ray extra; results identical to a local run)")
+    p.add_argument("--ray-chunk", type=_positive("--ray-chunk"), help="episodes per Ray task (default: about 4 tasks per CPU)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_evaluate)
     p = sub.add_parser("replay", help="record episodes of a policy: .npz, a self-contained 3D replay page each, MP4")
@@ -247,6 +290,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run a model without its vecnormalize.pkl (observations passed raw)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_replay)
+    p = sub.add_parser("sweep", help="training seeds (and a hyperparameter grid) as Ray Tune trials, each evaluated on held-out seeds")
+    p.add_argument("--config", default="training/sweep_seeds.json", help="sweep config, JSON (default: training/sweep_seeds.json)")
+    p.add_argument("--out", default="runs/sweep", help="output folder (default: runs/sweep)")
+    p.add_argument("--quiet", action="store_true", help="less output from Tune")
+    p.set_defaults(func=_sweep)
     p = sub.add_parser("rollout", help="run a policy for a few episodes headless and print a summary")
     p.add_argument("--policy", required=True, help="a baseline (zero, random, guidance) or a trained model")
     p.add_argument("--episodes", type=_positive("--episodes"), default=8, help="episodes (default 8)")
@@ -276,6 +324,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except ModuleNotFoundError as e:
         if e.name in ("plotly", "imageio_ffmpeg"):
             print(f"accd-gym: error: `accd-gym {args.command}` needs the replay extra ({e}): pip install 'accd-gym[replay]'",
+                  file=sys.stderr)
+            return 2
+        if e.name == "ray" or (e.name or "").startswith("ray."):
+            print(f"accd-gym: error: `accd-gym {args.command}` with Ray needs the ray extra ({e}): pip install 'accd-gym[ray]'",
                   file=sys.stderr)
             return 2
         if e.name not in ("stable_baselines3", "torch", "tensorboard", "rich"):

@@ -1,13 +1,16 @@
 """Held-out evaluation of policies: episodes on fixed wake and initial-condition seeds, metrics, plots.
 
-Every policy sees the same episodes: one :class:`accd_gym.AccdVecEnv` per policy with the same
-``num_envs`` and base seed (so env ``i``'s episode ``e`` has the same initial-condition and RLV
-seeds for every policy) and the wake-seed list ``wake_seeds`` (episode ``k = i + e * num_envs``
-uses ``wake_seeds[k]``). By default the wake seeds are the first ``K`` of
-:data:`accd_gym.HELD_OUT_WAKE_SEEDS`, which training never draws.
+Every policy sees the same episodes: episode ``k`` is the first episode of a single env seeded
+``seed + k`` (initial conditions and RLV motion; ``seed`` is :data:`EVAL_BASE_SEED` by default)
+with wake seed ``wake_seeds[k]``, by default the first ``K`` of
+:data:`accd_gym.HELD_OUT_WAKE_SEEDS`, which training never draws. That definition depends on
+nothing else: not on ``num_envs`` (earlier versions gave env ``i``'s ``e``-th episode the seeds of
+``(seed + i, e)``, so their results changed with ``num_envs``), and not on how the episodes are
+split over Ray workers (:mod:`accd_gym.distributed`), which therefore reproduce the local results
+bit for bit (see :func:`run_episode_range` for the one condition on the policy).
 
 A *policy* is any object with ``predict(obs_batch) -> actions`` ((N, 25) -> (N, 4)) and
-optionally ``reset(mask)``: the baselines of :mod:`accd_gym.baselines` and :class:`SB3Policy`
+optionally ``reset(mask)`` (or ``start_episodes(mask, episode_indices)``): the baselines of :mod:`accd_gym.baselines` and :class:`SB3Policy`
 (a stable-baselines3 model with its VecNormalize statistics).
 """
 
@@ -104,16 +107,34 @@ class SB3Policy:
                 name=e.name,
             ) from e
 
-        cls = {"ppo": PPO, "sac": SAC}[self.algo]
-        self.model = cls.load(str(model_path), device=device)
-        self.normalizer = None
-        if stats_path.is_file():
-            with open(stats_path, "rb") as f:
-                self.normalizer = pickle.load(f)
-            self.normalizer.training = False
-        else:
+        self._device = device
+        self._model_bytes = model_path.read_bytes()
+        self._stats_bytes = stats_path.read_bytes() if stats_path.is_file() else None
+        self._load()
+        if self._stats_bytes is None:
             warnings.warn(f"policy {str(path)!r}: no VecNormalize statistics; observations are passed unnormalised",
                           stacklevel=2)
+
+    def _load(self) -> None:
+        """Builds the model and the normalizer from the files' bytes (kept for pickling)."""
+        import io
+
+        from stable_baselines3 import PPO, SAC
+
+        cls = {"ppo": PPO, "sac": SAC}[self.algo]
+        self.model = cls.load(io.BytesIO(self._model_bytes), device=self._device)
+        self.normalizer = None
+        if self._stats_bytes is not None:
+            self.normalizer = pickle.loads(self._stats_bytes)
+            self.normalizer.training = False
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickles as the model's and statistics' file contents (for Ray tasks): a copy acts bit for bit alike."""
+        return {k: v for k, v in self.__dict__.items() if k not in ("model", "normalizer")}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._load()
 
     def predict(self, obs: Any) -> np.ndarray:
         """Deterministic actions (N, 4) for raw observations (N, 25), normalised as in training."""
@@ -156,7 +177,8 @@ def _algo_of(model_path: Path) -> str:
 def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False) -> Any:
     """A policy from a baseline name (``zero``, ``random``, ``guidance``), a guidance tuning file
     (``training/guidance_tuning*.json``: the controller with its winning gains) or a model path
-    (see :class:`SB3Policy` for ``allow_unnormalized``)."""
+    (see :class:`SB3Policy` for ``allow_unnormalized``; an RLlib run or checkpoint folder gives an
+    :class:`accd_gym.rllib.RLlibPolicy`)."""
     from accd_gym.baselines import BASELINES, guidance_from_tuning, make_baseline
 
     if spec in BASELINES:
@@ -164,6 +186,10 @@ def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False) -
     if spec.endswith(".json") and Path(spec).is_file():
         return guidance_from_tuning(spec)
     if Path(spec).exists():
+        from accd_gym.rllib import RLlibPolicy, is_rllib_run
+
+        if is_rllib_run(spec):
+            return RLlibPolicy(spec)
         return SB3Policy(spec, allow_unnormalized=allow_unnormalized)
     return make_baseline(spec, seed)  # raises ConfigError naming the allowed names
 
@@ -204,88 +230,148 @@ def run_episodes(
     progress: bool = False,
     desc: str = "episodes",
 ) -> list[Episode]:
-    """Runs ``episodes`` episodes of ``policy``; episode ``k`` uses ``wake_seeds[k]`` when given.
+    """Runs episodes ``0 .. episodes - 1`` of ``policy`` (see :func:`run_episode_range`); returns
+    them in index order. ``wake_seeds=None`` draws training wake seeds (for tuning on training
+    data). Needs no stable-baselines3."""
+    if episodes < 1:
+        raise ConfigError(f"invalid config: `episodes` = {episodes} is outside the allowed range >= 1")
+    return run_episode_range(policy, 0, episodes, seed=seed, wake_seeds=wake_seeds, batch=min(int(num_envs), episodes),
+                             num_threads=num_threads, config=config, progress=progress, desc=desc)
 
-    ``wake_seeds=None`` draws training wake seeds (for tuning on training data). Returns the
-    episodes in index order. Needs no stable-baselines3 (the native gymnasium vector env, with
-    same-step autoreset, runs the episodes).
+
+def run_episode_range(
+    policy: Any,
+    start: int,
+    stop: int,
+    *,
+    seed: int = EVAL_BASE_SEED,
+    wake_seeds: Optional[Sequence[int]] = None,
+    batch: int = 16,
+    num_threads: int = 0,
+    config: Optional[dict[str, Any]] = None,
+    progress: bool = False,
+    desc: str = "episodes",
+) -> list[Episode]:
+    """Runs episodes ``start .. stop - 1`` of an evaluation; returns them in index order.
+
+    **Episode k** is the first episode of a single env seeded ``seed + k`` (its initial
+    conditions and RLV motion) with wake seed ``wake_seeds[k]`` (``wake_seeds`` is indexed by the
+    episode index, so it needs at least ``stop`` entries; ``None``: that env's training draw).
+    Its physics depends on nothing else: the episodes run ``batch`` at a time in one native
+    vector env (:meth:`~accd_gym.InAirCaptureVectorEnv.start_episode` starts the next episode in
+    whichever env finished), and an env with no episode left runs a repeat of its last one,
+    whose result is dropped, so the policy always sees batches of exactly ``batch`` rows. A
+    split of the index range into parts (:mod:`accd_gym.distributed`) therefore gives the same
+    episodes bit for bit, provided each part uses the same ``batch`` and the policy's action for
+    a row depends on that row alone at a fixed batch size: true of the baselines (``random``
+    draws from a stream per episode index) and, as measured here, of PyTorch's MLPs on CPU
+    (``tests/test_distributed.py`` checks both; PyTorch gives other last bits for batches of
+    1-3 rows than for 4 or more, which is why the batch size is fixed).
     """
     from accd_gym.vector import InAirCaptureVectorEnv
 
-    if episodes < 1:
-        raise ConfigError(f"invalid config: `episodes` = {episodes} is outside the allowed range >= 1")
-    if wake_seeds is not None and len(wake_seeds) < episodes:
-        raise ConfigError(f"invalid config: {len(wake_seeds)} wake seeds for {episodes} episodes; need at least as many")
-    n = max(1, min(int(num_envs), episodes))
-    env = InAirCaptureVectorEnv(n, autoreset_mode="same_step", num_threads=num_threads, **(config or {}))
-    options = None if wake_seeds is None else {"wake_seeds": [int(s) for s in wake_seeds[:episodes]]}
-    obs, _ = env.reset(seed=seed, options=options)
-    if hasattr(policy, "reset"):
-        policy.reset(None)
-    ep_of = np.arange(n)  # index of the episode each env is running
-    traj: list[list[np.ndarray]] = [[-obs[i, _BOOM_REL] / _POS_SCALE] for i in range(n)]
-    acts: list[list[np.ndarray]] = [[] for _ in range(n)]
+    start, stop, batch = int(start), int(stop), int(batch)
+    if not 0 <= start < stop:
+        raise ConfigError(f"invalid config: episode range {start}..{stop} is empty or negative; need 0 <= start < stop")
+    if batch < 1:
+        raise ConfigError(f"invalid config: `batch` = {batch} is outside the allowed range >= 1")
+    if wake_seeds is not None and len(wake_seeds) < stop:
+        raise ConfigError(f"invalid config: {len(wake_seeds)} wake seeds for episodes up to {stop - 1}; need at least {stop}")
+    env = InAirCaptureVectorEnv(batch, autoreset_mode="disabled", num_threads=num_threads, **(config or {}))
+    pending = iter(range(start, stop))
+    ep_of = np.full(batch, -1)  # episode index each env runs; -1: a repeat whose result is dropped
+    last = np.zeros(batch, dtype=np.int64)  # the last real episode each env ran (repeated when idle)
+
+    def wake_of(k: int) -> Optional[int]:
+        return None if wake_seeds is None else int(wake_seeds[k])
+
+    env.reset(seed=[seed + start] * batch)
+    obs = None
+    started = np.zeros(batch, dtype=bool)
+    for i in range(batch):
+        k = next(pending, None)
+        ep_of[i] = -1 if k is None else k
+        last[i] = start if k is None else k
+        obs = env.start_episode(i, seed + int(last[i]), wake_of(int(last[i])))
+    started[:] = True
+    _policy_starts(policy, started, ep_of, last)
+    traj: list[list[np.ndarray]] = [[-obs[i, _BOOM_REL] / _POS_SCALE] for i in range(batch)]
+    acts: list[list[np.ndarray]] = [[] for _ in range(batch)]
     mind = np.linalg.norm(obs[:, _BOOM_REL], axis=1) / _POS_SCALE
-    peak = np.zeros(n)
-    ret = np.zeros(n)
+    peak = np.zeros(batch)
+    ret = np.zeros(batch)
     done_eps: dict[int, Episode] = {}
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=episodes, desc=desc, unit="ep")
-    while len(done_eps) < episodes:
-        actions = np.asarray(policy.predict(obs), dtype=np.float32)
-        obs, reward, terminated, truncated, infos = env.step(actions)
-        reward = reward.astype(np.float32)  # as stable-baselines3 reports it (returns unchanged)
-        dones = terminated | truncated
-        for i in range(n):
-            if ep_of[i] >= episodes:
+        bar = tqdm(total=stop - start, desc=desc, unit="ep")
+    try:
+        while len(done_eps) < stop - start:
+            actions = np.asarray(policy.predict(obs), dtype=np.float32)
+            obs, reward, terminated, truncated, infos = env.step(actions)
+            reward = reward.astype(np.float32)  # as stable-baselines3 reports it (returns unchanged)
+            dones = terminated | truncated
+            for i in range(batch):
+                info = {k: infos[k][i] for k in (*INFO_NAMES, "wake_seed")}
+                traj[i].append(-obs[i, _BOOM_REL] / _POS_SCALE)
+                acts[i].append(np.clip(actions[i], -1, 1))
+                mind[i] = min(mind[i], info["distance"])
+                peak[i] = max(peak[i], info["peak_tension"])
+                ret[i] += float(reward[i])
+                if not dones[i] or ep_of[i] < 0:
+                    continue
+                a = np.asarray(acts[i])
+                da = np.diff(np.vstack([np.zeros((1, a.shape[1])), a]), axis=0)
+                outcome = next((e for e in EVENT_NAMES if info[e]), "truncated")
+                k = int(ep_of[i])
+                done_eps[k] = Episode(
+                    index=k,
+                    wake_seed=int(info["wake_seed"]),
+                    outcome=outcome,
+                    captured=bool(info["captured"]),
+                    steps=int(info["episode_steps"]),
+                    time=float(info["time"]),
+                    capture_time=float(info["time"]) if info["captured"] else None,
+                    min_distance=float(mind[i]),
+                    final_distance=float(info["distance"]),
+                    peak_tension=float(peak[i]),
+                    mean_abs_action=float(np.abs(a).mean()),
+                    mean_abs_delta_action=float(np.abs(da).mean()),
+                    episode_return=float(ret[i]),
+                    trajectory=np.asarray(traj[i], dtype=np.float32),
+                )
+                if bar is not None:
+                    bar.update(1)
+            if not dones.any() or len(done_eps) == stop - start:
                 continue
-            step_info = infos["final_info"] if dones[i] else infos
-            info = {k: step_info[k][i] for k in (*INFO_NAMES, "wake_seed")}
-            last = infos["final_obs"][i] if dones[i] else obs[i]
-            traj[i].append(-last[0:3] / _POS_SCALE)
-            acts[i].append(np.clip(actions[i], -1, 1))
-            mind[i] = min(mind[i], info["distance"])
-            peak[i] = max(peak[i], info["peak_tension"])
-            ret[i] += float(reward[i])
-            if not dones[i]:
-                continue
-            a = np.asarray(acts[i])
-            da = np.diff(np.vstack([np.zeros((1, a.shape[1])), a]), axis=0)
-            outcome = next((e for e in EVENT_NAMES if info[e]), "truncated")
-            k = int(ep_of[i])
-            done_eps[k] = Episode(
-                index=k,
-                wake_seed=int(info["wake_seed"]),
-                outcome=outcome,
-                captured=bool(info["captured"]),
-                steps=int(info["episode_steps"]),
-                time=float(info["time"]),
-                capture_time=float(info["time"]) if info["captured"] else None,
-                min_distance=float(mind[i]),
-                final_distance=float(info["distance"]),
-                peak_tension=float(peak[i]),
-                mean_abs_action=float(np.abs(a).mean()),
-                mean_abs_delta_action=float(np.abs(da).mean()),
-                episode_return=float(ret[i]),
-                trajectory=np.asarray(traj[i], dtype=np.float32),
-            )
-            if bar is not None:
-                bar.update(1)
-            ep_of[i] += n
-            traj[i] = [-obs[i, _BOOM_REL] / _POS_SCALE]
-            acts[i] = []
-            mind[i] = np.linalg.norm(obs[i, _BOOM_REL]) / _POS_SCALE
-            peak[i] = 0.0
-            ret[i] = 0.0
-        if hasattr(policy, "reset"):
-            policy.reset(dones)
-    if bar is not None:
-        bar.close()
-    env.close()
-    return [done_eps[k] for k in range(episodes)]
+            for i in np.flatnonzero(dones):
+                k = next(pending, None)
+                ep_of[i] = -1 if k is None else k
+                if k is not None:
+                    last[i] = k
+                obs = env.start_episode(int(i), seed + int(last[i]), wake_of(int(last[i])))
+            for i in np.flatnonzero(dones):
+                traj[i] = [-obs[i, _BOOM_REL] / _POS_SCALE]
+                acts[i] = []
+                mind[i] = np.linalg.norm(obs[i, _BOOM_REL]) / _POS_SCALE
+                peak[i] = 0.0
+                ret[i] = 0.0
+            _policy_starts(policy, dones, ep_of, last)
+    finally:
+        if bar is not None:
+            bar.close()
+        env.close()
+    return [done_eps[k] for k in range(start, stop)]
+
+
+def _policy_starts(policy: Any, rows: np.ndarray, ep_of: np.ndarray, last: np.ndarray) -> None:
+    """Tells ``policy`` that the envs ``rows`` selects started new episodes: ``start_episodes(rows,
+    indices)`` when it has it (a policy with per-episode random streams), else ``reset(rows)``."""
+    if hasattr(policy, "start_episodes"):
+        policy.start_episodes(rows.copy(), np.where(ep_of >= 0, ep_of, last).astype(np.int64))
+    elif hasattr(policy, "reset"):
+        policy.reset(rows.copy())
 
 
 def summarize(episodes: Sequence[Episode]) -> dict[str, Any]:
@@ -333,13 +419,19 @@ def evaluate(
     dpi: int = 90,
     allow_unnormalized: bool = False,
     replay: int = 0,
+    ray_address: Optional[str] = None,
+    ray_chunk: Optional[int] = None,
 ) -> dict[str, Any]:
     """Evaluates each policy spec on the same episodes; writes results.json, summary.md and plots.
 
-    ``wake_seeds`` defaults to the first ``episodes`` held-out wake seeds. ``replay`` = K > 0
-    also writes replay pages and recordings of K episodes per policy (best, median, worst, ...;
-    :func:`accd_gym.replay.write_evaluation_replays`) under ``out/replays/``. Returns the results
-    document (also in ``out/results.json``).
+    ``wake_seeds`` defaults to the first ``episodes`` held-out wake seeds. Returns the results
+    document (also in ``out/results.json``). ``replay`` = K > 0 also writes replay pages and
+    recordings of K episodes per policy (best, median, worst, ...;
+    :func:`accd_gym.replay.write_evaluation_replays`) under ``out/replays/``. ``ray_address``
+    (``"local"``, ``"auto"`` or ``HOST:PORT``) runs the episodes as Ray tasks of ``ray_chunk``
+    episodes each (:mod:`accd_gym.distributed`): the same results bit for bit, plus
+    ``out/ray_tasks.json`` (where each task ran, timings). ``num_threads`` is then per task (0:
+    the task's CPUs).
     """
     if not policies:
         raise ConfigError("invalid config: `policy` is empty; give at least one baseline name or model path")
@@ -361,10 +453,18 @@ def evaluate(
         "policies": {},
     }
     runs: dict[str, list[Episode]] = {}
+    if ray_address is not None:
+        from accd_gym import distributed
+
+        runs, ray_info = distributed.run_policies(dict(loaded), episodes, seed=seed, wake_seeds=seeds, num_envs=num_envs,
+                                                  config=config, address=ray_address, chunk=ray_chunk,
+                                                  cpus_per_task=max(1, num_threads), progress=progress)
+        (out / "ray_tasks.json").write_text(json.dumps(ray_info, indent=1))
     for spec, policy in loaded:
-        eps = run_episodes(policy, episodes, seed=seed, wake_seeds=seeds, num_envs=num_envs,
-                           num_threads=num_threads, config=config, progress=progress, desc=_label(spec))
-        runs[spec] = eps
+        if ray_address is None:
+            runs[spec] = run_episodes(policy, episodes, seed=seed, wake_seeds=seeds, num_envs=num_envs,
+                                      num_threads=num_threads, config=config, progress=progress, desc=_label(spec))
+        eps = runs[spec]
         results["policies"][spec] = {"summary": summarize(eps), "episodes": [e.metrics() for e in eps]}
         if getattr(policy, "note", None):
             results["policies"][spec]["note"] = policy.note
@@ -486,4 +586,4 @@ def plot_miss_cdf(runs: dict[str, list[Episode]], path: Path, dpi: int = 90, cap
     plt.close(fig)
 
 
-__all__ = ["EVAL_BASE_SEED", "Episode", "SB3Policy", "evaluate", "load_policy", "run_episodes", "summarize", "wilson_interval"]
+__all__ = ["EVAL_BASE_SEED", "Episode", "SB3Policy", "evaluate", "load_policy", "run_episode_range", "run_episodes", "summarize", "wilson_interval"]

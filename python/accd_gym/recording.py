@@ -237,13 +237,6 @@ def _outcome(arrays: dict[str, np.ndarray]) -> str:
     return "truncated" if arrays["truncated"][-1] else "running"
 
 
-def _info_row(row: np.ndarray) -> dict[str, Any]:
-    """One env's info row as a dict of plain values."""
-    from accd_gym.task import INFO_NAMES, info_dict
-
-    return info_dict(row, 0) if len(row) == len(INFO_NAMES) else {}
-
-
 def _policy_label(policy: Any) -> str:
     """A name for a policy object or spec."""
     if isinstance(policy, str):
@@ -267,9 +260,8 @@ def iter_recordings(
     the episodes end; ``rec.meta["episode"]`` is its index), so that callers can write and drop
     them one at a time."""
     from accd_gym import _core
-    from accd_gym.config import valid_config
     from accd_gym.evaluation import EVAL_BASE_SEED, load_policy
-    from accd_gym.task import HELD_OUT_WAKE_SEEDS, check_actions, check_seed, wake_options
+    from accd_gym.task import HELD_OUT_WAKE_SEEDS, INFO_NAMES, check_actions, check_seed
 
     if episodes is None:
         episodes = len(wake_seeds) if wake_seeds is not None else 1
@@ -293,13 +285,13 @@ def iter_recordings(
     label = _policy_label(policy)
     if isinstance(policy, str):
         policy = load_policy(policy, seed=policy_seed)
-    valid = valid_config(config or {})
-    cfg = json.loads(valid.to_json())
-    n = max(1, min(int(num_envs), episodes))
-    core = _core.BatchEnv(valid, n, base, "disabled", int(num_threads))
-    wake_options(core, {"wake_seeds": [int(s) for s in wake_seeds[:episodes]]})
-    obs, _ = core.reset(base, None)
-    obs = obs.copy()
+    from accd_gym.evaluation import _policy_starts
+    from accd_gym.vector import InAirCaptureVectorEnv
+
+    batch = max(1, min(int(num_envs), episodes))  # the evaluation's batch: the policy sees the same rows
+    env = InAirCaptureVectorEnv(batch, autoreset_mode="disabled", num_threads=num_threads, **(config or {}))
+    core = env._core
+    cfg = env._config
     geometry = accd_geometry(cfg)
 
     def meta_of(i: int, k: int) -> dict[str, Any]:
@@ -308,7 +300,7 @@ def iter_recordings(
             "policy": label,
             "episode": k,
             "env_index": i,
-            "num_envs": n,
+            "num_envs": batch,
             "base_seed": base,
             "seeds": {name: int(v) for name, v in seeds.items()},
             "config": cfg,
@@ -318,36 +310,45 @@ def iter_recordings(
             "divergence": None,
         }
 
-    ep_of = np.arange(n)
+    # Episode k is the first episode of seed base + k with wake_seeds[k], whatever else runs beside
+    # it (evaluation.run_episode_range): only the kept episodes run; idle rows repeat their last.
+    pending = iter(sorted(wanted))
+    first = min(wanted)
+    ep_of = np.full(batch, -1)
+    last = np.full(batch, first, dtype=np.int64)
     builders: dict[int, _Builder] = {}
     metas: dict[int, dict[str, Any]] = {}
+    env.reset(seed=[base + first] * batch)
+    obs: np.ndarray = np.zeros(0)
 
-    def start(i: int) -> None:
-        k = int(ep_of[i])
-        if k in wanted:
-            builders[i] = _Builder(core.record_data(i), obs[i])
+    def start(i: int) -> np.ndarray:
+        k = next(pending, None)
+        ep_of[i] = -1 if k is None else k
+        if k is not None:
+            last[i] = k
+        o = env.start_episode(i, base + int(last[i]), int(wake_seeds[int(last[i])]))
+        if k is not None:
+            builders[i] = _Builder(core.record_data(i), o[i])
             metas[i] = meta_of(i, k)
         else:
             builders.pop(i, None)
+        return o
 
-    for i in range(n):
-        start(i)
-    if hasattr(policy, "reset"):
-        policy.reset(None)
-    remaining = set(wanted)
-    while remaining:
-        actions = check_actions(np.asarray(policy.predict(obs), dtype=np.float32), n)
-        out = core.step(actions)
-        # The core's output arrays are reused two calls later: copy what is kept.
-        obs, reward, terminated, truncated, info = (out[0].copy(), out[1], out[2].copy(), out[3].copy(), out[5])
-        dones = terminated | truncated
-        for i in range(n):
-            if i not in builders:
+    try:
+        for i in range(batch):
+            obs = start(i)
+        _policy_starts(policy, np.ones(batch, dtype=bool), ep_of, last)
+        remaining = set(wanted)
+        while remaining:
+            actions = check_actions(np.asarray(policy.predict(obs), dtype=np.float32), batch)
+            obs, reward, terminated, truncated, info = env.step(actions)
+            dones = terminated | truncated
+            for i in builders:
+                row = {name: info[name][i] for name in INFO_NAMES}
+                builders[i].add(core.record_data(i), obs[i], np.clip(actions[i], -1.0, 1.0), float(reward[i]),
+                                bool(terminated[i]), bool(truncated[i]), row)
+            if not dones.any():
                 continue
-            row = _info_row(info[i])
-            builders[i].add(core.record_data(i), obs[i], np.clip(actions[i], -1.0, 1.0), float(reward[i]), bool(terminated[i]),
-                            bool(truncated[i]), row)
-        if dones.any():
             for i in np.flatnonzero(dones):
                 i = int(i)
                 if i in builders:
@@ -357,13 +358,13 @@ def iter_recordings(
                     rec = builders.pop(i).finish(meta)
                     remaining.discard(int(ep_of[i]))
                     yield rec
-                ep_of[i] += n
-            new_obs, _ = core.reset(None, dones.tolist())
-            obs = new_obs.copy()
+            if not remaining:
+                break
             for i in np.flatnonzero(dones):
-                start(int(i))
-        if hasattr(policy, "reset"):
-            policy.reset(dones)
+                obs = start(int(i))
+            _policy_starts(policy, dones, ep_of, last)
+    finally:
+        env.close()
 
 
 def record_episodes(

@@ -122,9 +122,16 @@ def validate_config(raw: dict[str, Any]) -> dict[str, Any]:
     act = cfg["policy_kwargs"].get("activation_fn")
     if act is not None and act not in _ACTIVATIONS:
         raise ConfigError(f"invalid config: `policy_kwargs.activation_fn` = {act!r} is outside the allowed range {list(_ACTIVATIONS)}")
+    check_training_env(cfg["env"])
+    return cfg
+
+
+def check_training_env(env: dict[str, Any]) -> None:
+    """ConfigError for a bad env override or one that fixes a held-out wake seed (training may
+    only draw training wake seeds); shared by every trainer."""
     from accd_gym.config import env_config
 
-    full = env_config(cfg["env"])  # raises ConfigError naming the bad env field
+    full = env_config(env)  # raises ConfigError naming the bad env field
     from accd_gym.task import HELD_OUT_WAKE_SEEDS
 
     fixed = ([full["wake_seed"]] if full["wake_seed"] is not None else []) + list(full["wake_seeds"] or [])
@@ -134,7 +141,6 @@ def validate_config(raw: dict[str, Any]) -> dict[str, Any]:
             f"invalid config: `env.wake_seed(s)` = {leaked[:5]} is outside the allowed range: training may not use "
             f"held-out wake seeds [{HELD_OUT_WAKE_SEEDS.start}, {HELD_OUT_WAKE_SEEDS.stop})"
         )
-    return cfg
 
 
 #: Keyword arguments of the algorithms that the training pipeline sets itself.

@@ -167,6 +167,33 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         wake_seed[~selected] = 0
         return obs, {"wake_seed": wake_seed, "_wake_seed": selected}
 
+    def start_episode(self, i: int, seed: int, wake_seed: Optional[int] = None) -> np.ndarray:
+        """Starts a new episode in env ``i`` alone and returns every env's observations (a copy).
+
+        The new episode is the first one of a single env reset with ``seed=seed`` and
+        ``options={"wake_seed": wake_seed}`` (``wake_seed=None``: a training draw of that seed),
+        bit for bit; the other envs are left as they are and the batch's wake schedule for
+        later resets is kept. Held-out evaluation (:mod:`accd_gym.evaluation`) starts episode
+        ``k`` this way, which makes it independent of the batch size and of its place in a batch.
+        """
+        if not 0 <= int(i) < self.num_envs:
+            raise ConfigError(f"invalid config: env index `i` = {i} is outside the allowed range 0..{self.num_envs - 1}")
+        from accd_gym.task import WAKE_SEED_BOUND
+
+        seed = check_seed(seed)
+        wake = None if wake_seed is None else check_seed(wake_seed, "wake_seed", WAKE_SEED_BOUND)
+        kind, kept = self._core.wake_schedule()
+        self._core.set_wake_schedule("training", []) if wake is None else self._core.set_wake_schedule("fixed", [wake])
+        try:
+            mask = np.zeros(self.num_envs, dtype=bool)
+            mask[int(i)] = True
+            seeds = list(self.np_random_seed)
+            seeds[int(i)] = seed
+            obs, _ = self.reset(seed=seeds, options={"reset_mask": mask})
+        finally:
+            self._core.set_wake_schedule(kind, kept)
+        return np.array(obs, copy=True)
+
     @property
     def np_random_seed(self) -> tuple[int, ...]:  # type: ignore[override]
         """The seed of each env's episodes, as ``SyncVectorEnv`` reports its envs' seeds: ``s + i``
