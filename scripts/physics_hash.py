@@ -1,7 +1,7 @@
 """Hashes every output of a fixed set of episodes: the physics fingerprint kept by refactors.
 
 Runs 8 envs x 700 agent steps of the native vector env under the default and the precision
-configurations, each with the guidance controller (closed loop, captures) and with seeded
+configurations (and both again under the exact air scheme, the default of the first releases), each with the guidance controller (closed loop, captures) and with seeded
 uniform random flaps (open loop, failures), and hashes per step the observations, rewards,
 terminated/truncated flags and every info value (``wake_seed`` as int64). Info values of the
 step after an episode ended (the autoreset step of ``NEXT_STEP``) are left out: they describe
@@ -24,12 +24,18 @@ import numpy as np
 import accd_gym
 from accd_gym.baselines import GuidancePolicy
 
+# The exact air scheme, the default until the fast one became it (BENCHMARKS.md, "the fast air
+# scheme"): its hashes are the ones recorded at a3be75f for the default and precision configs.
+EXACT = {"wake": {"sampling": "per_stage"}, "turbulence": {"normal_sampler": "box_muller", "lane_streams": "shared"}}
+PRECISION = {
+    "turbulence": {"ambient": "severe"},
+    "boom": {"capture_radius": 0.3, "max_closing_speed": 1.0},
+}
 CONFIGS = {
     "default": {},
-    "precision": {
-        "turbulence": {"ambient": "severe"},
-        "boom": {"capture_radius": 0.3, "max_closing_speed": 1.0},
-    },
+    "precision": PRECISION,
+    "exact": EXACT,
+    "exact_precision": {**EXACT, "turbulence": {**EXACT["turbulence"], **PRECISION["turbulence"]}, "boom": PRECISION["boom"]},
 }
 NUM_ENVS = 8
 STEPS = 700

@@ -47,7 +47,7 @@ from accd_gym._core import (
 )
 from accd_gym._core import reward_bounds as _core_reward_bounds
 from accd_gym.errors import AccdError, ConfigError, SimulationError, StateError
-from accd_gym.config import default_config, env_config
+from accd_gym.config import EXACT_AIR_SCHEME, default_config, env_config
 from accd_gym.task import HELD_OUT_WAKE_SEEDS, TRAINING_WAKE_SEEDS
 from accd_gym.env import InAirCaptureEnv
 from accd_gym.vector import InAirCaptureVectorEnv
@@ -97,6 +97,7 @@ __all__ = [
     "AccdError",
     "AccdVecEnv",
     "ENV_ID",
+    "EXACT_AIR_SCHEME",
     "HELD_OUT_WAKE_SEEDS",
     "InAirCaptureEnv",
     "InAirCaptureVectorEnv",

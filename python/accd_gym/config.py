@@ -123,3 +123,14 @@ def config_json(config: Mapping[str, Any]) -> str:
 
 
 __all__ = ["default_config", "env_config", "valid_config", "config_json", "self_contained"]
+
+
+#: The exact air scheme, the default before the fast one (BENCHMARKS.md, "the fast air scheme"):
+#: the segments sample the wake and its turbulence at every RK4 stage, Box-Muller normals, one
+#: stream for every turbulence lane. Pass it to reproduce results of the first releases bit for
+#: bit, e.g. ``InAirCaptureEnv(**EXACT_AIR_SCHEME)`` (merge your own ``wake``/``turbulence``
+#: keys into its dicts). It is about 2x slower per physics step.
+EXACT_AIR_SCHEME: dict[str, Any] = {
+    "wake": {"sampling": "per_stage"},
+    "turbulence": {"normal_sampler": "box_muller", "lane_streams": "shared"},
+}

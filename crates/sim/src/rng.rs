@@ -60,9 +60,9 @@ pub fn stream_rng(seed: u64, stream: u64) -> ChaCha8Rng {
 #[serde(rename_all = "snake_case")]
 pub enum NormalSampler {
     /// Box-Muller, two deviates from two `u64`s (sin, cos, ln, sqrt).
-    #[default]
     BoxMuller,
     /// The ziggurat of `rand_distr::StandardNormal`, about one `u64` per deviate.
+    #[default]
     Ziggurat,
 }
 

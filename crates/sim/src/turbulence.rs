@@ -145,7 +145,6 @@ impl AmbientTurbulence {
 pub enum LaneStreams {
     /// One stream for every lane, drawn lane by lane (x, y, z) at every grid step: every lane is
     /// generated all the time.
-    #[default]
     Shared,
     /// Each lane from its own stream (label [`WAKE_LANES_STREAM`]` + 1 + lane`), so that a lane's
     /// history is a function of the seed and the lane alone. A lane can then be generated late,
@@ -154,6 +153,7 @@ pub enum LaneStreams {
     /// The capture simulation generates lanes on demand with `wake.sampling = "per_step"` (which
     /// declares every point it samples) and all of them otherwise; a standalone
     /// [`crate::WakeField`] generates all of them.
+    #[default]
     PerLane,
 }
 
@@ -180,11 +180,13 @@ pub struct TurbulenceConfig {
     pub time_step_s: f64,
     /// Ambient turbulence. Default none.
     pub ambient: AmbientTurbulence,
-    /// How the gusts' normal deviates are drawn: `"box_muller"` (default) or `"ziggurat"`
-    /// ([`NormalSampler`]; 4-5x cheaper, another realisation of the same process per seed).
+    /// How the gusts' normal deviates are drawn: `"ziggurat"` (default; [`NormalSampler`]: 4-5x
+    /// cheaper than Box-Muller) or `"box_muller"` (the first releases' sampler: another
+    /// realisation of the same process per seed).
     pub normal_sampler: NormalSampler,
-    /// Where the wake lanes' random numbers come from: `"shared"` (default, one stream) or
-    /// `"per_lane"` ([`LaneStreams`]; lanes far from the tether are then not generated).
+    /// Where the wake lanes' random numbers come from: `"per_lane"` (default; [`LaneStreams`]:
+    /// lanes far from the tether are then not generated) or `"shared"` (the first releases' one
+    /// stream).
     pub lane_streams: LaneStreams,
 }
 
@@ -198,8 +200,8 @@ impl Default for TurbulenceConfig {
             history_distance_m: 400.0,
             time_step_s: 0.01,
             ambient: AmbientTurbulence::None,
-            normal_sampler: NormalSampler::BoxMuller,
-            lane_streams: LaneStreams::Shared,
+            normal_sampler: NormalSampler::Ziggurat,
+            lane_streams: LaneStreams::PerLane,
         }
     }
 }
@@ -494,6 +496,9 @@ impl Turbulence {
             }
             self.active.fill(false);
             self.active_list.clear();
+            // A clone's list has the capacity of its length: give it room for every lane here,
+            // so that activating lanes while stepping never allocates.
+            self.active_list.reserve(self.lanes);
             self.covered = None;
         } else {
             for c in 0..wake_channels {
@@ -761,6 +766,7 @@ impl Turbulence {
             }
             self.active = active;
             self.active_list.clear();
+            self.active_list.reserve(self.lanes);
             self.active_list
                 .extend(lanes.generated.iter().map(|&l| l as usize));
             self.covered = lanes.covered.map(|c| c.map(|v| v as usize));

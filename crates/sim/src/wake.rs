@@ -706,10 +706,10 @@ pub struct WakeTableFiles {
 pub enum AirSampling {
     /// At every RK4 stage, at the stage's segment centres (4 samples per segment and step): the
     /// exact scheme for a field that is frozen over the step.
-    #[default]
     PerStage,
     /// Once per step, at the segment centres of the step's initial state, held over its four
     /// stages (a first-order error in the forcing: the segments move by millimetres in a step).
+    #[default]
     PerStep,
 }
 
@@ -729,8 +729,9 @@ pub struct WakeConfig {
     pub attachment_from_nose_m: [f64; 3],
     /// User tables (JSON files); `None` (the default) uses the analytic model.
     pub tables: Option<WakeTableFiles>,
-    /// Where the tether's segments sample the wake and its turbulence: `"per_stage"` (default)
-    /// or `"per_step"` ([`AirSampling`]).
+    /// Where the tether's segments sample the wake and its turbulence: `"per_step"` (default
+    /// since the fast scheme's measurement, BENCHMARKS.md) or `"per_stage"` (the exact scheme of
+    /// the first releases; [`AirSampling`]).
     pub sampling: AirSampling,
 }
 
@@ -741,7 +742,7 @@ impl Default for WakeConfig {
             alpha_deg: 8.0,
             attachment_from_nose_m: DEFAULT_ATTACHMENT_FROM_NOSE_M,
             tables: None,
-            sampling: AirSampling::PerStage,
+            sampling: AirSampling::PerStep,
         }
     }
 }

@@ -39,9 +39,23 @@ fn per_lane() -> CaptureConfig {
     c
 }
 
+/// The exact air scheme (the default of the first releases): one shared lane stream, per-stage sampling.
+fn exact() -> CaptureConfig {
+    let mut c = CaptureConfig::default();
+    c.turbulence.lane_streams = LaneStreams::Shared;
+    c.turbulence.normal_sampler = accd_sim::NormalSampler::BoxMuller;
+    c.wake.sampling = accd_sim::AirSampling::PerStage;
+    c
+}
+
 #[test]
 fn a_saved_simulation_continues_bit_for_bit() {
-    for config in [CaptureConfig::default(), per_lane(), CaptureConfig::calm()] {
+    for config in [
+        CaptureConfig::default(),
+        per_lane(),
+        exact(),
+        CaptureConfig::calm(),
+    ] {
         let mut a = CaptureSim::new(&config.clone().validated().unwrap(), seeds()).unwrap();
         run(&mut a, 0, 120);
         let saved = a.save().unwrap();

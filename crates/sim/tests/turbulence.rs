@@ -2,7 +2,7 @@
 //! independence, ambient levels, and the Gaussian generator.
 
 use accd_sim::rng::{stream_rng, NormalSampler, Stream, AMBIENT_STREAM, WAKE_LANES_STREAM};
-use accd_sim::turbulence::{AmbientTurbulence, Turbulence, TurbulenceConfig};
+use accd_sim::turbulence::{AmbientTurbulence, LaneStreams, Turbulence, TurbulenceConfig};
 use accd_sim::SimError;
 use nalgebra::Vector3;
 use rand_core::Rng;
@@ -12,11 +12,22 @@ const DT: f64 = 0.01;
 
 /// A small lane grid (3 lanes) so that long statistical runs are cheap; the sampling code is the
 /// same as with the default grid.
+/// The default configuration with every lane generated all the time (one shared stream): a
+/// standalone `Turbulence` with per-lane streams (the default) generates only the lanes it is told
+/// to (`activate_box`, `activate_all`); the per-lane scheme is tested in episode.rs and
+/// state_format.rs (a lane generated late equals one generated from the start).
+fn every_lane() -> TurbulenceConfig {
+    TurbulenceConfig {
+        lane_streams: LaneStreams::Shared,
+        ..TurbulenceConfig::default()
+    }
+}
+
 fn small_grid() -> TurbulenceConfig {
     TurbulenceConfig {
         lanes_y_m: [0.0, 0.0],
         lanes_z_m: [0.0, 20.0],
-        ..TurbulenceConfig::default()
+        ..every_lane()
     }
 }
 
@@ -102,7 +113,7 @@ fn rms_matches_u_prime_per_component() {
 
 #[test]
 fn unit_variance_everywhere_with_the_default_lane_grid() {
-    let mut t = Turbulence::new(&TurbulenceConfig::default(), U, 11).unwrap();
+    let mut t = Turbulence::new(&every_lane(), U, 11).unwrap();
     assert_eq!(t.lane_grid(), (7, 11));
     let points = [
         Vector3::new(0.0, 0.0, 0.0),
@@ -157,7 +168,7 @@ fn e_folding_lag(x: &[f64], dt: f64) -> f64 {
 
 #[test]
 fn autocorrelation_time_is_length_scale_over_airspeed() {
-    let lt = TurbulenceConfig::default().wake_length_scale_m;
+    let lt = every_lane().wake_length_scale_m;
     let expected = lt / U;
     let points = [Vector3::new(0.0, 0.0, 0.0), Vector3::new(-100.0, 0.0, 5.0)];
     for sampler in SAMPLERS {
@@ -183,7 +194,7 @@ fn autocorrelation_time_is_length_scale_over_airspeed() {
         wake_turbulence: false,
         ambient: AmbientTurbulence::Moderate,
         time_step_s: 0.05,
-        ..TurbulenceConfig::default()
+        ..every_lane()
     };
     let mut t = Turbulence::new(&config, U, 3).unwrap();
     let p = Vector3::new(-50.0, 0.0, 30.0);
@@ -201,7 +212,7 @@ fn autocorrelation_time_is_length_scale_over_airspeed() {
 fn frozen_turbulence_a_point_behind_sees_the_same_history_later() {
     let config = TurbulenceConfig {
         ambient: AmbientTurbulence::Light,
-        ..TurbulenceConfig::default()
+        ..every_lane()
     };
     let mut t = Turbulence::new(&config, U, 99).unwrap();
     // 18.5 m behind = 0.1 s = 10 steps later; also between lanes.
@@ -236,7 +247,7 @@ fn frozen_turbulence_a_point_behind_sees_the_same_history_later() {
 fn history(seed: u64, ambient: AmbientTurbulence, steps: usize) -> Vec<Vector3<f64>> {
     let config = TurbulenceConfig {
         ambient,
-        ..TurbulenceConfig::default()
+        ..every_lane()
     };
     let mut t = Turbulence::new(&config, U, seed).unwrap();
     let points = [
@@ -267,7 +278,7 @@ fn same_seed_same_history_bitwise_and_reset_reproduces() {
     // reset(seed) on a used turbulence gives the same history as a new one.
     let config = TurbulenceConfig {
         ambient: AmbientTurbulence::Moderate,
-        ..TurbulenceConfig::default()
+        ..every_lane()
     };
     let mut t = Turbulence::new(&config, U, 1).unwrap();
     for _ in 0..777 {
@@ -294,7 +305,7 @@ fn same_seed_same_history_bitwise_and_reset_reproduces() {
 fn ambient_does_not_change_the_wake_lanes() {
     let config = |ambient| TurbulenceConfig {
         ambient,
-        ..TurbulenceConfig::default()
+        ..every_lane()
     };
     let mut a = Turbulence::new(&config(AmbientTurbulence::None), U, 5).unwrap();
     let mut b = Turbulence::new(&config(AmbientTurbulence::Severe), U, 5).unwrap();
@@ -350,7 +361,7 @@ fn ambient_levels_give_their_sigmas() {
             wake_turbulence: false,
             ambient: level,
             time_step_s: 0.1,
-            ..TurbulenceConfig::default()
+            ..every_lane()
         };
         let mut t = Turbulence::new(&config, U, seed).unwrap();
         assert_eq!(t.ambient_sigma(), sigma);
@@ -391,7 +402,7 @@ fn ambient_serde_is_lowercase() {
 
 #[test]
 fn zero_k_gives_zero_wake_turbulence() {
-    let mut t = Turbulence::new(&TurbulenceConfig::default(), U, 8).unwrap();
+    let mut t = Turbulence::new(&every_lane(), U, 8).unwrap();
     for _ in 0..100 {
         t.advance(DT).unwrap();
         for p in [
@@ -405,7 +416,7 @@ fn zero_k_gives_zero_wake_turbulence() {
     // Wake turbulence off: zero whatever k.
     let config = TurbulenceConfig {
         wake_turbulence: false,
-        ..TurbulenceConfig::default()
+        ..every_lane()
     };
     let mut t = Turbulence::new(&config, U, 8).unwrap();
     t.advance(DT).unwrap();
@@ -418,7 +429,7 @@ fn zero_k_gives_zero_wake_turbulence() {
 
 #[test]
 fn the_history_does_not_depend_on_how_time_is_advanced() {
-    let mut a = Turbulence::new(&TurbulenceConfig::default(), U, 21).unwrap();
+    let mut a = Turbulence::new(&every_lane(), U, 21).unwrap();
     let mut b = a.clone();
     let p = Vector3::new(-80.0, 4.0, 30.0);
     for _ in 0..200 {
@@ -516,35 +527,35 @@ fn config_errors_name_field_value_and_range() {
         (
             TurbulenceConfig {
                 wake_length_scale_m: 0.5,
-                ..TurbulenceConfig::default()
+                ..every_lane()
             },
             "turbulence.wake_length_scale_m",
         ),
         (
             TurbulenceConfig {
                 lanes_y_m: [10.0, -10.0],
-                ..TurbulenceConfig::default()
+                ..every_lane()
             },
             "turbulence.lanes_y_m[1]",
         ),
         (
             TurbulenceConfig {
                 lanes_z_m: [f64::NAN, 10.0],
-                ..TurbulenceConfig::default()
+                ..every_lane()
             },
             "turbulence.lanes_z_m[0]",
         ),
         (
             TurbulenceConfig {
                 history_distance_m: -1.0,
-                ..TurbulenceConfig::default()
+                ..every_lane()
             },
             "turbulence.history_distance_m",
         ),
         (
             TurbulenceConfig {
                 time_step_s: 0.5,
-                ..TurbulenceConfig::default()
+                ..every_lane()
             },
             "turbulence.time_step_s",
         ),
@@ -554,7 +565,7 @@ fn config_errors_name_field_value_and_range() {
                     sigma_mps: -1.0,
                     length_scale_m: 533.4,
                 },
-                ..TurbulenceConfig::default()
+                ..every_lane()
             },
             "turbulence.ambient.custom.sigma_mps",
         ),
@@ -562,7 +573,7 @@ fn config_errors_name_field_value_and_range() {
             TurbulenceConfig {
                 wake_length_scale_m: 1.0,
                 lanes_y_m: [-1000.0, 1000.0],
-                ..TurbulenceConfig::default()
+                ..every_lane()
             },
             "turbulence.wake_length_scale_m",
         ),
@@ -575,7 +586,7 @@ fn config_errors_name_field_value_and_range() {
         assert_eq!(field, name, "{err}");
         assert!(!allowed.is_empty());
     }
-    let err = Turbulence::new(&TurbulenceConfig::default(), 0.0, 0).unwrap_err();
+    let err = Turbulence::new(&every_lane(), 0.0, 0).unwrap_err();
     assert!(err.to_string().contains("airspeed_mps"));
 }
 
@@ -583,7 +594,7 @@ fn on_demand(normal_sampler: NormalSampler) -> TurbulenceConfig {
     TurbulenceConfig {
         normal_sampler,
         lane_streams: accd_sim::LaneStreams::PerLane,
-        ..TurbulenceConfig::default()
+        ..every_lane()
     }
 }
 
@@ -682,7 +693,7 @@ fn on_demand_statistics_match_the_model() {
         let r = rms(x);
         assert!((r / 3.0 - 1.0).abs() < 0.04, "component {c}: rms {r} m/s");
         let lag = e_folding_lag(x, DT);
-        let expected = TurbulenceConfig::default().wake_length_scale_m / U;
+        let expected = every_lane().wake_length_scale_m / U;
         assert!(
             (lag / expected - 1.0).abs() < 0.1,
             "component {c}: 1/e lag {lag} s"
