@@ -363,6 +363,8 @@ def test_an_inline_table_that_is_broken_names_the_table():
         (["rollout", "--policy", "zero", "--env", '{"capture_window": "x"}', "--quiet"], ["capture_window"]),
         (["rollout", "--policy", "zero", "--num-envs", "100000", "--episodes", "100000", "--quiet"], ["num_envs"]),
         (["evaluate", "--policy", "{tmp}", "--episodes", "1", "--quiet"], ["no final model"]),
+        (["train", "--config", "{cfg_arch}", "--out", "{tmp}/run"], ["`policy_kwargs.net_arch`", "'x'"]),
+        (["train", "--config", "{cfg_lr}", "--out", "{tmp}/run"], ["PPO refused", "learning_rate", "'x'"]),
     ],
 )
 def test_cli_user_errors_exit_2_on_one_line(argv, words, tmp_path, capsys):
@@ -371,7 +373,10 @@ def test_cli_user_errors_exit_2_on_one_line(argv, words, tmp_path, capsys):
     from accd_gym.cli import main
 
     files = {"cfg_array": [1, 2], "cfg_kwarg": {"algo_kwargs": {"learning_rat": 1}},
-             "cfg_seed": {"seed": True}, "cfg_ok": {"total_timesteps": 8}}
+             "cfg_seed": {"seed": True}, "cfg_ok": {"total_timesteps": 8},
+             "cfg_arch": {"total_timesteps": 8, "policy_kwargs": {"net_arch": "x"}},
+             "cfg_lr": {"total_timesteps": 8, "num_envs": 2, "algo_kwargs": {"learning_rate": "x"},
+                        "env": {"initial": {"settle_time": 20.0}}}}
     for name, doc in files.items():
         (tmp_path / f"{name}.json").write_text(_json.dumps(doc))
     argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
@@ -384,11 +389,25 @@ def test_cli_user_errors_exit_2_on_one_line(argv, words, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("argv", [["evaluate", "--policy", "zero", "--num-threads", "-1"],
-                                  ["rollout", "--policy", "zero", "--seed", "-5"]])
+                                  ["rollout", "--policy", "zero", "--seed", "-5"],
+                                  ["settle", "--duration", "-1"], ["settle", "--duration", "nan"]])
 def test_cli_bad_option_values_are_argparse_errors(argv, capsys):
     from accd_gym.cli import main
 
     with pytest.raises(SystemExit) as info:
         main(argv)
     assert info.value.code == 2
-    assert "outside the allowed range" in capsys.readouterr().err
+    err = capsys.readouterr().err.strip()
+    assert "outside the allowed range" in err
+    assert err.count("\n") == 0 and err.startswith(f"accd-gym {argv[0]}: error:") and "--help" in err, err
+
+
+@pytest.mark.parametrize("argv", [[], ["nosuch"], ["study", "nosuch"], ["train", "--bogus"]])
+def test_cli_parse_errors_are_one_line(argv, capsys):
+    from accd_gym.cli import main
+
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    assert info.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and ": error: " in err, err
