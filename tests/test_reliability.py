@@ -411,3 +411,40 @@ def test_cli_parse_errors_are_one_line(argv, capsys):
     assert info.value.code == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and ": error: " in err, err
+
+
+@pytest.mark.parametrize("seed", ["12", 1.9, True, [1, 2], -1])
+def test_sb3_vec_env_seeds_are_integers(seed):
+    # issue 13: reset(seed="12") seeded [1, 2]
+    with pytest.raises(ConfigError, match="seed"):
+        accd_gym.AccdVecEnv(num_envs=2, seed=seed, **SHORT)
+    env = accd_gym.AccdVecEnv(num_envs=2, seed=np.int64(3), num_threads=1, **SHORT)
+    with pytest.raises(ConfigError, match="seed"):
+        env.seed(seed)
+        env.reset()
+    assert np.array_equal(env.reset(), accd_gym.AccdVecEnv(num_envs=2, seed=3, num_threads=1, **SHORT).reset())
+
+
+# 9. The supported Python versions are the tested ones ------------------------------------------
+
+
+def test_the_oldest_python_claimed_is_the_one_ci_runs_and_the_sources_parse_on_it():
+    """pyproject claims Python >= 3.11 and CI runs 3.11 (scripts/setup.sh's default ``python3`` is 3.11 there);
+    every module of the package must parse as 3.11 syntax (no newer grammar slips in), and the
+    README states the same bound."""
+    import ast
+    import pathlib
+    import re
+    import sys
+    import tomllib
+
+    root = pathlib.Path(__file__).resolve().parent.parent
+    claim = tomllib.loads((root / "pyproject.toml").read_text())["project"]["requires-python"]
+    oldest = tuple(int(x) for x in re.fullmatch(r">=\s*(\d+)\.(\d+)", claim).groups())
+    assert oldest == (3, 11), claim
+    assert sys.version_info[:2] >= oldest
+    assert "Python >= 3.11" in (root / "README.md").read_text()
+    files = sorted((root / "python" / "accd_gym").rglob("*.py"))
+    assert len(files) > 10
+    for path in files:
+        ast.parse(path.read_text(), filename=str(path), feature_version=oldest)
