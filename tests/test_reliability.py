@@ -93,8 +93,8 @@ def _assert_interrupted_within_0_2_s(call, delay: float = 0.4) -> None:
     assert latency < 0.2, f"interrupted {latency:.3f} s after the signal"
 
 
-# 10 s agent steps of 300 segments: one step of one env takes about 0.6 s on one thread here
-# (2 envs: about 1.2 s), well beyond the 0.4 s after which the signal comes.
+# 10 s agent steps of 300 segments: one step of one env takes 0.6-0.8 s on one thread at load 5 here
+# (2 envs: about 1.2 s), well beyond the 0.1 s after which the signal comes.
 LONG_STEP = dict(agent_step=10.0, capture_window=20.0, tether={"segments": 300}, initial={"settle_time": 1.0})
 
 
@@ -124,7 +124,7 @@ def test_a_long_batch_step_raises_keyboard_interrupt_within_0_2_s_and_wants_a_re
             def step():
                 return env.step(np.zeros(4, np.float32))[0]
 
-    _assert_interrupted_within_0_2_s(step)
+    _assert_interrupted_within_0_2_s(step, delay=0.1)  # the step runs for 0.4 s or more
     # the envs stopped part-way through the step: the env says so until it is reset
     with pytest.raises(StateError, match=r"interrupted.*reset\(\)"):
         step()
