@@ -72,3 +72,47 @@ def test_seed_and_options_set_before_a_reset_survive_the_pickle():
     assert [x[2] for x in a] == [x[2] for x in b]
     assert all(w in held_out for x in a for w in x[2])
     assert [x[0].tolist() for x in a] == [x[0].tolist() for x in b]
+
+
+@pytest.mark.parametrize("make", ["single", "vector", "sb3"])
+def test_a_pickle_taken_mid_run_continues_the_wake_seed_schedule(make):
+    """The schedule's position (which held-out seed each env's next episode takes), the episodes
+    in progress and their random streams travel inside the pickle."""
+    held_out = [1_000_000_000 + k for k in range(8)]
+    action = np.full((2, 4), 0.3, np.float32)
+    if make == "single":
+        env = accd_gym.InAirCaptureEnv(**QUICK)
+        env.reset(seed=4, options={"wake_seeds": held_out})
+    elif make == "vector":
+        env = accd_gym.InAirCaptureVectorEnv(2, **QUICK)
+        env.reset(seed=4, options={"wake_seeds": held_out})
+    else:
+        env = AccdVecEnv(num_envs=2, seed=4, **QUICK)
+        env.set_options({"wake_seeds": held_out})
+        env.reset()
+
+    def go(e):
+        """30 steps: the rewards and the wake seed of each step's episode."""
+        rewards, wakes = [], []
+        for _ in range(30):
+            if make == "single":
+                _, r, terminated, truncated, info = e.step(action[0])
+                rewards.append(r)
+                wakes.append(info["wake_seed"])
+                if terminated or truncated:
+                    e.reset()
+            elif make == "vector":
+                _, r, _, _, info = e.step(action)
+                rewards += r.tolist()
+                wakes += info["wake_seed"].tolist()
+            else:
+                _, r, _, infos = e.step(action)
+                rewards += r.tolist()
+                wakes += [i["wake_seed"] for i in infos]
+        return rewards, wakes
+
+    go(env)  # into the run: several episodes done, one in progress
+    copy = pickle.loads(pickle.dumps(env))
+    a, b = go(env), go(copy)
+    assert a == b
+    assert set(a[1]) <= set(held_out) and len(set(a[1])) > 2

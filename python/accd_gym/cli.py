@@ -151,6 +151,29 @@ def _positive(name: str):
     return parse
 
 
+def _positive_seconds(name: str):
+    """An argparse type: a finite number of seconds > 0, with an error naming the option."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} = {text!r} is not a number") from None
+        if not (value > 0 and value < float("inf")):
+            raise argparse.ArgumentTypeError(f"{name} = {text} is outside the allowed range: a finite number of seconds > 0")
+        return value
+
+    return parse
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line (exit code 2), pointing to ``--help``."""
+
+    def error(self, message: str):  # type: ignore[override]
+        """Prints ``prog: error: message`` on one line and exits with code 2."""
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
+
+
 def _env_overrides(text: Optional[str]) -> dict:
     """The --env JSON object (environment config overrides)."""
     from accd_gym.errors import ConfigError
@@ -220,12 +243,13 @@ def _rollout(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``accd-gym`` and its subcommands."""
-    parser = argparse.ArgumentParser(prog="accd-gym", description="accd-gym: In-Air Capturing simulation tools.")
+    parser = _Parser(prog="accd-gym", description="accd-gym: In-Air Capturing simulation tools.")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("settle", help="simulate a towed tether settling behind the aircraft and plot it")
     p.add_argument("--out", default="runs/settle", help="output folder (default: runs/settle)")
     p.add_argument("--preset", default="table3", help="tether preset, e.g. table3 or steel-250m-24mm")
-    p.add_argument("--duration", type=float, default=120.0, help="simulated time in seconds (default 120)")
+    p.add_argument("--duration", type=_positive_seconds("--duration"), default=120.0,
+                   help="simulated time in seconds (default 120)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_settle)
     from accd_gym.study import STUDIES

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import re
 import signal
@@ -119,11 +120,30 @@ def validate_config(raw: dict[str, Any]) -> dict[str, Any]:
     if cfg["algo"] == "sac" and "norm_reward" not in cfg["vec_normalize"]:
         vn["norm_reward"] = False
     cfg["vec_normalize"] = vn
+    _check_net_arch(cfg["policy_kwargs"])
     act = cfg["policy_kwargs"].get("activation_fn")
     if act is not None and act not in _ACTIVATIONS:
         raise ConfigError(f"invalid config: `policy_kwargs.activation_fn` = {act!r} is outside the allowed range {list(_ACTIVATIONS)}")
     check_training_env(cfg["env"])
     return cfg
+
+
+def _check_net_arch(policy_kwargs: dict[str, Any]) -> None:
+    """ConfigError for a ``net_arch`` that is not a list of layer widths (or a dict of such lists
+    under ``pi``/``vf``/``qf``), or a ``log_std_init`` that is not a finite number."""
+
+    def widths(value: Any) -> bool:
+        return isinstance(value, list) and all(isinstance(w, int) and not isinstance(w, bool) and 1 <= w <= 65_536
+                                               for w in value)
+
+    arch = policy_kwargs.get("net_arch")
+    if arch is not None and not widths(arch) and not (
+            isinstance(arch, dict) and arch and set(arch) <= {"pi", "vf", "qf"} and all(widths(v) for v in arch.values())):
+        raise ConfigError(f"invalid config: `policy_kwargs.net_arch` = {arch!r} is outside the allowed range: a list of "
+                          "layer widths (integers in [1, 65536]) or a dict of such lists under 'pi', 'vf', 'qf'")
+    std = policy_kwargs.get("log_std_init")
+    if std is not None and (not isinstance(std, (int, float)) or isinstance(std, bool) or not math.isfinite(std)):
+        raise ConfigError(f"invalid config: `policy_kwargs.log_std_init` = {std!r} is outside the allowed range: a finite number")
 
 
 def check_training_env(env: dict[str, Any]) -> None:
@@ -370,16 +390,23 @@ def train(
     torch.set_num_threads(cfg["torch_threads"])
     env = make_training_env(cfg)
     cls = {"ppo": PPO, "sac": SAC}[cfg["algo"]]
-    model = cls(
-        "MlpPolicy",
-        env,
-        seed=cfg["seed"],
-        device=cfg["device"],
-        tensorboard_log=str(out / "tb"),
-        policy_kwargs=_policy_kwargs(cfg),
-        verbose=0,
-        **cfg["algo_kwargs"],
-    )
+    try:
+        model = cls(
+            "MlpPolicy",
+            env,
+            seed=cfg["seed"],
+            device=cfg["device"],
+            tensorboard_log=str(out / "tb"),
+            policy_kwargs=_policy_kwargs(cfg),
+            verbose=0,
+            **cfg["algo_kwargs"],
+        )
+    except (TypeError, ValueError, AssertionError, RuntimeError) as e:
+        # a value of the right key that stable-baselines3 or torch cannot use (a string learning
+        # rate, a batch size the rollout cannot fill, an unknown device, ...)
+        raise ConfigError(f"invalid config: {cfg['algo'].upper()} refused the config's algo_kwargs "
+                          f"{cfg['algo_kwargs']!r} / policy_kwargs {cfg['policy_kwargs']!r} / device "
+                          f"{cfg['device']!r}: {type(e).__name__}: {e}") from e
     meta = {"algo": cfg["algo"], "config": cfg, "status": "training", "total_timesteps": cfg["total_timesteps"]}
     _write_meta(out, meta)
     return _learn(model, env, cfg, out, meta, progress=progress, fresh=True)

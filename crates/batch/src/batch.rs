@@ -6,7 +6,9 @@
 //! caller's struct-of-arrays buffers ([`StepBuffers`]); nothing is allocated per step.
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
+use std::time::Duration;
 
 use accd_sim::episode::EpisodeState;
 use accd_sim::state_format::{self, Expected, StateError, StateKind};
@@ -174,6 +176,9 @@ struct Slot {
     /// Why the episode that ended in the last step diverged, kept past a same-step autoreset
     /// (which starts the next episode at once); not part of the saved state.
     final_divergence: Option<String>,
+    /// A step of the batch was interrupted while this env's episode may have been part-way
+    /// through it: the env refuses steps and saves until it is reset or restored.
+    interrupted: bool,
 }
 
 /// N episodes of one config.
@@ -249,6 +254,7 @@ impl BatchEnv {
                 index: 0,
                 pending_reset: false,
                 final_divergence: None,
+                interrupted: false,
             });
         }
         let pool = rayon::ThreadPoolBuilder::new()
@@ -379,6 +385,7 @@ impl BatchEnv {
                 }
             }
             slot.pending_reset = false;
+            slot.interrupted = false;
         }
         let schedule = &self.schedule;
         let results: Vec<Result<()>> = {
@@ -418,7 +425,43 @@ impl BatchEnv {
     /// One agent step of every env with `actions` (`N * ACT_DIM` flap commands in [-1, 1],
     /// clipped). A non-finite action is an error naming the env; no env is stepped then.
     pub fn step(&mut self, actions: &[f32], out: StepBuffers<'_>) -> Result<()> {
+        self.step_watched(actions, out, None)
+    }
+
+    /// [`BatchEnv::step`] that stays interruptible however long the step takes: the calling
+    /// thread waits for the pool's threads, asking `interrupted()` every [`WATCH_INTERVAL`]
+    /// (from the calling thread, so Python can run its signal handlers there). Once it returns
+    /// true the envs stop before their next physics step and the call fails with
+    /// [`SimError::Interrupted`]; the envs may then be part-way through the step, so each
+    /// refuses to step or be saved ([`BatchError::Interrupted`]) until a reset or `set_state`.
+    /// Results are bitwise those of [`BatchEnv::step`]. Unlike it, this allocates (one small
+    /// job box a call).
+    pub fn step_interruptible(
+        &mut self,
+        actions: &[f32],
+        out: StepBuffers<'_>,
+        interrupted: &mut dyn FnMut() -> bool,
+    ) -> Result<()> {
+        self.step_watched(actions, out, Some(interrupted))
+    }
+
+    /// Fails with [`BatchError::Interrupted`] naming the first env left part-way through an
+    /// interrupted step.
+    pub fn check_consistent(&self) -> Result<()> {
+        match self.slots.iter().position(|s| s.interrupted) {
+            Some(env) => Err(BatchError::Interrupted { env }),
+            None => Ok(()),
+        }
+    }
+
+    fn step_watched(
+        &mut self,
+        actions: &[f32],
+        out: StepBuffers<'_>,
+        watch: Option<&mut dyn FnMut() -> bool>,
+    ) -> Result<()> {
         self.check_poisoned()?;
+        self.check_consistent()?;
         let n = self.slots.len();
         check_len("actions", actions.len(), n * ACT_DIM)?;
         check_len("obs", out.obs.len(), n * OBS_DIM)?;
@@ -444,6 +487,7 @@ impl BatchEnv {
         let mode = self.autoreset;
         let schedule = &self.schedule;
         let n64 = n as u64;
+        let stop = AtomicBool::new(false);
         let rows = (
             self.slots.par_iter_mut().enumerate(),
             actions.par_chunks(ACT_DIM),
@@ -484,8 +528,12 @@ impl BatchEnv {
                 return;
             }
             *wake = slot.episode.seeds().wake;
-            let o = match slot.episode.step(action) {
+            if stop.load(Ordering::Relaxed) {
+                return; // interrupted: this env is left as it was
+            }
+            let o = match slot.episode.step_interruptible(action, &stop) {
                 Ok(o) => o,
+                Err(SimError::Interrupted { .. }) => return,
                 // Actions were checked; a remaining error is a divergence (a panic is a bug:
                 // it poisons the batch, see `run`).
                 Err(_) => Outcome {
@@ -515,9 +563,28 @@ impl BatchEnv {
             }
         };
         let pool = &self.pool;
-        run(&mut self.poisoned, || {
-            pool.install(|| rows.into_par_iter().for_each(job))
-        })
+        match watch {
+            None => run(&mut self.poisoned, || {
+                pool.install(|| rows.into_par_iter().for_each(job))
+            })?,
+            Some(interrupted) => run(&mut self.poisoned, || {
+                watched(pool, &stop, interrupted, || {
+                    rows.into_par_iter().for_each(job)
+                })
+            })?,
+        }
+        if stop.load(Ordering::Relaxed) {
+            for slot in &mut self.slots {
+                slot.interrupted = true;
+            }
+            let time = self.slots.first().map_or(0.0, |s| s.episode.sim().time());
+            return Err(SimError::Interrupted {
+                time,
+                what: format!("a step of {n} envs"),
+            }
+            .into());
+        }
+        Ok(())
     }
 
     /// Fails with [`BatchError::Internal`] once a step or reset has panicked.
@@ -573,6 +640,7 @@ impl BatchEnv {
             slot.index = saved.index;
             slot.pending_reset = saved.pending_reset;
             slot.final_divergence = None;
+            slot.interrupted = false;
             slot.episode
                 .set_state(saved.episode)
                 .map_err(|e| in_env(env, e))?;
@@ -598,6 +666,7 @@ impl BatchEnv {
 
     /// [`BatchEnv::state`] behind a header ([`state_format`], kind [`StateKind::Batch`]).
     pub fn save(&self) -> Result<Vec<u8>> {
+        self.check_consistent()?;
         let hash = self.config_hash()?;
         let n = self.slots.len() as u64;
         Ok(
@@ -688,6 +757,47 @@ fn restart(slot: &mut Slot, env: u64, n: u64, schedule: &WakeSchedule) -> Option
     }
 }
 
+/// Longest time the calling thread of [`BatchEnv::step_interruptible`] waits between two
+/// calls of its interruption check.
+pub const WATCH_INTERVAL: Duration = Duration::from_millis(10);
+
+/// Runs `job` on `pool` while the calling thread asks `interrupted()` every [`WATCH_INTERVAL`]
+/// and sets `stop` once it says so; returns when the job has finished (a panic in the job is
+/// resumed here, after it has finished).
+fn watched(
+    pool: &rayon::ThreadPool,
+    stop: &AtomicBool,
+    interrupted: &mut dyn FnMut() -> bool,
+    job: impl FnOnce() + Send,
+) {
+    /// Marks the job finished and wakes the waiting thread, also when the job panics.
+    struct Finished<'a> {
+        done: &'a AtomicBool,
+        waiter: std::thread::Thread,
+    }
+    impl Drop for Finished<'_> {
+        fn drop(&mut self) {
+            self.done.store(true, Ordering::Release);
+            self.waiter.unpark();
+        }
+    }
+    let done = AtomicBool::new(false);
+    let waiter = std::thread::current();
+    pool.in_place_scope(|scope| {
+        let done = &done;
+        scope.spawn(move |_| {
+            let _finished = Finished { done, waiter };
+            job();
+        });
+        while !done.load(Ordering::Acquire) {
+            std::thread::park_timeout(WATCH_INTERVAL);
+            if !done.load(Ordering::Acquire) && !stop.load(Ordering::Relaxed) && interrupted() {
+                stop.store(true, Ordering::Relaxed);
+            }
+        }
+    });
+}
+
 /// Runs a parallel job; a panic in it (a bug, never a divergence) poisons the batch and becomes
 /// [`BatchError::Internal`] with the panic's message.
 fn run(poisoned: &mut Option<String>, job: impl FnOnce()) -> Result<()> {
@@ -728,4 +838,41 @@ fn check_len(what: &'static str, found: usize, expected: usize) -> Result<()> {
         });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_panic_in_a_job_is_an_internal_error_that_poisons_the_batch() {
+        let mut poisoned = None;
+        let err = run(&mut poisoned, || panic!("index out of bounds")).unwrap_err();
+        assert!(
+            matches!(&err, BatchError::Internal(m) if m.contains("a bug") && m.contains("index out of bounds")),
+            "{err}"
+        );
+        assert!(poisoned.is_some());
+        let mut clean = None;
+        run(&mut clean, || {}).unwrap();
+        assert!(clean.is_none());
+    }
+
+    #[test]
+    fn a_panic_in_a_watched_job_is_resumed_after_it_finished() {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let stop = AtomicBool::new(false);
+        let mut poisoned = None;
+        let err = run(&mut poisoned, || {
+            watched(&pool, &stop, &mut || false, || {
+                std::thread::sleep(Duration::from_millis(30));
+                panic!("late bug")
+            })
+        })
+        .unwrap_err();
+        assert!(err.to_string().contains("late bug"), "{err}");
+    }
 }

@@ -22,6 +22,13 @@ pub enum BatchError {
         /// Env index.
         env: usize,
     },
+    /// A step of a batch whose env `env` was part-way through an interrupted step
+    /// ([`crate::BatchEnv::step_interruptible`]).
+    #[error("env {env}: a step of this batch was interrupted part-way; reset() it (or set_state()) before stepping or saving again")]
+    Interrupted {
+        /// Env index.
+        env: usize,
+    },
     /// A buffer or input has the wrong length.
     #[error("`{what}` has {found} values, expected {expected}")]
     Shape {

@@ -69,3 +69,99 @@ fn construction_stops_when_interrupted() {
     );
     assert_eq!(calls, 6);
 }
+
+fn quick() -> EnvConfig {
+    let mut c = EnvConfig {
+        capture_window: 2.0,
+        ..EnvConfig::default()
+    };
+    c.initial.settle_time = 2.0;
+    c
+}
+
+#[test]
+fn an_interruptible_step_is_bitwise_the_plain_step() {
+    let make =
+        || BatchEnv::new(quick().validated().unwrap(), 3, 7, Autoreset::SameStep, 2).unwrap();
+    let (mut a, mut b) = (make(), make());
+    let actions: Vec<f32> = (0..3 * 4).map(|k| ((k % 5) as f32 - 2.0) / 2.0).collect();
+    let (mut oa, mut ob) = (
+        accd_batch::StepOutputs::new(3),
+        accd_batch::StepOutputs::new(3),
+    );
+    for _ in 0..30 {
+        a.step(&actions, oa.buffers()).unwrap();
+        b.step_interruptible(&actions, ob.buffers(), &mut || false)
+            .unwrap();
+        assert_eq!(oa, ob);
+    }
+    assert_eq!(a.save().unwrap(), b.save().unwrap());
+}
+
+#[test]
+fn an_interrupted_step_stops_part_way_and_the_batch_refuses_until_reset() {
+    // 10 s agent steps of 1000 physics steps each: a step takes far longer than one check
+    // interval, so the check runs while the envs are part-way through it.
+    let mut c = quick();
+    c.agent_step = 10.0;
+    c.capture_window = 20.0;
+    let mut env =
+        BatchEnv::new(c.clone().validated().unwrap(), 2, 1, Autoreset::SameStep, 1).unwrap();
+    let actions = [0.0f32; 8];
+    let mut out = accd_batch::StepOutputs::new(2);
+    let mut calls = 0;
+    let start = std::time::Instant::now();
+    let err = env
+        .step_interruptible(&actions, out.buffers(), &mut || {
+            calls += 1;
+            true
+        })
+        .unwrap_err();
+    assert_eq!(calls, 1);
+    assert!(
+        matches!(err, BatchError::Sim(SimError::Interrupted { .. })),
+        "{err}"
+    );
+    let time = env.episode(0).unwrap().sim().time();
+    assert!(time > 0.0 && time < 10.0, "t = {time}"); // stopped part-way
+    assert!(start.elapsed() < std::time::Duration::from_secs(1));
+    for e in [
+        env.step(&actions, out.buffers()).unwrap_err(),
+        env.save().unwrap_err(),
+    ] {
+        assert!(
+            matches!(e, BatchError::Interrupted { env: 0 }) && e.to_string().contains("reset()"),
+            "{e}"
+        );
+    }
+    let mut reset = accd_batch::StepOutputs::new(2);
+    env.reset(
+        accd_batch::SeedSpec::Base(1),
+        Some(&[true, false]),
+        accd_batch::ResetBuffers {
+            obs: &mut reset.obs,
+            wake_seed: &mut reset.wake_seed,
+        },
+    )
+    .unwrap();
+    assert!(matches!(
+        env.step(&actions, out.buffers()).unwrap_err(),
+        BatchError::Interrupted { env: 1 }
+    ));
+    env.reset(
+        accd_batch::SeedSpec::Base(1),
+        None,
+        accd_batch::ResetBuffers {
+            obs: &mut reset.obs,
+            wake_seed: &mut reset.wake_seed,
+        },
+    )
+    .unwrap();
+    env.save().unwrap();
+    // after the reset the batch runs as a fresh one does
+    let mut fresh = BatchEnv::new(c.validated().unwrap(), 2, 1, Autoreset::SameStep, 1).unwrap();
+    let mut out2 = accd_batch::StepOutputs::new(2);
+    env.step(&actions, out.buffers()).unwrap();
+    fresh.step(&actions, out2.buffers()).unwrap();
+    assert_eq!(out, out2);
+}

@@ -60,6 +60,18 @@ impl Buffers {
     }
 }
 
+/// A write borrow of `array`; an error (never a panic) if it cannot be had, which
+/// [`PyBatchEnv::next_buffers`] rules out by replacing arrays that are not writable.
+fn writable<'py, T: numpy::Element, D: numpy::ndarray::Dimension>(
+    array: &Bound<'py, numpy::PyArray<T, D>>,
+) -> PyResult<numpy::PyReadwriteArray<'py, T, D>> {
+    array.try_readwrite().map_err(|e| {
+        pyo3::exceptions::PyRuntimeError::new_err(format!(
+            "internal error (a bug, please report it): an output array is not writable ({e})"
+        ))
+    })
+}
+
 /// N In-Air Capturing episodes stepped by one call (internal; use ``accd_gym.AccdVecEnv`` or
 /// ``gymnasium.make_vec("accd_gym/InAirCapture-v0")``).
 ///
@@ -165,6 +177,16 @@ impl PyBatchEnv {
             return Err(e);
         }
         let inner = built.py_err()?;
+        if let Some(why) = &inner.equilibrium().outside_limits {
+            let message = std::ffi::CString::new(why.as_str())
+                .map_err(|e| raise(Kind::Config, e.to_string()))?;
+            PyErr::warn(
+                py,
+                &py.get_type::<pyo3::exceptions::PyUserWarning>(),
+                &message,
+                2,
+            )?;
+        }
         let n = inner.num_envs();
         Ok(PyBatchEnv {
             inner,
@@ -220,8 +242,8 @@ impl PyBatchEnv {
         let obs = b.obs.bind(py).clone();
         let wake = b.wake_seed.bind(py).clone();
         {
-            let mut o = obs.readwrite();
-            let mut w = wake.readwrite();
+            let mut o = writable(&obs)?;
+            let mut w = writable(&wake)?;
             let (o, w) = (o.as_slice_mut()?, w.as_slice_mut()?);
             let inner = &mut self.inner;
             py.detach(|| {
@@ -271,14 +293,14 @@ impl PyBatchEnv {
             b.autoreset.bind(py).clone(),
         );
         {
-            let mut obs = arrays.0.readwrite();
-            let mut reward = arrays.1.readwrite();
-            let mut terminated = arrays.2.readwrite();
-            let mut truncated = arrays.3.readwrite();
-            let mut final_obs = arrays.4.readwrite();
-            let mut info = arrays.5.readwrite();
-            let mut wake = arrays.6.readwrite();
-            let mut reset = arrays.7.readwrite();
+            let mut obs = writable(&arrays.0)?;
+            let mut reward = writable(&arrays.1)?;
+            let mut terminated = writable(&arrays.2)?;
+            let mut truncated = writable(&arrays.3)?;
+            let mut final_obs = writable(&arrays.4)?;
+            let mut info = writable(&arrays.5)?;
+            let mut wake = writable(&arrays.6)?;
+            let mut reset = writable(&arrays.7)?;
             let buffers = StepBuffers {
                 obs: obs.as_slice_mut()?,
                 reward: reward.as_slice_mut()?,
@@ -290,7 +312,13 @@ impl PyBatchEnv {
                 autoreset: reset.as_slice_mut()?,
             };
             let inner = &mut self.inner;
-            py.detach(|| inner.step(a, buffers)).py_err()?;
+            let mut check = SignalCheck::new();
+            let result =
+                py.detach(|| inner.step_interruptible(a, buffers, &mut || check.interrupted()));
+            if let Some(e) = check.take() {
+                return Err(e);
+            }
+            result.py_err()?;
         }
         PyTuple::new(
             py,
@@ -347,6 +375,7 @@ impl PyBatchEnv {
         seeded: bool,
     ) -> PyResult<Bound<'py, PyBytes>> {
         let kind = parse_kind(kind)?;
+        self.inner.check_consistent().py_err()?;
         let hash = self.inner.config_hash().py_err()?;
         let state = EnvState {
             needs_reset,

@@ -107,7 +107,8 @@ impl ToPy for BatchError {
             BatchError::Sim(e) => e.kind(),
             BatchError::Action { .. }
             | BatchError::Shape { .. }
-            | BatchError::ResetNeeded { .. } => Some(Kind::State),
+            | BatchError::ResetNeeded { .. }
+            | BatchError::Interrupted { .. } => Some(Kind::State),
             BatchError::Env { source, .. } => source.kind(),
             BatchError::Threads(_) => Some(Kind::Simulation),
             BatchError::Internal(_) => None,

@@ -182,7 +182,7 @@ pub fn parse_named<T: serde::de::DeserializeOwned>(text: &str) -> Result<T> {
                 Some((field, v)) => SimError::InvalidConfig {
                     field,
                     value: short(&v),
-                    allowed: message,
+                    allowed: format!("of its type: {message}"),
                 },
                 None => SimError::InvalidConfig {
                     field: "(document)".into(),

@@ -2,6 +2,7 @@
 //! equilibrium, agent steps of several physics steps, observation, reward and episode end.
 //! Nothing here allocates per step; divergence is an outcome, not a panic or a NaN.
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use accd_tether::TetherState;
@@ -32,6 +33,9 @@ pub struct Equilibrium {
     pub accd: AccdState,
     /// The ACCD's position, m (TA frame).
     pub position: V3,
+    /// Why episodes starting around this equilibrium would end at their first step (it breaks
+    /// an episode limit), if they would.
+    pub outside_limits: Option<String>,
 }
 
 impl Equilibrium {
@@ -62,15 +66,64 @@ impl Equilibrium {
                 });
             }
         }
-        let position = sim.snapshot()?.position;
+        let snapshot = sim.snapshot()?;
+        let outside_limits = outside_limits(config, &snapshot);
+        let position = snapshot.position;
         let mut tether = sim.tether_state().clone();
         tether.time = 0.0;
         Ok(Equilibrium {
             tether,
             accd: *sim.accd_state(),
             position,
+            outside_limits,
         })
     }
+}
+
+/// Why episodes of `config` starting around its open-loop equilibrium `s` would mostly end at
+/// once, if they would: the capture point farther than `limits.max_distance` from the boom tip's
+/// nominal place (the formation offset; along track the approach closes on the capture point),
+/// the ACCD tilted beyond `limits.max_tilt_deg`, or the attachment tension beyond the overload
+/// tension. The message names the limit and the equilibrium's value. (A warning, not an error:
+/// an unsettled start, a short `initial.settle_time`, is a legitimate choice in tests.)
+fn outside_limits(config: &EnvConfig, s: &Snapshot) -> Option<String> {
+    let boom = &config.boom;
+    let limits = &config.limits;
+    let along = if boom.approach_speed > 0.0 {
+        s.capture_point.x
+    } else {
+        boom.offset[0]
+    };
+    let nominal = Vector3::new(along, boom.offset[1], boom.offset[2]);
+    let distance = (s.capture_point - nominal).norm();
+    let tilt_deg = tilt(&s.attitude).to_degrees();
+    let overload = limits.overload_fraction * config.tether.breaking_tension;
+    let what = if distance > limits.max_distance {
+        format!(
+            "puts the capture point {distance:.2} m from the boom tip's nominal position \
+             (boom.offset), beyond limits.max_distance = {} m",
+            limits.max_distance
+        )
+    } else if tilt_deg > limits.max_tilt_deg {
+        format!(
+            "tilts the ACCD {tilt_deg:.2} deg, beyond limits.max_tilt_deg = {} deg",
+            limits.max_tilt_deg
+        )
+    } else if s.attachment_tension > overload {
+        format!(
+            "pulls {:.4e} N at the attachment, beyond the overload tension {overload:.4e} N \
+             (limits.overload_fraction = {} of tether.breaking_tension)",
+            s.attachment_tension, limits.overload_fraction
+        )
+    } else {
+        return None;
+    };
+    Some(format!(
+        "the open-loop equilibrium of this configuration (neutral flaps, after \
+         initial.settle_time = {} s) {what}: episodes start around it, so most end at their \
+         first step; relax that limit or change the configuration",
+        config.initial.settle_time
+    ))
 }
 
 /// What one agent step did.
@@ -206,6 +259,13 @@ impl Episode {
     /// One agent step with `action` (four flap commands in [-1, 1], clipped). A non-finite
     /// action is an error and changes nothing; so is stepping an episode that has ended.
     pub fn step(&mut self, action: &[f32]) -> Result<Outcome> {
+        self.step_interruptible(action, &AtomicBool::new(false))
+    }
+
+    /// [`Episode::step`], stopping with [`SimError::Interrupted`] before any physics step that
+    /// finds `stop` set. An interrupted step leaves the episode part-way through its agent step,
+    /// so it counts as ended ([`Episode::done`]): reset it (or restore a state) to go on.
+    pub fn step_interruptible(&mut self, action: &[f32], stop: &AtomicBool) -> Result<Outcome> {
         if action.len() != ACT_DIM {
             return Err(SimError::invalid_config(
                 "action",
@@ -239,7 +299,18 @@ impl Episode {
             distance: self.distance,
             ..Outcome::default()
         };
-        for _ in 0..self.substeps {
+        for k in 0..self.substeps {
+            if stop.load(Ordering::Relaxed) {
+                self.done = true;
+                return Err(SimError::Interrupted {
+                    time: self.sim.time(),
+                    what: format!(
+                        "agent step {} after {k} of its {} physics steps",
+                        self.steps + 1,
+                        self.substeps
+                    ),
+                });
+            }
             if let Err(e) = self.sim.step(command) {
                 self.diverge(e);
                 out.diverged = true;

@@ -65,3 +65,30 @@ fn no_gust_channels_keep_no_history() {
     assert_eq!(calm.history_bytes(1e-6), 0);
     assert!(TurbulenceConfig::default().history_slots(185.0) > 100);
 }
+
+#[test]
+fn an_equilibrium_outside_the_episode_limits_is_reported_naming_the_limit() {
+    use accd_sim::Equilibrium;
+    // issue 13: a tangential drag coefficient of 1 hangs the ACCD about 62 m from the boom tip
+    // (the default allows 60 m): every episode ended at its first step, silently.
+    let mut c = EnvConfig::default();
+    c.tether.tangential_drag_coefficient = 1.0;
+    let eq = Equilibrium::settle(&c.clone().validated().unwrap()).unwrap();
+    let why = eq.outside_limits.expect("reported");
+    assert!(
+        why.contains("limits.max_distance = 60") && why.contains("first step"),
+        "{why}"
+    );
+    c.limits.max_distance = 80.0;
+    let eq = Equilibrium::settle(&c.validated().unwrap()).unwrap();
+    assert_eq!(eq.outside_limits, None);
+    let mut c = EnvConfig::default();
+    c.limits.overload_fraction = 1e-3; // 550 N: below the default's 2.9 kN
+    let eq = Equilibrium::settle(&c.validated().unwrap()).unwrap();
+    assert!(eq
+        .outside_limits
+        .unwrap()
+        .contains("limits.overload_fraction = 0.001"));
+    let eq = Equilibrium::settle(&EnvConfig::default().validated().unwrap()).unwrap();
+    assert_eq!(eq.outside_limits, None);
+}
