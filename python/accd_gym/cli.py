@@ -299,7 +299,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=_seed, default=None,
                    help="base seed of initial conditions and RLV motion (default: the evaluation's, 20240607)")
     p.add_argument("--num-envs", type=_positive("--num-envs"), default=16,
-                   help="parallel episodes (default 16, as evaluate: episode k is evaluate's episode k)")
+                   help="parallel episodes, the batch the policy sees (default 16, as evaluate: episode k is evaluate's episode k)")
     p.add_argument("--num-threads", type=_nonnegative("--num-threads"), default=0,
                    help="threads stepping the envs (default 0: one per core)")
     p.add_argument("--env", help="environment config overrides as JSON")
