@@ -64,7 +64,7 @@ impl PyEnvConfig {
     fn __repr__(&self) -> String {
         format!(
             "EnvConfig(<{} segments, {} s window, agent step {} s>)",
-            self.inner.tether.segments, self.inner.capture_window, self.inner.agent_step
+            self.inner.physics.tether.segments, self.inner.capture_window, self.inner.agent_step
         )
     }
 }

@@ -134,8 +134,8 @@ impl Episode {
             start: equilibrium.tether.clone(),
             substeps: config.substeps(),
             total_steps: config.episode_steps(),
-            flap_limit: config.accd.flap_limit_deg.to_radians(),
-            overload_tension: config.limits.overload_fraction * config.tether.breaking_tension,
+            flap_limit: config.physics.accd.flap_limit_deg.to_radians(),
+            overload_tension: config.limits.overload_fraction * config.physics.tether.breaking_tension,
             config,
             equilibrium,
             sim,
@@ -156,7 +156,7 @@ impl Episode {
     pub fn reset(&mut self, seeds: Seeds) -> Result<()> {
         let init = &self.config.initial;
         let mut stream = Stream::new(seeds.initial, INITIAL_STREAM);
-        let length = self.config.tether.length;
+        let length = self.config.physics.tether.length;
         let d_psi = stream.range(-1.0, 1.0) * init.offset[0] / length;
         let d_phi = stream.range(-1.0, 1.0) * init.offset[1] / length;
         let max_angle = init.attitude_deg.to_radians();
@@ -167,7 +167,7 @@ impl Episode {
         let eq = &self.equilibrium;
         self.start.q.copy_from_slice(&eq.tether.q);
         self.start.qd.copy_from_slice(&eq.tether.qd);
-        for k in 0..self.config.tether.segments {
+        for k in 0..self.config.physics.tether.segments {
             self.start.q[1 + 2 * k] += d_phi;
             self.start.q[2 + 2 * k] += d_psi;
         }
@@ -314,7 +314,7 @@ impl Episode {
     /// False for a state no flight could reach: the ACCD faster than twice the airspeed
     /// relative to the aircraft, or spinning faster than 1000 rad/s (a diverging integration).
     fn plausible(&self, s: &Snapshot) -> bool {
-        s.velocity.norm() <= 2.0 * self.config.aircraft.airspeed && s.omega.norm() <= 1e3
+        s.velocity.norm() <= 2.0 * self.config.physics.aircraft.airspeed && s.omega.norm() <= 1e3
     }
 
     fn diverge(&mut self, e: SimError) {

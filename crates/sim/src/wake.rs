@@ -97,6 +97,7 @@ use std::path::Path;
 use std::sync::{Arc, OnceLock};
 
 use nalgebra::Vector3;
+use accd_spec::Fields;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, SimError};
@@ -713,60 +714,39 @@ pub enum AirSampling {
     PerStep,
 }
 
-/// Configuration of the mean wake.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct WakeConfig {
-    /// Whether there is a wake at all. Default true. When false the air is free stream (and there
-    /// is no wake turbulence, k = 0).
-    pub enabled: bool,
-    /// TA angle of attack, deg, within the angles of the table pair ([0, 8] for the default
-    /// tables). Default 8 (the paper's high-angle-of-attack case, the hardest).
-    pub alpha_deg: f64,
-    /// Position of the tether attachment (the TA frame's origin) relative to the TA's nose, in the
-    /// TA frame (x forward, y starboard, z down), m; each component in [-1000, 1000].
-    /// Default [-60, 0, 0]: on the fuselage axis 60 m behind the nose (an assumption).
-    pub attachment_from_nose_m: [f64; 3],
-    /// User tables (JSON files); `None` (the default) uses the analytic model.
-    pub tables: Option<WakeTableFiles>,
-    /// Where the tether's segments sample the wake and its turbulence: `"per_stage"` (default)
-    /// or `"per_step"` ([`AirSampling`]).
-    pub sampling: AirSampling,
-}
-
-impl Default for WakeConfig {
-    fn default() -> Self {
-        WakeConfig {
-            enabled: true,
-            alpha_deg: 8.0,
-            attachment_from_nose_m: DEFAULT_ATTACHMENT_FROM_NOSE_M,
-            tables: None,
-            sampling: AirSampling::PerStage,
-        }
+accd_spec::config_struct! {
+    /// Configuration of the mean wake.
+    #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+    #[serde(deny_unknown_fields, default)]
+    pub struct WakeConfig {
+        /// When false the air is free stream (and there is no wake turbulence, k = 0).
+        pub enabled: bool = true, "", "", "whether there is a wake at all";
+        /// 8 is the paper's high-angle-of-attack case, the hardest. Checked against the tables'
+        /// angles by [`Wake::new`].
+        pub alpha_deg: f64 = 8.0, "deg", "",
+            "TA angle of attack, within the angles of the table pair ([0, 8] for the default tables)";
+        /// In the TA frame (x forward, y starboard, z down); the default, on the fuselage axis
+        /// 60 m behind the nose, is an assumption.
+        pub attachment_from_nose_m: [f64; 3] = DEFAULT_ATTACHMENT_FROM_NOSE_M, "m", "[-1000, 1000]",
+            "position of the tether attachment (the TA frame's origin) relative to the TA's nose";
+        pub tables: Option<WakeTableFiles> = None, "", "",
+            "user wake tables, {\"low\": path, \"high\": path} (None: the analytic model)";
+        pub sampling: AirSampling = AirSampling::PerStage, "", "",
+            "where the tether's segments sample the wake and its turbulence: \"per_stage\" or \"per_step\"";
     }
 }
 
+accd_spec::no_range!(WakeTableFiles, AirSampling);
+
+/// Each field's range is all there is to check here (the angle is checked against the tables
+/// when they are loaded).
+impl accd_spec::Rules for WakeConfig {}
+
 impl WakeConfig {
-    /// Checks the values that do not depend on the tables (the angle is checked against the
-    /// tables by [`Wake::new`]). Errors name the field as `wake.<field>`.
+    /// Checks the values against their declared ranges (the angle is checked against the tables
+    /// by [`Wake::new`]). Errors name the field as `wake.<field>`.
     pub fn validate(&self) -> Result<()> {
-        if !self.alpha_deg.is_finite() {
-            return Err(SimError::invalid_config(
-                "wake.alpha_deg",
-                self.alpha_deg,
-                "a finite angle within the tables' angles ([0, 8] deg by default)",
-            ));
-        }
-        for (i, &c) in self.attachment_from_nose_m.iter().enumerate() {
-            if !(c.is_finite() && c.abs() <= 1000.0) {
-                return Err(SimError::invalid_config(
-                    &format!("wake.attachment_from_nose_m[{i}]"),
-                    c,
-                    "[-1000, 1000] m",
-                ));
-            }
-        }
-        Ok(())
+        Ok(self.check_fields("wake")?)
     }
 
     /// The table pair this config asks for: the files, or the shared analytic default.
