@@ -39,7 +39,10 @@ pub fn check_budget(config: &EnvConfig, num_envs: usize) -> Result<(), SimError>
     }
     let mib = |b: u64| b as f64 / (1u64 << 20) as f64;
     if per_env > budget {
-        let history = config.physics.turbulence.history_bytes(config.physics.aircraft.airspeed) as u64;
+        let history = config
+            .physics
+            .turbulence
+            .history_bytes(config.physics.aircraft.airspeed) as u64;
         let (field, value) = if history * 2 > per_env {
             (
                 "turbulence.history_distance_m",

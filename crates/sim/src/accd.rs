@@ -12,8 +12,8 @@
 //! Four flaps (right, left, top, bottom; see [`crate::aero`] for their signs) follow their
 //! commands through a first-order lag with a rate limit and hard stops at +-`flap_limit_deg`.
 
-use nalgebra::{UnitQuaternion, Vector3};
 use accd_spec::{join, out_of_range, Fields, OutOfRange, Rules};
+use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::aero::AeroModel;

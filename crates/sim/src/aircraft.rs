@@ -6,8 +6,8 @@
 //! `V(t) = V0 + integral of a` (relative to the air mass), the free stream in the TA frame is
 //! `-V(t)`, and every mass feels the apparent force `-m a(t)`.
 
-use nalgebra::Vector3;
 use accd_spec::{join, out_of_range, Fields, OutOfRange, Rules};
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use crate::error::Result;
@@ -142,8 +142,13 @@ mod tests {
     #[test]
     fn airspeed_check_is_the_declared_one() {
         assert_eq!(AIRSPEED.name, "airspeed");
-        let e = check_airspeed("airspeed_mps", 401.0).unwrap_err().to_string();
-        assert!(e.contains("airspeed_mps") && e.contains("(0, 400] m/s"), "{e}");
+        let e = check_airspeed("airspeed_mps", 401.0)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("airspeed_mps") && e.contains("(0, 400] m/s"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -22,8 +22,8 @@
 //! tolerates a decimetre-scale miss; more closing speed would load the lock and the tether
 //! abruptly).
 
-use nalgebra::Vector3;
 use accd_spec::Fields;
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use crate::error::Result;

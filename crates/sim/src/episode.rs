@@ -135,7 +135,8 @@ impl Episode {
             substeps: config.substeps(),
             total_steps: config.episode_steps(),
             flap_limit: config.physics.accd.flap_limit_deg.to_radians(),
-            overload_tension: config.limits.overload_fraction * config.physics.tether.breaking_tension,
+            overload_tension: config.limits.overload_fraction
+                * config.physics.tether.breaking_tension,
             config,
             equilibrium,
             sim,

@@ -460,7 +460,10 @@ impl EnvConfig {
         // State, start state, RK4 stages and spares (about 20 vectors), and the model's
         // per-segment workspace (about 60 values a segment).
         let tether = (20 * dofs + 60 * self.physics.tether.segments) * std::mem::size_of::<f64>();
-        let turbulence = self.physics.turbulence.history_bytes(self.physics.aircraft.airspeed);
+        let turbulence = self
+            .physics
+            .turbulence
+            .history_bytes(self.physics.aircraft.airspeed);
         const FIXED: usize = 16 << 10;
         turbulence.saturating_add(tether).saturating_add(FIXED)
     }
@@ -499,6 +502,7 @@ pub fn tilt(attitude: &nalgebra::UnitQuaternion<f64>) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::accd::AccdConfig;
 
     #[test]
     fn defaults_validate_and_derive_the_step_counts() {
@@ -524,6 +528,173 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("capture_windw"), "{e}");
+    }
+
+    /// The keys of today's documents, in the order they are written (the state header hashes
+    /// this JSON: the order must not change).
+    const KEYS: [&str; 13] = [
+        "tether",
+        "accd",
+        "aircraft",
+        "boom",
+        "wake",
+        "turbulence",
+        "agent_step",
+        "capture_window",
+        "initial",
+        "reward",
+        "limits",
+        "wake_seed",
+        "wake_seeds",
+    ];
+
+    #[test]
+    fn env_config_reads_and_writes_flat_keys() {
+        let text = serde_json::to_string(&EnvConfig::default()).unwrap();
+        let doc: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let keys: Vec<&str> = doc
+            .as_object()
+            .unwrap()
+            .keys()
+            .map(|k| k.as_str())
+            .collect();
+        let mut sorted = KEYS.to_vec();
+        sorted.sort();
+        assert_eq!(keys, sorted, "serde_json's map is sorted");
+        assert!(text.starts_with(r#"{"tether":{"segments":30,"#), "{text}");
+        let order: Vec<usize> = KEYS
+            .iter()
+            .map(|k| text.find(&format!("\"{k}\":")).unwrap())
+            .collect();
+        assert!(order.windows(2).all(|w| w[0] < w[1]), "{text}");
+        let back: EnvConfig = serde_json::from_str(&text).unwrap();
+        assert_eq!(back, EnvConfig::default());
+        let c = EnvConfig::from_json(
+            r#"{"tether": {"segments": 20}, "reward": {"effort": 0.1}, "capture_window": 30}"#,
+        )
+        .unwrap();
+        assert_eq!(c.physics.tether.segments, 20);
+        assert_eq!(c.reward.effort, 0.1);
+        assert_eq!(c.capture_window, 30.0);
+        assert_eq!(c.physics.accd, AccdConfig::default());
+    }
+
+    #[test]
+    fn env_config_refuses_unknown_and_repeated_keys_by_dotted_path() {
+        for (doc, path) in [
+            (r#"{"capture_windw": 3}"#, "capture_windw"),
+            (r#"{"tether": {"lenght": 3}}"#, "tether.lenght"),
+            (r#"{"reward": {"effort": 0.1, "efort": 1}}"#, "reward.efort"),
+            (r#"{"wake": {"enabled": 3}}"#, "wake.enabled"),
+            (r#"{"boom": {"offset": [0, 1]}}"#, "boom.offset"),
+        ] {
+            let e = EnvConfig::from_json(doc).unwrap_err().to_string();
+            assert!(e.contains(&format!("`{path}`")), "{doc}: {e}");
+        }
+        let e = EnvConfig::from_json(r#"{"capture_window": 30, "capture_window": 40}"#)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("duplicate field `capture_window`"), "{e}");
+        let e = EnvConfig::from_json(r#"{"nope": 1}"#)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("`tether`") && e.contains("`wake_seeds`"), "{e}");
+    }
+
+    /// Every declared range reads, only numbers have one, sections have neither unit nor range.
+    #[test]
+    fn declarations_are_well_formed() {
+        let rows = accd_spec::walk(EnvConfig::FIELDS);
+        assert!(rows.len() > 70, "{}", rows.len());
+        let mut keys: Vec<&str> = rows.iter().map(|(k, _)| k.as_str()).collect();
+        keys.sort();
+        keys.dedup();
+        assert_eq!(keys.len(), rows.len());
+        for (key, f) in &rows {
+            assert!(
+                !f.description.is_empty() && !f.description.ends_with('.'),
+                "{key}"
+            );
+            if !f.range.is_empty() {
+                accd_spec::Range::parse(f.range).unwrap_or_else(|e| panic!("{key}: {e}"));
+                assert!(
+                    !f.unit.is_empty(),
+                    "{key}: a number has a unit (\"-\" for none)"
+                );
+            }
+            if !f.nested.is_empty() {
+                assert!(f.unit.is_empty() && f.range.is_empty(), "{key}");
+            }
+        }
+    }
+
+    /// Each declared range is what validation enforces: a value just outside it (each number of
+    /// the configuration in turn) is refused, naming the dotted field.
+    #[test]
+    fn every_declared_range_is_enforced() {
+        let default = serde_json::to_value(EnvConfig::default()).unwrap();
+        let mut checked = 0;
+        for (key, f) in accd_spec::walk(EnvConfig::FIELDS) {
+            if f.range.is_empty() {
+                continue;
+            }
+            let r = accd_spec::Range::parse(f.range).unwrap();
+            let (lo, hi) = match (r.lo, r.hi) {
+                (
+                    accd_spec::Bound::Open(lo) | accd_spec::Bound::Closed(lo),
+                    accd_spec::Bound::Open(hi) | accd_spec::Bound::Closed(hi),
+                ) => (lo, hi),
+            };
+            for outside in [hi + hi.abs() + 1.0, lo - lo.abs() - 1.0] {
+                if !outside.is_finite() {
+                    continue;
+                }
+                let mut doc = default.clone();
+                let mut slot = &mut doc;
+                for part in key.split('.') {
+                    slot = slot.get_mut(part).unwrap_or_else(|| panic!("{key}"));
+                }
+                let field = match slot {
+                    serde_json::Value::Array(a) => {
+                        a[0] = outside.into();
+                        format!("{key}[0]")
+                    }
+                    serde_json::Value::Null => {
+                        *slot = serde_json::json!([outside, outside, outside]);
+                        format!("{key}[0]")
+                    }
+                    other => {
+                        *other = if other.is_u64() {
+                            (outside.max(0.0) as u64).into()
+                        } else {
+                            outside.into()
+                        };
+                        key.clone()
+                    }
+                };
+                if slot_is_unsigned_below_zero(&default, &key, outside) {
+                    continue;
+                }
+                let e = EnvConfig::from_json(&doc.to_string())
+                    .unwrap_err()
+                    .to_string();
+                assert!(
+                    e.contains(&format!("`{field}`")) && e.contains(f.range),
+                    "{key} = {outside}: {e}"
+                );
+                checked += 1;
+            }
+        }
+        assert!(checked > 60, "{checked}");
+    }
+
+    /// A count (unsigned in JSON) cannot be negative: nothing to check below its range.
+    fn slot_is_unsigned_below_zero(default: &serde_json::Value, key: &str, v: f64) -> bool {
+        let mut slot = default;
+        for part in key.split('.') {
+            slot = &slot[part];
+        }
+        slot.is_u64() && v < 0.0
     }
 
     #[test]

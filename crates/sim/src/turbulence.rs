@@ -74,8 +74,8 @@
 //! `advance` draws `3 * lanes (+ 3)` Gaussians per grid step (234 with the defaults);
 //! [`Turbulence::sample`] reads 24 (+ 6) ring entries. Neither allocates.
 
-use nalgebra::Vector3;
 use accd_spec::{join, out_of_range, Fields, OutOfRange, Range, Rules};
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, SimError};

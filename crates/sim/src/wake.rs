@@ -96,8 +96,8 @@
 use std::path::Path;
 use std::sync::{Arc, OnceLock};
 
-use nalgebra::Vector3;
 use accd_spec::Fields;
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, SimError};

@@ -39,6 +39,9 @@ pub struct FieldSpec {
     pub range: &'static str,
     /// One line saying what the field is.
     pub description: &'static str,
+    /// The default as written in the declaration (Rust source text; tables show the default's
+    /// JSON where the configuration writes one).
+    pub default: &'static str,
     /// The fields of a section (a field whose type is itself a configuration struct); empty for
     /// a value.
     pub nested: &'static [FieldSpec],
@@ -125,7 +128,13 @@ impl Range {
         if lo > hi {
             return Err(bad("its lower end is above its upper end"));
         }
-        let end = |open: bool, v: f64| if open { Bound::Open(v) } else { Bound::Closed(v) };
+        let end = |open: bool, v: f64| {
+            if open {
+                Bound::Open(v)
+            } else {
+                Bound::Closed(v)
+            }
+        };
         Ok(Range {
             lo: end(open_lo, lo),
             hi: end(open_hi, hi),
@@ -151,7 +160,11 @@ impl Range {
         if self.contains(value) {
             Ok(())
         } else {
-            Err(out_of_range(field, value, with_unit(&self.to_string(), unit)))
+            Err(out_of_range(
+                field,
+                value,
+                with_unit(&self.to_string(), unit),
+            ))
         }
     }
 }
@@ -219,10 +232,16 @@ pub fn check_number(path: &str, value: f64, spec: &FieldSpec) -> Result<(), OutO
         };
     }
     match Range::parse(spec.range) {
-        Ok(range) => range.check(path, value, spec.unit),
+        // The message carries the range as declared ("(0, 1e12]").
+        Ok(range) if range.contains(value) => Ok(()),
+        Ok(_) => Err(out_of_range(path, value, spec.allowed())),
         // Every declaration is parsed by the crates' tests; this is only reachable by a typo
         // that those tests would have caught.
-        Err(why) => Err(out_of_range(path, value, format!("(bad declaration: {why})"))),
+        Err(why) => Err(out_of_range(
+            path,
+            value,
+            format!("(bad declaration: {why})"),
+        )),
     }
 }
 
@@ -444,6 +463,7 @@ macro_rules! config_struct {
                     unit: "",
                     range: "",
                     description: "",
+                    default: "",
                     nested: <$flat_ty as $crate::Fields>::FIELDS,
                 },
                 $($crate::FieldSpec {
@@ -451,6 +471,7 @@ macro_rules! config_struct {
                     unit: $unit,
                     range: $range,
                     description: $desc,
+                    default: stringify!($default),
                     nested: <$fty as $crate::Field>::NESTED,
                 },)*
             ];
@@ -465,6 +486,7 @@ macro_rules! config_struct {
                         unit: $unit,
                         range: $range,
                         description: $desc,
+                        default: stringify!($default),
                         nested: <$fty as $crate::Field>::NESTED,
                     },
                 )?;)*
@@ -556,6 +578,7 @@ macro_rules! config_struct {
                     unit: $unit,
                     range: $range,
                     description: $desc,
+                    default: stringify!($default),
                     nested: <$fty as $crate::Field>::NESTED,
                 },)*
             ];
@@ -569,6 +592,7 @@ macro_rules! config_struct {
                         unit: $unit,
                         range: $range,
                         description: $desc,
+                        default: stringify!($default),
                         nested: <$fty as $crate::Field>::NESTED,
                     },
                 )?;)*
@@ -668,8 +692,13 @@ mod tests {
         assert!(!r.contains(1000.0000001) && !r.contains(f64::NAN));
         let r = Range::parse("[-inf, 5)").unwrap();
         assert!(r.contains(-1e300) && !r.contains(f64::NEG_INFINITY) && !r.contains(5.0));
-        assert_eq!(Range::parse(" [1e-4, 0.1] ").unwrap(), Range::closed(1e-4, 0.1));
-        for bad in ["0, 1]", "(0, 1", "(0 1]", "(a, 1]", "(2, 1]", "(nan, 1]", ""] {
+        assert_eq!(
+            Range::parse(" [1e-4, 0.1] ").unwrap(),
+            Range::closed(1e-4, 0.1)
+        );
+        for bad in [
+            "0, 1]", "(0, 1", "(0 1]", "(a, 1]", "(2, 1]", "(nan, 1]", "",
+        ] {
             assert!(Range::parse(bad).is_err(), "{bad}");
         }
     }
@@ -681,6 +710,7 @@ mod tests {
             unit: "m",
             range: "(0, 5000]",
             description: "length",
+            default: "250.0",
             nested: &[],
         };
         let e = check_number("tether.length", -3.0, &spec).unwrap_err();
@@ -691,7 +721,14 @@ mod tests {
         let e = [1.0, 6000.0].check_field("x", &spec).unwrap_err();
         assert_eq!((e.field.as_str(), e.value.as_str()), ("x[1]", "6000"));
         let e = 0usize
-            .check_field("segments", &FieldSpec { range: "[1, 1000]", unit: "-", ..spec })
+            .check_field(
+                "segments",
+                &FieldSpec {
+                    range: "[1, 1000]",
+                    unit: "-",
+                    ..spec
+                },
+            )
             .unwrap_err();
         assert_eq!(e.allowed, "[1, 1000]");
         let free = FieldSpec { range: "", ..spec };
