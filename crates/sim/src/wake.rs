@@ -101,6 +101,7 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, SimError};
+use crate::interp::{Axis, Edge, Grid};
 
 /// Length of the towing aircraft L, m (paper section 2.2).
 pub const TA_LENGTH_M: f64 = 70.0;
@@ -138,99 +139,6 @@ pub struct WakeTableData {
     pub w: Vec<f64>,
     /// Turbulent kinetic energy, fraction of U_inf^2, >= 0; same layout.
     pub k: Vec<f64>,
-}
-
-/// One table axis with what makes locating a coordinate cheap.
-#[derive(Debug, Clone, PartialEq)]
-struct Axis {
-    values: Vec<f64>,
-    /// `Some((first, 1 / step))` when the axis is uniformly spaced (to 1e-9 of a step).
-    uniform: Option<(f64, f64)>,
-}
-
-impl Axis {
-    fn new(values: Vec<f64>) -> Axis {
-        let n = values.len();
-        let step = (values[n - 1] - values[0]) / (n - 1) as f64;
-        let is_uniform = values
-            .iter()
-            .enumerate()
-            .all(|(i, &v)| (v - (values[0] + i as f64 * step)).abs() <= 1e-9 * step);
-        Axis {
-            uniform: is_uniform.then(|| (values[0], 1.0 / step)),
-            values,
-        }
-    }
-
-    /// The cell `i` (values[i] <= x <= values[i + 1]) and the fraction within it, or `None` if
-    /// `x` is outside [first, last] (or NaN).
-    #[inline]
-    fn locate(&self, x: f64) -> Option<(usize, f64)> {
-        let v = &self.values;
-        let n = v.len();
-        if !(x >= v[0] && x <= v[n - 1]) {
-            return None;
-        }
-        let mut i = match self.uniform {
-            Some((first, inv_step)) => (((x - first) * inv_step) as usize).min(n - 2),
-            None => v.partition_point(|&a| a <= x).saturating_sub(1).min(n - 2),
-        };
-        // Guard against rounding in the uniform guess.
-        if x < v[i] && i > 0 {
-            i -= 1;
-        } else if x > v[i + 1] && i + 2 < n {
-            i += 1;
-        }
-        let f = ((x - v[i]) / (v[i + 1] - v[i])).clamp(0.0, 1.0);
-        Some((i, f))
-    }
-}
-
-/// A rectilinear 3D grid (x, y, z axes).
-#[derive(Debug, Clone, PartialEq)]
-struct Grid {
-    x: Axis,
-    y: Axis,
-    z: Axis,
-}
-
-/// A trilinear interpolation stencil: the first corner's flat index and the 8 corner weights.
-struct Stencil {
-    base: usize,
-    /// Flat-index offsets of the 8 corners.
-    offsets: [usize; 8],
-    weights: [f64; 8],
-}
-
-impl Grid {
-    fn len(&self) -> usize {
-        self.x.values.len() * self.y.values.len() * self.z.values.len()
-    }
-
-    #[inline]
-    fn stencil(&self, q: [f64; 3]) -> Option<Stencil> {
-        let (i, fx) = self.x.locate(q[0])?;
-        let (j, fy) = self.y.locate(q[1])?;
-        let (l, fz) = self.z.locate(q[2])?;
-        let nz = self.z.values.len();
-        let sy = nz;
-        let sx = self.y.values.len() * nz;
-        let (gx, gy, gz) = (1.0 - fx, 1.0 - fy, 1.0 - fz);
-        Some(Stencil {
-            base: i * sx + j * sy + l,
-            offsets: [0, 1, sy, sy + 1, sx, sx + 1, sx + sy, sx + sy + 1],
-            weights: [
-                gx * gy * gz,
-                gx * gy * fz,
-                gx * fy * gz,
-                gx * fy * fz,
-                fx * gy * gz,
-                fx * gy * fz,
-                fx * fy * gz,
-                fx * fy * fz,
-            ],
-        })
-    }
 }
 
 /// One validated wake table (one TA angle of attack). See the [module docs](self) for the
@@ -396,7 +304,10 @@ impl WakeTable {
     /// `(x / L, y / L, z / L)`, trilinearly interpolated; all zero outside the grid.
     pub fn sample(&self, x_over_l: f64, y_over_l: f64, z_over_l: f64) -> [f64; 4] {
         let mut out = [0.0; 4];
-        if let Some(s) = self.grid.stencil([x_over_l, y_over_l, z_over_l]) {
+        if let Some(s) = self
+            .grid
+            .stencil([x_over_l, y_over_l, z_over_l], Edge::Zero)
+        {
             let d = &self.data;
             for c in 0..8 {
                 let idx = s.base + s.offsets[c];
@@ -875,7 +786,7 @@ impl Wake {
             return WakeSample::default();
         };
         let pair = &*tables.inner;
-        let Some(s) = pair.low.grid.stencil(self.table_coordinates(p)) else {
+        let Some(s) = pair.low.grid.stencil(self.table_coordinates(p), Edge::Zero) else {
             return WakeSample::default();
         };
         let mut acc = [0.0; 8];

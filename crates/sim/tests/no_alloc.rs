@@ -7,9 +7,9 @@ use std::cell::Cell;
 use accd_sim::turbulence::AmbientTurbulence;
 mod support;
 
-use support::wake_field::{wake_field, WakeFieldConfig};
 use accd_tether::{reference, Surroundings, Tether};
 use nalgebra::Vector3;
+use support::wake_field::{wake_field, WakeFieldConfig};
 
 struct Counting;
 

@@ -5,9 +5,9 @@ use accd_sim::wake::WakeConfig;
 mod support;
 
 use accd_sim::SimError;
-use support::wake_field::{wake_field, WakeFieldConfig};
 use accd_tether::{reference, Surroundings, Tether};
 use nalgebra::Vector3;
+use support::wake_field::{wake_field, WakeFieldConfig};
 
 fn config(alpha_deg: f64, ambient: AmbientTurbulence) -> WakeFieldConfig {
     WakeFieldConfig {
