@@ -26,14 +26,14 @@ pub enum Edge {
     Zero,
 }
 
-/// The canonical cell of `x` in `[v[0], v[n - 1]]` (module docs), from a first guess.
+/// The canonical cell of `x` in `[v[0], v[n - 1]]` (module docs), from a first guess at most
+/// one cell off (a uniform axis's division; the binary search's is exact).
 #[inline]
 fn cell(v: &[f64], mut i: usize, x: f64) -> (usize, f64) {
     let n = v.len();
-    while i > 0 && x < v[i] {
+    if x < v[i] && i > 0 {
         i -= 1;
-    }
-    while i + 2 < n && x >= v[i + 1] {
+    } else if x >= v[i + 1] && i + 2 < n {
         i += 1;
     }
     (i, ((x - v[i]) / (v[i + 1] - v[i])).clamp(0.0, 1.0))
@@ -87,8 +87,10 @@ impl Axis {
     }
 
     /// Cell and fraction of `x` (module docs); beyond the ends (or NaN) as `edge` says:
-    /// [`Edge::Hold`] as [`locate`], [`Edge::Zero`] `None`.
-    #[inline]
+    /// [`Edge::Hold`] as [`locate`], [`Edge::Zero`] `None`. Always inlined: the edge is then a
+    /// constant of the caller (callgrind, `episode_probe 200 default`: 1.183e9 instructions
+    /// when called, 1.137e9 inlined).
+    #[inline(always)]
     pub fn locate(&self, x: f64, edge: Edge) -> Option<(usize, f64)> {
         let v = &self.values;
         let n = v.len();
