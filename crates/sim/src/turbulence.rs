@@ -276,7 +276,10 @@ impl TurbulenceConfig {
 }
 
 /// Position of a point on a 1D lane axis: the first lane, the fraction towards the second, and
-/// whether there is a second.
+/// whether there is a second. Not [`crate::interp::Axis`]: the lanes are a computed uniform
+/// grid (first lane and spacing, no stored points) that may have a single lane, and beyond the
+/// outer lanes a point takes the outer lane's gusts (a clamp, `Edge::Hold` in the table
+/// interpolator's terms); its values (the lane histories) live in the turbulence's ring buffer.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct LaneAxis {
     first: f64,

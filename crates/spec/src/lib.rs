@@ -426,7 +426,7 @@ macro_rules! config_struct {
     (
         $(#[$smeta:meta])*
         $svis:vis struct $name:ident {
-            .. $flat:ident : $flat_ty:ty;
+            $(.. $flat:ident : $flat_ty:ty;)?
             $(
                 $(#[$fmeta:meta])*
                 $fvis:vis $field:ident : $fty:ty = $default:expr, $unit:literal, $range:literal, $desc:literal;
@@ -435,8 +435,10 @@ macro_rules! config_struct {
     ) => {
         $(#[$smeta])*
         $svis struct $name {
-            #[doc = concat!("The keys of [`", stringify!($flat_ty), "`], written beside this struct's own (composed flat).")]
-            pub $flat: $flat_ty,
+            $(
+                #[doc = concat!("The keys of [`", stringify!($flat_ty), "`], written beside this struct's own (composed flat).")]
+                pub $flat: $flat_ty,
+            )?
             $(
                 #[doc = concat!(" ", $desc, ".")]
                 #[doc = ""]
@@ -450,7 +452,7 @@ macro_rules! config_struct {
         impl ::std::default::Default for $name {
             fn default() -> Self {
                 $name {
-                    $flat: ::std::default::Default::default(),
+                    $($flat: ::std::default::Default::default(),)?
                     $($field: $default,)*
                 }
             }
@@ -458,14 +460,14 @@ macro_rules! config_struct {
 
         impl $crate::Fields for $name {
             const FIELDS: &'static [$crate::FieldSpec] = &[
-                $crate::FieldSpec {
+                $($crate::FieldSpec {
                     name: "",
                     unit: "",
                     range: "",
-                    description: "",
+                    description: stringify!($flat),
                     default: "",
                     nested: <$flat_ty as $crate::Fields>::FIELDS,
-                },
+                },)?
                 $($crate::FieldSpec {
                     name: stringify!($field),
                     unit: $unit,
@@ -477,7 +479,7 @@ macro_rules! config_struct {
             ];
 
             fn check_fields(&self, prefix: &str) -> ::std::result::Result<(), $crate::OutOfRange> {
-                $crate::Fields::check_fields(&self.$flat, prefix)?;
+                $($crate::Fields::check_fields(&self.$flat, prefix)?;)?
                 $($crate::Field::check_field(
                     &self.$field,
                     &$crate::join(prefix, stringify!($field)),
@@ -498,9 +500,9 @@ macro_rules! config_struct {
                 key: &str,
                 map: &mut A,
             ) -> ::std::result::Result<bool, A::Error> {
-                if $crate::Fields::read_key(&mut self.$flat, key, map)? {
+                $(if $crate::Fields::read_key(&mut self.$flat, key, map)? {
                     return Ok(true);
-                }
+                })?
                 match key {
                     $(stringify!($field) => self.$field = map.next_value()?,)*
                     _ => return Ok(false),
@@ -512,7 +514,7 @@ macro_rules! config_struct {
                 &self,
                 map: &mut S,
             ) -> ::std::result::Result<(), S::Error> {
-                $crate::Fields::write_entries(&self.$flat, map)?;
+                $($crate::Fields::write_entries(&self.$flat, map)?;)?
                 $(map.serialize_entry(stringify!($field), &self.$field)?;)*
                 Ok(())
             }
@@ -527,8 +529,21 @@ macro_rules! config_struct {
             }
         }
 
+        $($crate::flat_serde!($name, $flat);)?
+    };
+}
+
+/// The serde `Serialize`/`Deserialize` of a [`config_struct!`] with a flat member (`$flat` names
+/// it only to make this expansion conditional on it).
+#[doc(hidden)]
+#[macro_export]
+macro_rules! flat_serde {
+    ($name:ident, $flat:ident) => {
         impl $crate::serde::Serialize for $name {
-            fn serialize<S: $crate::serde::Serializer>(&self, serializer: S) -> ::std::result::Result<S::Ok, S::Error> {
+            fn serialize<S: $crate::serde::Serializer>(
+                &self,
+                serializer: S,
+            ) -> ::std::result::Result<S::Ok, S::Error> {
                 use $crate::serde::ser::SerializeMap;
                 let mut map = serializer.serialize_map(None)?;
                 $crate::Fields::write_entries(self, &mut map)?;
@@ -537,95 +552,10 @@ macro_rules! config_struct {
         }
 
         impl<'de> $crate::serde::Deserialize<'de> for $name {
-            fn deserialize<D: $crate::serde::Deserializer<'de>>(deserializer: D) -> ::std::result::Result<Self, D::Error> {
+            fn deserialize<D: $crate::serde::Deserializer<'de>>(
+                deserializer: D,
+            ) -> ::std::result::Result<Self, D::Error> {
                 $crate::deserialize_flat(deserializer, stringify!($name))
-            }
-        }
-    };
-    (
-        $(#[$smeta:meta])*
-        $svis:vis struct $name:ident {
-            $(
-                $(#[$fmeta:meta])*
-                $fvis:vis $field:ident : $fty:ty = $default:expr, $unit:literal, $range:literal, $desc:literal;
-            )*
-        }
-    ) => {
-        $(#[$smeta])*
-        $svis struct $name {
-            $(
-                #[doc = concat!(" ", $desc, ".")]
-                #[doc = ""]
-                $(#[$fmeta])*
-                #[doc = ""]
-                #[doc = concat!(" Unit `", $unit, "`; range `", $range, "`; default `", stringify!($default), "`.")]
-                $fvis $field: $fty,
-            )*
-        }
-
-        impl ::std::default::Default for $name {
-            fn default() -> Self {
-                $name {
-                    $($field: $default,)*
-                }
-            }
-        }
-
-        impl $crate::Fields for $name {
-            const FIELDS: &'static [$crate::FieldSpec] = &[
-                $($crate::FieldSpec {
-                    name: stringify!($field),
-                    unit: $unit,
-                    range: $range,
-                    description: $desc,
-                    default: stringify!($default),
-                    nested: <$fty as $crate::Field>::NESTED,
-                },)*
-            ];
-
-            fn check_fields(&self, prefix: &str) -> ::std::result::Result<(), $crate::OutOfRange> {
-                $($crate::Field::check_field(
-                    &self.$field,
-                    &$crate::join(prefix, stringify!($field)),
-                    &$crate::FieldSpec {
-                        name: stringify!($field),
-                        unit: $unit,
-                        range: $range,
-                        description: $desc,
-                        default: stringify!($default),
-                        nested: <$fty as $crate::Field>::NESTED,
-                    },
-                )?;)*
-                $crate::Rules::check_rules(self, prefix)
-            }
-
-            fn read_key<'de, A: $crate::serde::de::MapAccess<'de>>(
-                &mut self,
-                key: &str,
-                map: &mut A,
-            ) -> ::std::result::Result<bool, A::Error> {
-                match key {
-                    $(stringify!($field) => self.$field = map.next_value()?,)*
-                    _ => return Ok(false),
-                }
-                Ok(true)
-            }
-
-            fn write_entries<S: $crate::serde::ser::SerializeMap>(
-                &self,
-                map: &mut S,
-            ) -> ::std::result::Result<(), S::Error> {
-                $(map.serialize_entry(stringify!($field), &self.$field)?;)*
-                Ok(())
-            }
-        }
-
-        impl $crate::Field for $name {
-            const NESTED: &'static [$crate::FieldSpec] = <$name as $crate::Fields>::FIELDS;
-            const NUMERIC: bool = false;
-
-            fn check_field(&self, path: &str, _spec: &$crate::FieldSpec) -> ::std::result::Result<(), $crate::OutOfRange> {
-                $crate::Fields::check_fields(self, path)
             }
         }
     };
