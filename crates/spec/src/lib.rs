@@ -480,18 +480,12 @@ macro_rules! config_struct {
 
             fn check_fields(&self, prefix: &str) -> ::std::result::Result<(), $crate::OutOfRange> {
                 $($crate::Fields::check_fields(&self.$flat, prefix)?;)?
-                $($crate::Field::check_field(
-                    &self.$field,
-                    &$crate::join(prefix, stringify!($field)),
-                    &$crate::FieldSpec {
-                        name: stringify!($field),
-                        unit: $unit,
-                        range: $range,
-                        description: $desc,
-                        default: stringify!($default),
-                        nested: <$fty as $crate::Field>::NESTED,
-                    },
-                )?;)*
+                // The declarations of the struct's own fields, in order (a flat member's entry
+                // has no name).
+                let mut _specs = <Self as $crate::Fields>::FIELDS.iter().filter(|f| !f.name.is_empty());
+                $(if let Some(spec) = _specs.next() {
+                    $crate::Field::check_field(&self.$field, &$crate::join(prefix, stringify!($field)), spec)?;
+                })*
                 $crate::Rules::check_rules(self, prefix)
             }
 
