@@ -316,6 +316,39 @@ def test_environment_doc_carries_the_cores_observation_table():
     assert observation_table_markdown() in doc
 
 
+def test_config_docs_are_generated_from_the_declarations():
+    """docs/environment.md and the three env docstrings carry the configuration table generated
+    from the Rust declarations (one per field); regenerate the docs section with
+    ``accd_gym.config.config_table_markdown()`` when a declaration changes."""
+    import re
+    from pathlib import Path
+
+    from accd_gym import _core
+    from accd_gym.config import config_table_markdown, default_config
+
+    table = config_table_markdown()
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "environment.md").read_text()
+    generated = re.search(r"<!-- generated: [^>]*-->\n(.*?)\n<!-- end generated -->", doc, re.S)
+    assert generated and generated.group(1) == table
+    for cls in (accd_gym.InAirCaptureEnv, accd_gym.InAirCaptureVectorEnv, accd_gym.AccdVecEnv):
+        lines = [line.strip() for line in cls.__doc__.splitlines()]
+        assert all(row in lines for row in table.splitlines()), cls.__name__
+    # Every key of the configuration is declared, and every declared leaf key is in it.
+    rows = _core.config_fields()
+    keys = {key for key, *_ in rows}
+    defaults = default_config()
+
+    def leaves(d, prefix=""):
+        for k, v in d.items():
+            key = f"{prefix}{k}"
+            yield key
+            if isinstance(v, dict):
+                yield from leaves(v, key + ".")
+
+    assert set(leaves(defaults)) <= keys
+    assert set(leaves(defaults)) | {"tether.elasticity"} == keys
+
+
 def test_the_id_loads_through_gymnasiums_module_syntax():
     env = gym.make("accd_gym:accd_gym/InAirCapture-v0", **QUICK)
     assert isinstance(env.unwrapped, accd_gym.InAirCaptureEnv)

@@ -2,29 +2,12 @@
 
 Every env of accd-gym takes its configuration as keyword arguments, e.g.
 ``gymnasium.make("accd_gym/InAirCapture-v0", capture_window=60.0, wake={"enabled": False})``.
-Top-level keys (all optional; missing keys keep their defaults, nested dicts are merged with
-their defaults, unknown keys raise :class:`~accd_gym.ConfigError`):
-
-============== ==================================================================================
-key            meaning
-============== ==================================================================================
-tether         tether config dict, or a preset name (``"table3"``, ``"uhmwpe-300m-24mm"``, ...)
-accd           capturing device: mass, geometry, flap limit (``flap_limit_deg``), actuators
-aircraft       towing aircraft: ``airspeed`` (m/s), ``altitude`` (m), acceleration profile
-boom           RLV boom: formation offset, drift, perturbation, ``capture_radius`` (m),
-               ``max_closing_speed`` (m/s)
-wake           mean wake: ``enabled``, TA angle of attack, user tables
-turbulence     wake and ambient turbulence
-agent_step     how long one action is held, s (default 0.1 = 10 physics steps)
-capture_window episode length before truncation, s (default 70)
-initial        random initial conditions: ``settle_time`` s, ``offset`` [y, z] m, ``attitude_deg``
-reward         reward weights: ``proximity``, ``proximity_scale`` (m), ``effort``,
-               ``smoothness``, ``capture``, ``failure``
-limits         episode-ending limits: ``overload_fraction``, ``max_distance`` (m),
-               ``max_tilt_deg``, ``max_body_rate``, ``max_roll_rate`` (rad/s)
-wake_seed      fix the wake seed of every episode (int)
-wake_seeds     cycle through these wake seeds (list of int; evaluation)
-============== ==================================================================================
+Keys are all optional: missing keys keep their defaults, a section takes a dict of its keys
+(merged with its defaults), ``tether`` also a preset name (``"table3"``, ``"uhmwpe-300m-24mm"``,
+...), unknown keys raise :class:`~accd_gym.ConfigError`. Every key with its default, unit,
+allowed range and description: :func:`config_table_markdown`, generated from the one
+declaration per field in the Rust core (``accd_spec::config_struct!``), and printed in the env
+docstrings' Arguments and in ``docs/environment.md``.
 
 :func:`default_config` returns every key with its default value.
 """
@@ -117,12 +100,65 @@ def self_contained(config: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
+def _default_text(defaults: Mapping[str, Any], key: str, declared: str) -> str:
+    """The default of dotted ``key`` as Python shows it (from ``default_config()``), or the
+    declaration's text for a key the configuration omits at its default."""
+    value: Any = defaults
+    for part in key.split("."):
+        if not isinstance(value, Mapping) or part not in value:
+            return declared
+        value = value[part]
+    return repr(value)
+
+
+def config_table_markdown() -> str:
+    """Every configuration key as a markdown table (key, default, unit, allowed range,
+    description), generated from the Rust declarations (``_core.config_fields()``, one per
+    field): the Arguments tables of the env docstrings and ``docs/environment.md`` carry it.
+    Ranges: ``(`` and ``)`` exclude the end, ``[`` and ``]`` include it; a rule between fields
+    is in the description."""
+    defaults = default_config()
+    rows = ["| key | default | unit | range | description |", "|---|---|---|---|---|"]
+    for key, unit, allowed, description, section, declared in _core.config_fields():
+        if section:
+            rows.append(f"| **`{key}`** | | | | {description} |")
+        else:
+            default = _default_text(defaults, key, declared).replace("|", "\\|")
+            text = description.replace("|", "\\|")
+            rows.append(f"| `{key}` | `{default}` | {unit} | {allowed} | {text} |")
+    return "\n".join(rows)
+
+
+ARGUMENTS_MARKER = "{CONFIG_ARGUMENTS}"
+
+
+def with_arguments(doc: Optional[str]) -> Optional[str]:
+    """``doc`` (an env class docstring) with its :data:`ARGUMENTS_MARKER` line replaced by
+    :func:`config_table_markdown`, indented like the marker (None stays None: ``python -OO``)."""
+    if doc is None:
+        return None
+    for line in doc.splitlines():
+        if line.strip() == ARGUMENTS_MARKER:
+            indent = line[: len(line) - len(line.lstrip())]
+            table = "\n".join(indent + row for row in config_table_markdown().splitlines())
+            return doc.replace(line, table, 1)
+    raise ValueError(f"docstring has no {ARGUMENTS_MARKER} line")
+
+
 def config_json(config: Mapping[str, Any]) -> str:
     """A configuration as the JSON text the Rust core reads."""
     return json.dumps(config, default=_plain)
 
 
-__all__ = ["default_config", "env_config", "valid_config", "config_json", "self_contained"]
+__all__ = [
+    "default_config",
+    "env_config",
+    "valid_config",
+    "config_json",
+    "self_contained",
+    "config_table_markdown",
+    "EXACT_AIR_SCHEME",
+]
 
 
 #: The exact air scheme, the default before the fast one (BENCHMARKS.md, "the fast air scheme"):

@@ -10,7 +10,7 @@ import gymnasium as gym
 import numpy as np
 
 from accd_gym import _core
-from accd_gym.config import valid_config
+from accd_gym.config import valid_config, with_arguments
 from accd_gym.core_env import CoreEnvMixin
 from accd_gym.task import (
     action_space,
@@ -126,8 +126,12 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
     ## Arguments
 
     ``render_mode``: ``"rgb_array"`` (side and top views, off-screen) or ``"human"`` (a window);
-    ``**config``: see :mod:`accd_gym.config` (e.g. ``capture_window=60.0``,
-    ``tether="uhmwpe-300m-24mm"``, ``wake={"enabled": False}``).
+    ``**config``: the configuration keys below (e.g. ``capture_window=60.0``,
+    ``tether="uhmwpe-300m-24mm"``, ``wake={"enabled": False}``): a section takes a dict of its
+    keys (merged with the defaults), ``tether`` also a preset name. Unknown keys and values
+    outside the range raise ``ConfigError`` naming the dotted key, the value and the range.
+
+    {CONFIG_ARGUMENTS}
 
     ## State
 
@@ -234,3 +238,6 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
         self.__init__(render_mode=d["render_mode"], **d["config"])
         self.set_state(d["state"])
         self._np_random = d["np_random"]
+
+
+InAirCaptureEnv.__doc__ = with_arguments(InAirCaptureEnv.__doc__)

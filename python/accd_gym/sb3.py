@@ -10,7 +10,7 @@ import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
 from accd_gym import _core
-from accd_gym.config import valid_config
+from accd_gym.config import valid_config, with_arguments
 from accd_gym.core_env import CoreEnvMixin
 from accd_gym.errors import ConfigError
 from accd_gym.task import (
@@ -47,6 +47,12 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
     array stays valid through the next step, as SB3's rollout collection needs); the GIL is
     released while the envs step on ``num_threads`` threads (0: one per core). Works under
     ``VecMonitor`` and ``VecNormalize``.
+
+    Arguments besides ``num_envs``, ``seed``, ``num_threads`` and ``render_mode``: the
+    configuration keys (as for the single env), a section a dict of its keys, ``tether`` also a
+    preset name:
+
+    {CONFIG_ARGUMENTS}
     """
 
     _state_kind = "sb3"
@@ -173,3 +179,4 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         self._pending_options = d["pending_options"]
 
 
+AccdVecEnv.__doc__ = with_arguments(AccdVecEnv.__doc__)

@@ -12,7 +12,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from accd_gym import _core
-from accd_gym.config import valid_config
+from accd_gym.config import valid_config, with_arguments
 from accd_gym.core_env import CoreEnvMixin
 from accd_gym.errors import ConfigError
 from accd_gym.task import (
@@ -81,6 +81,12 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
     (truncation); a shorter limit raises ConfigError (pass ``max_episode_steps=`` with a longer
     ``capture_window``). ``num_threads``: threads stepping the envs (0: one per core). ``render_mode="rgb_array"``:
     ``render()`` returns a tuple of one RGB frame per env, as ``SyncVectorEnv`` does.
+
+    **Arguments** besides ``num_envs``, ``seed``, ``num_threads``, ``autoreset_mode``,
+    ``render_mode`` and ``max_episode_steps``: the configuration keys (as for the single env),
+    a section a dict of its keys, ``tether`` also a preset name:
+
+    {CONFIG_ARGUMENTS}
     """
 
     _state_kind = "vector"
@@ -321,3 +327,6 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
             **d["config"],
         )
         self.set_state(d["state"])
+
+
+InAirCaptureVectorEnv.__doc__ = with_arguments(InAirCaptureVectorEnv.__doc__)

@@ -8,9 +8,9 @@ use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Through
 /// The fast air scheme: per-step sampling, ziggurat normals, per-lane turbulence streams.
 fn fast() -> EnvConfig {
     let mut config = EnvConfig::default();
-    config.wake.sampling = accd_sim::AirSampling::PerStep;
-    config.turbulence.normal_sampler = accd_sim::NormalSampler::Ziggurat;
-    config.turbulence.lane_streams = accd_sim::LaneStreams::PerLane;
+    config.physics.wake.sampling = accd_sim::AirSampling::PerStep;
+    config.physics.turbulence.normal_sampler = accd_sim::NormalSampler::Ziggurat;
+    config.physics.turbulence.lane_streams = accd_sim::LaneStreams::PerLane;
     config
 }
 

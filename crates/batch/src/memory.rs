@@ -39,14 +39,17 @@ pub fn check_budget(config: &EnvConfig, num_envs: usize) -> Result<(), SimError>
     }
     let mib = |b: u64| b as f64 / (1u64 << 20) as f64;
     if per_env > budget {
-        let history = config.turbulence.history_bytes(config.aircraft.airspeed) as u64;
+        let history = config
+            .physics
+            .turbulence
+            .history_bytes(config.physics.aircraft.airspeed) as u64;
         let (field, value) = if history * 2 > per_env {
             (
                 "turbulence.history_distance_m",
-                config.turbulence.history_distance_m,
+                config.physics.turbulence.history_distance_m,
             )
         } else {
-            ("tether.segments", config.tether.segments as f64)
+            ("tether.segments", config.physics.tether.segments as f64)
         };
         return Err(SimError::invalid_config(
             field,
@@ -59,7 +62,7 @@ pub fn check_budget(config: &EnvConfig, num_envs: usize) -> Result<(), SimError>
                 mib(budget),
                 mib(per_env),
                 mib(history),
-                config.turbulence.history_distance_m / config.aircraft.airspeed
+                config.physics.turbulence.history_distance_m / config.physics.aircraft.airspeed
             ),
         ));
     }

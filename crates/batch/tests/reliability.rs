@@ -7,8 +7,8 @@ use accd_sim::{EnvConfig, SimError};
 
 fn low_and_slow() -> EnvConfig {
     let mut c = EnvConfig::default();
-    c.aircraft.airspeed = 10.0;
-    c.turbulence.history_distance_m = 5000.0;
+    c.physics.aircraft.airspeed = 10.0;
+    c.physics.turbulence.history_distance_m = 5000.0;
     c
 }
 

@@ -64,9 +64,39 @@ impl PyEnvConfig {
     fn __repr__(&self) -> String {
         format!(
             "EnvConfig(<{} segments, {} s window, agent step {} s>)",
-            self.inner.tether.segments, self.inner.capture_window, self.inner.agent_step
+            self.inner.physics.tether.segments, self.inner.capture_window, self.inner.agent_step
         )
     }
+}
+
+/// The configuration's declarations, one row a key in document order (sections before their
+/// fields): ``(dotted key, unit, range, description, is_section, declared default)`` (the
+/// default as Rust source; ``default_config()`` has its JSON). The env docstrings' Arguments
+/// tables and ``docs/environment.md`` are generated from them.
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+pub fn config_fields() -> Vec<(
+    String,
+    &'static str,
+    &'static str,
+    &'static str,
+    bool,
+    &'static str,
+)> {
+    use accd_spec::Fields;
+    accd_spec::walk(EnvConfig::FIELDS)
+        .into_iter()
+        .map(|(key, f)| {
+            (
+                key,
+                f.unit,
+                f.range,
+                f.description,
+                !f.nested.is_empty(),
+                f.default,
+            )
+        })
+        .collect()
 }
 
 /// Full validations of a physics configuration so far in this process (a diagnostic: one per

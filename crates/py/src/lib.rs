@@ -36,6 +36,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<capture::PyCaptureSim>()?;
     m.add_class::<config::PyEnvConfig>()?;
     m.add_function(wrap_pyfunction!(config::validation_passes, m)?)?;
+    m.add_function(wrap_pyfunction!(config::config_fields, m)?)?;
     batch::register(m)?;
     m.add_function(wrap_pyfunction!(capture::mix_flaps, m)?)?;
     m.add_function(wrap_pyfunction!(capture::default_aero_table_json, m)?)?;

@@ -6,7 +6,7 @@ use accd_sim::{AirSampling, EnvConfig, Episode, Equilibrium, LaneStreams, Normal
 
 fn time(label: &str, config: EnvConfig, steps: usize) {
     let mut config = config;
-    config.boom.capture_radius = 1e-6;
+    config.physics.boom.capture_radius = 1e-6;
     config.capture_window = 1000.0;
     let config = Arc::new(config.validated().unwrap());
     let eq = Arc::new(Equilibrium::settle(&config).unwrap());
@@ -38,28 +38,28 @@ fn main() {
     let only = std::env::args().nth(2).unwrap_or_default();
     if only == "per_step" {
         let mut per_step = EnvConfig::default();
-        per_step.wake.sampling = AirSampling::PerStep;
+        per_step.physics.wake.sampling = AirSampling::PerStep;
         return time("... sampled once per step", per_step, steps);
     }
     if only == "fast" {
         let mut fast = EnvConfig::default();
-        fast.wake.sampling = AirSampling::PerStep;
-        fast.turbulence.normal_sampler = NormalSampler::Ziggurat;
-        fast.turbulence.lane_streams = LaneStreams::PerLane;
+        fast.physics.wake.sampling = AirSampling::PerStep;
+        fast.physics.turbulence.normal_sampler = NormalSampler::Ziggurat;
+        fast.physics.turbulence.lane_streams = LaneStreams::PerLane;
         return time("per step, ziggurat, on-demand lanes", fast, steps);
     }
     if only == "default" {
         return time("mean wake + turbulence", EnvConfig::default(), steps);
     }
     let mut calm = EnvConfig::default();
-    calm.wake.enabled = false;
-    calm.turbulence.wake_turbulence = false;
+    calm.physics.wake.enabled = false;
+    calm.physics.turbulence.wake_turbulence = false;
     time("no wake, no turbulence", calm, steps);
     let mut mean = EnvConfig::default();
-    mean.turbulence.wake_turbulence = false;
+    mean.physics.turbulence.wake_turbulence = false;
     time("mean wake", mean, steps);
     time("mean wake + turbulence", EnvConfig::default(), steps);
     let mut per_step = EnvConfig::default();
-    per_step.wake.sampling = AirSampling::PerStep;
+    per_step.physics.wake.sampling = AirSampling::PerStep;
     time("... sampled once per step", per_step, steps);
 }

@@ -12,6 +12,7 @@
 //! Four flaps (right, left, top, bottom; see [`crate::aero`] for their signs) follow their
 //! commands through a first-order lag with a rate limit and hard stops at +-`flap_limit_deg`.
 
+use accd_spec::{join, out_of_range, Fields, OutOfRange, Rules};
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -23,116 +24,64 @@ type V3 = Vector3<f64>;
 /// Below this airspeed (m/s) the ACCD feels no aerodynamic load (angles are undefined).
 const MIN_AIRSPEED: f64 = 1.0;
 
-/// Mass, geometry, actuators and aerodynamic data of the ACCD. SI units unless the name says.
-///
-/// The paper gives the length (1.5 m with fins) and the flap limit (+-15 deg); the rest are
-/// documented assumptions. The mass (50 kg) is calibrated with the tether's normal drag
-/// coefficient so that the open-loop settled depths of the paper hold (see README).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct AccdConfig {
-    /// Mass, kg (0, 1000]. Default 50.
-    pub mass: f64,
-    /// Length including the fins, m (0, 10]. Default 1.5 (paper section 2.1).
-    pub length: f64,
-    /// Body diameter, m (0, 2]. Default 0.3.
-    pub diameter: f64,
-    /// Centre of gravity behind the nose, m, within the body. Default 0.6.
-    pub cg_from_nose: f64,
-    /// Principal moments of inertia (roll, pitch, yaw) about the centre of gravity, kg m^2.
-    /// Default: a solid cylinder of the mass, length and diameter (0.56, 9.66, 9.66).
-    pub inertia: Option<[f64; 3]>,
-    /// Flap deflection limit, degrees (0, 45]. Default 15 (paper section 2.1).
-    pub flap_limit_deg: f64,
-    /// Time constant of the flap actuators' first-order lag, s (0, 1]. Default 0.05.
-    pub actuator_time_constant: f64,
-    /// Rate limit of the flap actuators, degrees per second (0, 5000]. Default 300.
-    pub actuator_rate_limit_deg_s: f64,
-    /// Path of an aerodynamic table file (see [`crate::aero`]), or the table itself as a JSON
-    /// object in the file format (text starting with `{`: a configuration that carries its
-    /// table, for pickles and saved envs); `None` uses the default finned body
-    /// ([`crate::aero::FinnedBody::accd`]).
-    pub aero_table: Option<String>,
+accd_spec::config_struct! {
+    /// Mass, geometry, actuators and aerodynamic data of the ACCD. SI units unless the name says.
+    ///
+    /// The paper gives the length (1.5 m with fins) and the flap limit (+-15 deg); the rest are
+    /// documented assumptions. The mass (50 kg) is calibrated with the tether's normal drag
+    /// coefficient so that the open-loop settled depths of the paper hold (see README).
+    #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+    #[serde(deny_unknown_fields, default)]
+    pub struct AccdConfig {
+        pub mass: f64 = 50.0, "kg", "(0, 1000]", "mass";
+        pub length: f64 = 1.5, "m", "(0, 10]", "length including the fins (paper section 2.1)";
+        pub diameter: f64 = 0.3, "m", "(0, 2]", "body diameter";
+        pub cg_from_nose: f64 = 0.6, "m", "(0, 10]",
+            "centre of gravity behind the nose, at most accd.length";
+        /// `None`: a solid cylinder of the mass, length and diameter (0.56, 9.66, 9.66).
+        pub inertia: Option<[f64; 3]> = None, "kg m^2", "(0, 1e4]",
+            "principal moments of inertia (roll, pitch, yaw) about the centre of gravity (None: a solid cylinder's)";
+        pub flap_limit_deg: f64 = 15.0, "deg", "(0, 45]", "flap deflection limit (paper section 2.1)";
+        pub actuator_time_constant: f64 = 0.05, "s", "(0, 1]",
+            "time constant of the flap actuators' first-order lag";
+        pub actuator_rate_limit_deg_s: f64 = 300.0, "deg/s", "(0, 5000]",
+            "rate limit of the flap actuators";
+        /// See [`crate::aero`] for the file format; an inline table (text starting with `{`) is a
+        /// configuration that carries its table, for pickles and saved envs.
+        pub aero_table: Option<String> = None, "", "",
+            "aerodynamic table: a file path or the table as JSON text (None: the default finned body)";
+    }
 }
 
-impl Default for AccdConfig {
-    fn default() -> Self {
-        AccdConfig {
-            mass: 50.0,
-            length: 1.5,
-            diameter: 0.3,
-            cg_from_nose: 0.6,
-            inertia: None,
-            flap_limit_deg: 15.0,
-            actuator_time_constant: 0.05,
-            actuator_rate_limit_deg_s: 300.0,
-            aero_table: None,
+/// The centre of gravity within the body; principal moments satisfying the triangle inequality.
+impl Rules for AccdConfig {
+    fn check_rules(&self, prefix: &str) -> std::result::Result<(), OutOfRange> {
+        if self.cg_from_nose > self.length {
+            return Err(out_of_range(
+                &join(prefix, "cg_from_nose"),
+                self.cg_from_nose,
+                format!("(0, {}] m", join(prefix, "length")),
+            ));
         }
-    }
-}
-
-fn check(field: &str, value: f64, lo: f64, hi: f64, allowed: &str) -> Result<()> {
-    if value.is_finite() && value > lo && value <= hi {
-        Ok(())
-    } else {
-        Err(SimError::invalid_config(field, value, allowed))
-    }
-}
-
-impl AccdConfig {
-    /// Checks every field against its allowed range.
-    pub fn validate(&self) -> Result<()> {
-        check("accd.mass", self.mass, 0.0, 1000.0, "(0, 1000] kg")?;
-        check("accd.length", self.length, 0.0, 10.0, "(0, 10] m")?;
-        check("accd.diameter", self.diameter, 0.0, 2.0, "(0, 2] m")?;
-        check(
-            "accd.cg_from_nose",
-            self.cg_from_nose,
-            0.0,
-            self.length,
-            "(0, accd.length] m",
-        )?;
-        check(
-            "accd.flap_limit_deg",
-            self.flap_limit_deg,
-            0.0,
-            45.0,
-            "(0, 45] deg",
-        )?;
-        check(
-            "accd.actuator_time_constant",
-            self.actuator_time_constant,
-            0.0,
-            1.0,
-            "(0, 1] s",
-        )?;
-        check(
-            "accd.actuator_rate_limit_deg_s",
-            self.actuator_rate_limit_deg_s,
-            0.0,
-            5000.0,
-            "(0, 5000] deg/s",
-        )?;
         if let Some(inertia) = self.inertia {
-            for (i, v) in inertia.iter().enumerate() {
-                check(
-                    &format!("accd.inertia[{i}]"),
-                    *v,
-                    0.0,
-                    1e4,
-                    "(0, 1e4] kg m^2",
-                )?;
-            }
             let [a, b, c] = inertia;
             if a + b < c || b + c < a || a + c < b {
-                return Err(SimError::invalid_config(
-                    "accd.inertia",
+                return Err(out_of_range(
+                    &join(prefix, "inertia"),
                     format!("{inertia:?}"),
                     "principal moments satisfying the triangle inequality",
                 ));
             }
         }
         Ok(())
+    }
+}
+
+impl AccdConfig {
+    /// Checks every field against its declared range and the [`Rules`]; errors name the field
+    /// as `accd.<field>`.
+    pub fn validate(&self) -> Result<()> {
+        Ok(self.check_fields("accd")?)
     }
 
     /// Principal moments of inertia, kg m^2 (the configured ones, or a solid cylinder's).

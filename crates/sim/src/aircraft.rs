@@ -6,10 +6,11 @@
 //! `V(t) = V0 + integral of a` (relative to the air mass), the free stream in the TA frame is
 //! `-V(t)`, and every mass feels the apparent force `-m a(t)`.
 
+use accd_spec::{join, out_of_range, Fields, OutOfRange, Rules};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use crate::error::{Result, SimError};
+use crate::error::Result;
 
 type V3 = Vector3<f64>;
 
@@ -25,63 +26,50 @@ pub struct AccelerationSegment {
     pub acceleration: [f64; 3],
 }
 
-/// Flight condition and manoeuvre of the towing aircraft.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct AircraftConfig {
-    /// True airspeed at t = 0, m/s (0, 400]. Default 185 (paper section 2).
-    pub airspeed: f64,
-    /// Altitude at t = 0, m (ISA), [0, 15000]. Default 6000 (paper section 2).
-    pub altitude: f64,
-    /// Scripted accelerations; empty (default) for constant speed. Segments must not overlap.
-    pub acceleration_profile: Vec<AccelerationSegment>,
-}
-
-impl Default for AircraftConfig {
-    fn default() -> Self {
-        AircraftConfig {
-            airspeed: 185.0,
-            altitude: 6000.0,
-            acceleration_profile: vec![],
-        }
+accd_spec::config_struct! {
+    /// Flight condition and manoeuvre of the towing aircraft.
+    #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+    #[serde(deny_unknown_fields, default)]
+    pub struct AircraftConfig {
+        pub airspeed: f64 = 185.0, "m/s", "(0, 400]", "true airspeed at t = 0 (paper section 2)";
+        pub altitude: f64 = 6000.0, "m", "[0, 15000]", "altitude at t = 0, ISA (paper section 2)";
+        /// Each segment `{"start": s, "end": s, "acceleration": [x, y, z] m/s^2}`; segments must
+        /// not overlap.
+        pub acceleration_profile: Vec<AccelerationSegment> = vec![], "", "",
+            "scripted piecewise-constant accelerations (empty: constant speed)";
     }
 }
 
-/// Checks an airspeed (m/s) against the range every part of the simulation accepts, (0, 400].
+accd_spec::no_range!(AccelerationSegment);
+
+/// Checks an airspeed (m/s) against the range every part of the simulation accepts: that of
+/// `aircraft.airspeed`.
 pub fn check_airspeed(field: &str, value: f64) -> Result<()> {
-    if value.is_finite() && value > 0.0 && value <= 400.0 {
-        Ok(())
-    } else {
-        Err(SimError::invalid_config(field, value, "(0, 400] m/s"))
-    }
+    Ok(accd_spec::check_number(field, value, AIRSPEED)?)
 }
 
-impl AircraftConfig {
-    /// Checks every field against its allowed range.
-    pub fn validate(&self) -> Result<()> {
-        let bad = |field: &str, value: f64, allowed: &str| {
-            Err(SimError::invalid_config(field, value, allowed))
-        };
-        check_airspeed("aircraft.airspeed", self.airspeed)?;
-        if !(self.altitude.is_finite() && (0.0..=15_000.0).contains(&self.altitude)) {
-            return bad("aircraft.altitude", self.altitude, "[0, 15000] m");
-        }
+/// The declaration of `aircraft.airspeed` (the first field; a test checks the name).
+const AIRSPEED: &accd_spec::FieldSpec = &AircraftConfig::FIELDS[0];
+
+/// Acceleration segments in order, not overlapping, with bounded accelerations.
+impl Rules for AircraftConfig {
+    fn check_rules(&self, prefix: &str) -> std::result::Result<(), OutOfRange> {
         let mut last_end = f64::NEG_INFINITY;
         for (i, seg) in self.acceleration_profile.iter().enumerate() {
-            let field = format!("aircraft.acceleration_profile[{i}]");
+            let field = format!("{}[{i}]", join(prefix, "acceleration_profile"));
             if !(seg.start.is_finite()
                 && seg.end.is_finite()
                 && seg.start >= 0.0
                 && seg.end > seg.start)
             {
-                return Err(SimError::invalid_config(
+                return Err(out_of_range(
                     &field,
                     format!("start {} end {}", seg.start, seg.end),
                     "0 <= start < end, finite",
                 ));
             }
             if seg.start < last_end {
-                return Err(SimError::invalid_config(
+                return Err(out_of_range(
                     &field,
                     seg.start,
                     "start at or after the previous segment's end",
@@ -92,7 +80,7 @@ impl AircraftConfig {
                 .iter()
                 .any(|a| !a.is_finite() || a.abs() > 30.0)
             {
-                return Err(SimError::invalid_config(
+                return Err(out_of_range(
                     &format!("{field}.acceleration"),
                     format!("{:?}", seg.acceleration),
                     "components in [-30, 30] m/s^2",
@@ -101,6 +89,14 @@ impl AircraftConfig {
             last_end = seg.end;
         }
         Ok(())
+    }
+}
+
+impl AircraftConfig {
+    /// Checks every field against its declared range and the [`Rules`]; errors name the field
+    /// as `aircraft.<field>`.
+    pub fn validate(&self) -> Result<()> {
+        Ok(self.check_fields("aircraft")?)
     }
 
     /// Acceleration of the TA at time `t`, m/s^2.
@@ -142,6 +138,18 @@ impl AircraftConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn airspeed_check_is_the_declared_one() {
+        assert_eq!(AIRSPEED.name, "airspeed");
+        let e = check_airspeed("airspeed_mps", 401.0)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("airspeed_mps") && e.contains("(0, 400] m/s"),
+            "{e}"
+        );
+    }
 
     #[test]
     fn profile_integrates_exactly() {

@@ -22,136 +22,47 @@
 //! tolerates a decimetre-scale miss; more closing speed would load the lock and the tether
 //! abruptly).
 
+use accd_spec::Fields;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use crate::error::{Result, SimError};
+use crate::error::Result;
 use crate::rng::{NormalSampler, Stream, StreamState, RLV_STREAM};
 
 type V3 = Vector3<f64>;
 
-/// Formation, motion and capture criteria of the boom. SI units.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct BoomConfig {
-    /// Nominal boom-tip position in the TA frame, m (x only used with `approach_speed = 0`).
-    pub offset: [f64; 3],
-    /// Half-width of the uniform random initial offset per axis, m.
-    pub initial_spread: [f64; 3],
-    /// Amplitude of the slow drift per axis, m.
-    pub drift_amplitude: [f64; 3],
-    /// Period of the slow drift, s.
-    pub drift_period: f64,
-    /// RMS of the perturbation per axis, m.
-    pub perturbation_sigma: f64,
-    /// Time constant of the perturbation, s.
-    pub perturbation_time_constant: f64,
-    /// Capture radius around the boom tip, m.
-    pub capture_radius: f64,
-    /// Largest relative speed at which a capture holds, m/s.
-    pub max_closing_speed: f64,
-    /// Along-track distance of the boom tip behind the capture point at the start, m.
-    pub approach_distance: f64,
-    /// Largest along-track closing speed of the boom tip on the capture point, m/s (0: a fixed
-    /// formation at `offset[0]`).
-    pub approach_speed: f64,
-}
-
-impl Default for BoomConfig {
-    fn default() -> Self {
-        BoomConfig {
-            offset: [-241.0, 3.0, 62.0],
-            initial_spread: [2.0, 3.0, 3.0],
-            drift_amplitude: [1.0, 2.0, 2.0],
-            drift_period: 50.0,
-            perturbation_sigma: 0.2,
-            perturbation_time_constant: 1.5,
-            capture_radius: 0.5,
-            max_closing_speed: 2.0,
-            approach_distance: 10.0,
-            approach_speed: 0.5,
-        }
+accd_spec::config_struct! {
+    /// Formation, motion and capture criteria of the boom. SI units.
+    #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+    #[serde(deny_unknown_fields, default)]
+    pub struct BoomConfig {
+        pub offset: [f64; 3] = [-241.0, 3.0, 62.0], "m", "[-5000, 5000]",
+            "nominal boom-tip position in the TA frame (x only used with approach_speed = 0)";
+        pub initial_spread: [f64; 3] = [2.0, 3.0, 3.0], "m", "[0, 100]",
+            "half-width of the uniform random initial offset per axis";
+        pub drift_amplitude: [f64; 3] = [1.0, 2.0, 2.0], "m", "[0, 100]",
+            "amplitude of the slow drift per axis";
+        pub drift_period: f64 = 50.0, "s", "(0, 100000]", "period of the slow drift";
+        pub perturbation_sigma: f64 = 0.2, "m", "[0, 100]", "RMS of the perturbation per axis";
+        pub perturbation_time_constant: f64 = 1.5, "s", "(0, 10000]",
+            "time constant of the perturbation";
+        pub capture_radius: f64 = 0.5, "m", "(0, 100]", "capture radius around the boom tip";
+        pub max_closing_speed: f64 = 2.0, "m/s", "(0, 1000]",
+            "largest relative speed at which a capture holds";
+        pub approach_distance: f64 = 10.0, "m", "[0, 1000]",
+            "along-track distance of the boom tip behind the capture point at the start";
+        pub approach_speed: f64 = 0.5, "m/s", "[0, 50]",
+            "largest along-track closing speed of the boom tip on the capture point (0: a fixed formation at offset[0])";
     }
 }
 
+/// Each field's range is all there is to check.
+impl accd_spec::Rules for BoomConfig {}
+
 impl BoomConfig {
-    /// Checks every field against its allowed range.
+    /// Checks every field against its declared range.
     pub fn validate(&self) -> Result<()> {
-        for (i, v) in self.offset.iter().enumerate() {
-            if !(v.is_finite() && v.abs() <= 5000.0) {
-                return Err(SimError::invalid_config(
-                    &format!("boom.offset[{i}]"),
-                    v,
-                    "[-5000, 5000] m",
-                ));
-            }
-        }
-        for (name, arr) in [
-            ("boom.initial_spread", self.initial_spread),
-            ("boom.drift_amplitude", self.drift_amplitude),
-        ] {
-            for (i, v) in arr.iter().enumerate() {
-                if !(v.is_finite() && (0.0..=100.0).contains(v)) {
-                    return Err(SimError::invalid_config(
-                        &format!("{name}[{i}]"),
-                        v,
-                        "[0, 100] m",
-                    ));
-                }
-            }
-        }
-        let positive = [
-            ("boom.drift_period", self.drift_period, 1e5, "s"),
-            (
-                "boom.perturbation_time_constant",
-                self.perturbation_time_constant,
-                1e4,
-                "s",
-            ),
-            ("boom.capture_radius", self.capture_radius, 100.0, "m"),
-            (
-                "boom.max_closing_speed",
-                self.max_closing_speed,
-                1000.0,
-                "m/s",
-            ),
-        ];
-        for (name, v, hi, unit) in positive {
-            if !(v.is_finite() && v > 0.0 && v <= hi) {
-                return Err(SimError::invalid_config(
-                    name,
-                    v,
-                    &format!("(0, {hi}] {unit}"),
-                ));
-            }
-        }
-        for (name, v, hi, unit) in [
-            (
-                "boom.approach_distance",
-                self.approach_distance,
-                1000.0,
-                "m",
-            ),
-            ("boom.approach_speed", self.approach_speed, 50.0, "m/s"),
-        ] {
-            if !(v.is_finite() && (0.0..=hi).contains(&v)) {
-                return Err(SimError::invalid_config(
-                    name,
-                    v,
-                    &format!("[0, {hi}] {unit}"),
-                ));
-            }
-        }
-        if !(self.perturbation_sigma.is_finite()
-            && (0.0..=100.0).contains(&self.perturbation_sigma))
-        {
-            return Err(SimError::invalid_config(
-                "boom.perturbation_sigma",
-                self.perturbation_sigma,
-                "[0, 100] m",
-            ));
-        }
-        Ok(())
+        Ok(self.check_fields("boom")?)
     }
 }
 

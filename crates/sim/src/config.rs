@@ -3,6 +3,7 @@
 //! with unknown keys refused and a bad value named by its dotted path). The task's configuration
 //! ([`crate::EnvConfig`]) builds on it.
 
+use accd_spec::{join, out_of_range, Fields, OutOfRange, Rules};
 use accd_tether::TetherConfig;
 use serde::{Deserialize, Serialize};
 
@@ -14,57 +15,49 @@ use crate::turbulence::TurbulenceConfig;
 use crate::valid::Valid;
 use crate::wake::WakeConfig;
 
-/// Everything that defines an episode's physics. Missing keys take their defaults.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct CaptureConfig {
-    /// The tether (Table 3 by default). Its `tip_mass` must stay 0: the ACCD's mass is at the tip.
-    pub tether: TetherConfig,
-    /// The capturing device.
-    pub accd: AccdConfig,
-    /// The towing aircraft.
-    pub aircraft: AircraftConfig,
-    /// The RLV's boom.
-    pub boom: BoomConfig,
-    /// The towing aircraft's mean wake (on by default, at 8 degrees angle of attack).
-    pub wake: WakeConfig,
-    /// Wake and ambient turbulence (wake turbulence on by default, ambient off).
-    pub turbulence: TurbulenceConfig,
-}
-
-impl Default for CaptureConfig {
-    /// The capture mission: Table 3's tether, the default ACCD and boom, the aircraft at 185 m/s
-    /// and 6000 m, its wake at 8 degrees angle of attack with wake turbulence.
-    fn default() -> Self {
-        CaptureConfig {
-            tether: TetherConfig::table3(),
-            accd: AccdConfig::default(),
-            aircraft: AircraftConfig::default(),
-            boom: BoomConfig::default(),
-            wake: WakeConfig::default(),
-            turbulence: TurbulenceConfig::default(),
-        }
+accd_spec::config_struct! {
+    /// Everything that defines an episode's physics: one section a physics part. Missing keys
+    /// take their defaults. A new part is one more line here: the range checks, the rules
+    /// ([`Section::validate`]), the flat keys of [`crate::EnvConfig`] and the documentation
+    /// follow from it.
+    #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+    #[serde(deny_unknown_fields, default)]
+    pub struct CaptureConfig {
+        /// Its `tip_mass` must stay 0: the ACCD's mass is at the tip.
+        pub tether: TetherConfig = TetherConfig::table3(), "", "",
+            "the tether (Table 3 by default; a dict, or a preset name in Python)";
+        pub accd: AccdConfig = AccdConfig::default(), "", "", "the capturing device";
+        pub aircraft: AircraftConfig = AircraftConfig::default(), "", "",
+            "the towing aircraft (185 m/s at 6000 m by default)";
+        pub boom: BoomConfig = BoomConfig::default(), "", "", "the RLV's boom";
+        pub wake: WakeConfig = WakeConfig::default(), "", "",
+            "the towing aircraft's mean wake (on by default, at 8 degrees angle of attack)";
+        pub turbulence: TurbulenceConfig = TurbulenceConfig::default(), "", "",
+            "wake and ambient turbulence (wake turbulence on by default, ambient off)";
     }
 }
 
-impl CaptureConfig {
-    /// Checks every part (counted by [`crate::valid::validation_passes`]).
-    pub fn validate(&self) -> Result<()> {
-        crate::valid::count_validation_pass();
-        self.tether.validate()?;
+/// Between the sections: the tether's tip mass is the ACCD's ([`check_cross_fields`] has the
+/// rest).
+impl Rules for CaptureConfig {
+    fn check_rules(&self, prefix: &str) -> std::result::Result<(), OutOfRange> {
         if self.tether.tip_mass != 0.0 {
-            return Err(SimError::invalid_config(
-                "tether.tip_mass",
+            return Err(out_of_range(
+                &join(prefix, "tether.tip_mass"),
                 self.tether.tip_mass,
                 "0 kg (the ACCD's mass, accd.mass, is the tip mass)",
             ));
         }
-        self.accd.validate()?;
-        self.aircraft.validate()?;
-        self.boom.validate()?;
-        self.wake.validate()?;
-        self.turbulence.validate()?;
         check_cross_fields(self)
+    }
+}
+
+impl CaptureConfig {
+    /// Checks every field against its declared range and every section's rules, then the rules
+    /// between the sections ([`Rules`]); counted by [`crate::valid::validation_passes`].
+    pub fn validate(&self) -> Result<()> {
+        crate::valid::count_validation_pass();
+        Ok(self.check_fields("")?)
     }
 
     /// The paper's open-loop setting (section 4): no wake, no turbulence ("no wake unless stated").
@@ -107,14 +100,14 @@ pub(crate) fn parse_json<T: serde::de::DeserializeOwned>(text: &str, _what: &str
 /// table is checked when loaded, [`crate::accd::AccdConfig::aero_model`]), and a tether step
 /// that substepping can keep stable at the tension the tow is estimated to reach
 /// ([`accd_tether::TetherConfig::check_stability`]).
-pub fn check_cross_fields(config: &CaptureConfig) -> Result<()> {
+pub fn check_cross_fields(config: &CaptureConfig) -> std::result::Result<(), OutOfRange> {
     if config.accd.aero_table.is_none() {
         let range = crate::aero::DEFAULT_DEFLECTION_LIMIT_DEG;
         if config.accd.flap_limit_deg > range {
-            return Err(SimError::invalid_config(
+            return Err(out_of_range(
                 "accd.flap_limit_deg",
                 config.accd.flap_limit_deg,
-                &format!("(0, {range}] deg: the default aerodynamic table covers deflections up to {range} deg (give accd.aero_table for more)"),
+                format!("(0, {range}] deg: the default aerodynamic table covers deflections up to {range} deg (give accd.aero_table for more)"),
             ));
         }
     }
@@ -127,7 +120,7 @@ pub fn check_cross_fields(config: &CaptureConfig) -> Result<()> {
                 field,
                 value,
                 allowed,
-            } => SimError::InvalidConfig {
+            } => OutOfRange {
                 field: format!("tether.{field}"),
                 value,
                 allowed: format!(
@@ -136,7 +129,7 @@ pub fn check_cross_fields(config: &CaptureConfig) -> Result<()> {
                     config.accd.mass, config.aircraft.airspeed
                 ),
             },
-            other => other.into(),
+            other => out_of_range("tether.time_step", config.tether.time_step, other.to_string()),
         })
 }
 
@@ -253,20 +246,4 @@ pub fn locate_parse_error<T: serde::de::DeserializeOwned>(
         None
     }
     walk::<T>(&mut Vec::new(), document.as_object()?)
-}
-
-/// `v` in (0, hi].
-pub(crate) fn check_positive(name: &str, v: f64, hi: f64, allowed: &str) -> Result<()> {
-    if !(v.is_finite() && v > 0.0 && v <= hi) {
-        return Err(SimError::invalid_config(name, v, allowed));
-    }
-    Ok(())
-}
-
-/// `v` in [lo, hi].
-pub(crate) fn check(name: &str, v: f64, lo: f64, hi: f64, allowed: &str) -> Result<()> {
-    if !(v.is_finite() && v >= lo && v <= hi) {
-        return Err(SimError::invalid_config(name, v, allowed));
-    }
-    Ok(())
 }

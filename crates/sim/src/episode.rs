@@ -87,7 +87,7 @@ impl Equilibrium {
 /// tension. The message names the limit and the equilibrium's value. (A warning, not an error:
 /// an unsettled start, a short `initial.settle_time`, is a legitimate choice in tests.)
 fn outside_limits(config: &EnvConfig, s: &Snapshot) -> Option<String> {
-    let boom = &config.boom;
+    let boom = &config.physics.boom;
     let limits = &config.limits;
     let along = if boom.approach_speed > 0.0 {
         s.capture_point.x
@@ -97,7 +97,7 @@ fn outside_limits(config: &EnvConfig, s: &Snapshot) -> Option<String> {
     let nominal = Vector3::new(along, boom.offset[1], boom.offset[2]);
     let distance = (s.capture_point - nominal).norm();
     let tilt_deg = tilt(&s.attitude).to_degrees();
-    let overload = limits.overload_fraction * config.tether.breaking_tension;
+    let overload = limits.overload_fraction * config.physics.tether.breaking_tension;
     let what = if distance > limits.max_distance {
         format!(
             "puts the capture point {distance:.2} m from the boom tip's nominal position \
@@ -187,8 +187,9 @@ impl Episode {
             start: equilibrium.tether.clone(),
             substeps: config.substeps(),
             total_steps: config.episode_steps(),
-            flap_limit: config.accd.flap_limit_deg.to_radians(),
-            overload_tension: config.limits.overload_fraction * config.tether.breaking_tension,
+            flap_limit: config.physics.accd.flap_limit_deg.to_radians(),
+            overload_tension: config.limits.overload_fraction
+                * config.physics.tether.breaking_tension,
             config,
             equilibrium,
             sim,
@@ -209,7 +210,7 @@ impl Episode {
     pub fn reset(&mut self, seeds: Seeds) -> Result<()> {
         let init = &self.config.initial;
         let mut stream = Stream::new(seeds.initial, INITIAL_STREAM);
-        let length = self.config.tether.length;
+        let length = self.config.physics.tether.length;
         let d_psi = stream.range(-1.0, 1.0) * init.offset[0] / length;
         let d_phi = stream.range(-1.0, 1.0) * init.offset[1] / length;
         let max_angle = init.attitude_deg.to_radians();
@@ -220,7 +221,7 @@ impl Episode {
         let eq = &self.equilibrium;
         self.start.q.copy_from_slice(&eq.tether.q);
         self.start.qd.copy_from_slice(&eq.tether.qd);
-        for k in 0..self.config.tether.segments {
+        for k in 0..self.config.physics.tether.segments {
             self.start.q[1 + 2 * k] += d_phi;
             self.start.q[2 + 2 * k] += d_psi;
         }
@@ -385,7 +386,7 @@ impl Episode {
     /// False for a state no flight could reach: the ACCD faster than twice the airspeed
     /// relative to the aircraft, or spinning faster than 1000 rad/s (a diverging integration).
     fn plausible(&self, s: &Snapshot) -> bool {
-        s.velocity.norm() <= 2.0 * self.config.aircraft.airspeed && s.omega.norm() <= 1e3
+        s.velocity.norm() <= 2.0 * self.config.physics.aircraft.airspeed && s.omega.norm() <= 1e3
     }
 
     fn diverge(&mut self, e: SimError) {

@@ -75,5 +75,16 @@ impl SimError {
     }
 }
 
+impl From<accd_spec::OutOfRange> for SimError {
+    /// A field outside its declared range ([`accd_spec::Fields::check_fields`]).
+    fn from(e: accd_spec::OutOfRange) -> Self {
+        SimError::InvalidConfig {
+            field: e.field,
+            value: e.value,
+            allowed: e.allowed,
+        }
+    }
+}
+
 /// Result alias of this crate.
 pub type Result<T, E = SimError> = std::result::Result<T, E>;

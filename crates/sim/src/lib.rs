@@ -62,4 +62,4 @@ pub use wake::{
     AirSampling, AnalyticWake, Wake, WakeConfig, WakeSample, WakeTable, WakeTableData,
     WakeTableFiles, WakeTables,
 };
-pub use wake_field::{WakeField, WakeFieldConfig};
+pub use wake_field::WakeField;

@@ -42,16 +42,11 @@
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use crate::accd::AccdConfig;
-use crate::aircraft::AircraftConfig;
-use crate::boom::BoomConfig;
 use crate::capture::Snapshot;
-use crate::config::{check, check_positive, parse_named, CaptureConfig};
-use crate::error::{Result, SimError};
-use crate::turbulence::TurbulenceConfig;
+use crate::config::{parse_named, CaptureConfig};
+use crate::error::Result;
 use crate::valid::Valid;
-use crate::wake::WakeConfig;
-use accd_tether::TetherConfig;
+use accd_spec::{join, out_of_range, Fields, OutOfRange, Rules};
 
 /// Number of observation values.
 pub const OBS_DIM: usize = 25;
@@ -303,59 +298,41 @@ pub fn observe(inputs: &ObservationInputs<'_>, out: &mut [f32; OBS_DIM]) -> bool
     true
 }
 
-/// Random initial conditions of an episode, around the open-loop equilibrium.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct InitialConfig {
-    /// Time the open-loop equilibrium is settled for (neutral flaps, mean wake, no turbulence), s.
-    pub settle_time: f64,
-    /// Half-width of the uniform random displacement of the ACCD from the equilibrium, lateral
-    /// (y) and vertical (z), m: the whole tether is rotated about the attachment to put it there.
-    pub offset: [f64; 2],
-    /// Half-width of the uniform random roll, pitch and yaw of the ACCD, deg.
-    pub attitude_deg: f64,
-}
-
-impl Default for InitialConfig {
-    fn default() -> Self {
-        InitialConfig {
-            settle_time: 40.0,
-            offset: [5.0, 5.0],
-            attitude_deg: 3.0,
-        }
+accd_spec::config_struct! {
+    /// Random initial conditions of an episode, around the open-loop equilibrium.
+    #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+    #[serde(deny_unknown_fields, default)]
+    pub struct InitialConfig {
+        pub settle_time: f64 = 40.0, "s", "[0, 600]",
+            "time the open-loop equilibrium is settled for (neutral flaps, mean wake, no turbulence)";
+        /// The whole tether is rotated about the attachment to put the ACCD there.
+        pub offset: [f64; 2] = [5.0, 5.0], "m", "[0, 50]",
+            "half-width of the uniform random displacement of the ACCD from the equilibrium, [lateral y, vertical z]";
+        pub attitude_deg: f64 = 3.0, "deg", "[0, 30]",
+            "half-width of the uniform random roll, pitch and yaw of the ACCD";
     }
 }
 
-/// Reward weights (see the module docs for the formula).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct RewardConfig {
-    /// `w_p`: weight of the proximity term.
-    pub proximity: f64,
-    /// `lambda`: distance scale of the proximity term, m.
-    pub proximity_scale: f64,
-    /// `w_e`: weight of the control-effort cost.
-    pub effort: f64,
-    /// `w_s`: weight of the control-rate cost.
-    pub smoothness: f64,
-    /// `w_c`: bonus on capture (plus `w_p` per agent step left).
-    pub capture: f64,
-    /// `w_f`: penalty on overload, envelope exit or divergence.
-    pub failure: f64,
-}
+/// Each field's range is all there is to check.
+impl Rules for InitialConfig {}
 
-impl Default for RewardConfig {
-    fn default() -> Self {
-        RewardConfig {
-            proximity: 1.0,
-            proximity_scale: 10.0,
-            effort: 0.05,
-            smoothness: 0.05,
-            capture: 100.0,
-            failure: 50.0,
-        }
+accd_spec::config_struct! {
+    /// Reward weights (see the module docs for the formula).
+    #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+    #[serde(deny_unknown_fields, default)]
+    pub struct RewardConfig {
+        pub proximity: f64 = 1.0, "-", "[0, 1e6]", "w_p: weight of the proximity term";
+        pub proximity_scale: f64 = 10.0, "m", "(0, 1e4]",
+            "lambda: distance scale of the proximity term";
+        pub effort: f64 = 0.05, "-", "[0, 1e6]", "w_e: weight of the control-effort cost";
+        pub smoothness: f64 = 0.05, "-", "[0, 1e6]", "w_s: weight of the control-rate cost";
+        pub capture: f64 = 100.0, "-", "[0, 1e6]", "w_c: bonus on capture (plus w_p per agent step left)";
+        pub failure: f64 = 50.0, "-", "[0, 1e6]", "w_f: penalty on overload, envelope exit or divergence";
     }
 }
+
+/// Each field's range is all there is to check.
+impl Rules for RewardConfig {}
 
 impl RewardConfig {
     /// The lowest and highest reward of one agent step in an episode of `steps` agent steps.
@@ -365,159 +342,101 @@ impl RewardConfig {
             self.proximity * steps as f64 + self.capture,
         )
     }
+}
 
-    fn validate(&self) -> Result<()> {
-        for (name, v) in [
-            ("reward.proximity", self.proximity),
-            ("reward.effort", self.effort),
-            ("reward.smoothness", self.smoothness),
-            ("reward.capture", self.capture),
-            ("reward.failure", self.failure),
-        ] {
-            check(name, v, 0.0, 1e6, "[0, 1e6]")?;
-        }
-        check_positive(
-            "reward.proximity_scale",
-            self.proximity_scale,
-            1e4,
-            "(0, 1e4] m",
-        )
+accd_spec::config_struct! {
+    /// Limits whose violation ends an episode (terminated).
+    #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+    #[serde(deny_unknown_fields, default)]
+    pub struct LimitsConfig {
+        pub overload_fraction: f64 = 0.5, "-", "(0, 1]",
+            "largest attachment tension as a fraction of the tether's breaking tension (0.5: a safety factor of 2)";
+        pub max_distance: f64 = 60.0, "m", "(0, 1e4]",
+            "largest distance from the capture point to the boom tip";
+        pub max_tilt_deg: f64 = 60.0, "deg", "(0, 180]",
+            "largest angle between the ACCD's nose and the flight direction";
+        pub max_body_rate: f64 = 10.0, "rad/s", "(0, 1000]",
+            "largest pitch/yaw rate sqrt(q^2 + r^2) (tumbling)";
+        /// The tether attaches through a swivel, so roll is free; a faster spin counts as loss
+        /// of control.
+        pub max_roll_rate: f64 = 50.0, "rad/s", "(0, 1000]", "largest roll rate |p|";
     }
 }
 
-/// Limits whose violation ends an episode (terminated).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct LimitsConfig {
-    /// Largest attachment tension as a fraction of the tether's breaking tension (a safety
-    /// factor of 2 by default).
-    pub overload_fraction: f64,
-    /// Largest distance from the capture point to the boom tip, m.
-    pub max_distance: f64,
-    /// Largest angle between the ACCD's nose and the flight direction, deg.
-    pub max_tilt_deg: f64,
-    /// Largest pitch/yaw rate `sqrt(q^2 + r^2)` (tumbling), rad/s.
-    pub max_body_rate: f64,
-    /// Largest roll rate `|p|`, rad/s. The tether attaches through a swivel, so roll is free;
-    /// a faster spin counts as loss of control.
-    pub max_roll_rate: f64,
-}
+/// Each field's range is all there is to check.
+impl Rules for LimitsConfig {}
 
-impl Default for LimitsConfig {
-    fn default() -> Self {
-        LimitsConfig {
-            overload_fraction: 0.5,
-            max_distance: 60.0,
-            max_tilt_deg: 60.0,
-            max_body_rate: 10.0,
-            max_roll_rate: 50.0,
-        }
+accd_spec::config_struct! {
+    /// Everything that defines the RL environment: the physics ([`CaptureConfig`], composed flat:
+    /// its sections' keys stand beside the task's in one document), the task, and the wake seeds.
+    /// Missing keys take their defaults; unknown keys are errors.
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct EnvConfig {
+        ..physics: CaptureConfig;
+        pub agent_step: f64 = 0.1, "s", "(0, 10]",
+            "how long one action is held; a whole multiple of tether.time_step, at least one";
+        pub capture_window: f64 = 70.0, "s", "(0, 3600]",
+            "the episode is truncated after this time; a whole multiple of agent_step, at least one";
+        pub initial: InitialConfig = InitialConfig::default(), "", "", "random initial conditions";
+        pub reward: RewardConfig = RewardConfig::default(), "", "", "reward weights";
+        pub limits: LimitsConfig = LimitsConfig::default(), "", "", "episode-ending limits";
+        pub wake_seed: Option<u64> = None, "", "",
+            "fixes the wake seed of every episode (None: drawn from the training range)";
+        /// Env `i`'s episode `e` uses entry `(i + e * num_envs) mod len`.
+        pub wake_seeds: Option<Vec<u64>> = None, "", "",
+            "wake seeds to cycle through (evaluation); overrides wake_seed";
     }
 }
 
-impl LimitsConfig {
-    fn validate(&self) -> Result<()> {
-        for (name, v, hi, allowed) in [
-            (
-                "limits.overload_fraction",
-                self.overload_fraction,
-                1.0,
-                "(0, 1]",
-            ),
-            ("limits.max_distance", self.max_distance, 1e4, "(0, 1e4] m"),
-            (
-                "limits.max_tilt_deg",
-                self.max_tilt_deg,
-                180.0,
-                "(0, 180] deg",
-            ),
-            (
-                "limits.max_body_rate",
-                self.max_body_rate,
-                1e3,
-                "(0, 1000] rad/s",
-            ),
-            (
-                "limits.max_roll_rate",
-                self.max_roll_rate,
-                1e3,
-                "(0, 1000] rad/s",
-            ),
-        ] {
-            check_positive(name, v, hi, allowed)?;
+/// The agent step a whole multiple of the physics step, the capture window a whole multiple of
+/// the agent step, a wake-seed list not empty.
+impl Rules for EnvConfig {
+    fn check_rules(&self, prefix: &str) -> std::result::Result<(), OutOfRange> {
+        let dt = self.physics.tether.time_step;
+        if self.agent_step < dt {
+            return Err(out_of_range(
+                &join(prefix, "agent_step"),
+                self.agent_step,
+                format!("[tether.time_step = {dt}, 10] s"),
+            ));
+        }
+        let k = self.substeps() as f64;
+        if (k * dt - self.agent_step).abs() > 1e-9 * self.agent_step {
+            return Err(out_of_range(
+                &join(prefix, "agent_step"),
+                self.agent_step,
+                format!("a whole multiple of tether.time_step = {dt} s"),
+            ));
+        }
+        if self.capture_window < self.agent_step {
+            return Err(out_of_range(
+                &join(prefix, "capture_window"),
+                self.capture_window,
+                "[agent_step, 3600] s",
+            ));
+        }
+        let steps = self.capture_window / self.agent_step;
+        if (steps - steps.round()).abs() > 1e-9 * steps {
+            return Err(out_of_range(
+                &join(prefix, "capture_window"),
+                self.capture_window,
+                "a whole multiple of agent_step",
+            ));
+        }
+        if let Some(list) = &self.wake_seeds {
+            if list.is_empty() {
+                return Err(out_of_range(
+                    &join(prefix, "wake_seeds"),
+                    "[]",
+                    "a non-empty list of wake seeds",
+                ));
+            }
         }
         Ok(())
     }
 }
 
-/// Everything that defines the RL environment: the physics (as in [`CaptureConfig`]), the
-/// task, and the wake seeds. Missing keys take their defaults; unknown keys are errors.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct EnvConfig {
-    /// The tether (Table 3 by default).
-    pub tether: TetherConfig,
-    /// The capturing device.
-    pub accd: AccdConfig,
-    /// The towing aircraft.
-    pub aircraft: AircraftConfig,
-    /// The RLV's boom.
-    pub boom: BoomConfig,
-    /// The mean wake.
-    pub wake: WakeConfig,
-    /// Wake and ambient turbulence.
-    pub turbulence: TurbulenceConfig,
-    /// Agent step: how long one action is held, s; a whole number of physics steps.
-    pub agent_step: f64,
-    /// Capture window: the episode is truncated after this time, s.
-    pub capture_window: f64,
-    /// Random initial conditions.
-    pub initial: InitialConfig,
-    /// Reward weights.
-    pub reward: RewardConfig,
-    /// Episode-ending limits.
-    pub limits: LimitsConfig,
-    /// Fixes the wake seed of every episode (otherwise drawn from the training range).
-    pub wake_seed: Option<u64>,
-    /// Wake seeds to cycle through (evaluation): env `i`'s episode `e` uses entry
-    /// `(i + e * num_envs) mod len`. Overrides `wake_seed`.
-    pub wake_seeds: Option<Vec<u64>>,
-}
-
-impl Default for EnvConfig {
-    fn default() -> Self {
-        let capture = CaptureConfig::default();
-        EnvConfig {
-            tether: capture.tether,
-            accd: capture.accd,
-            aircraft: capture.aircraft,
-            boom: capture.boom,
-            wake: capture.wake,
-            turbulence: capture.turbulence,
-            agent_step: 0.1,
-            capture_window: 70.0,
-            initial: InitialConfig::default(),
-            reward: RewardConfig::default(),
-            limits: LimitsConfig::default(),
-            wake_seed: None,
-            wake_seeds: None,
-        }
-    }
-}
-
 impl EnvConfig {
-    /// The physics part.
-    pub fn capture(&self) -> CaptureConfig {
-        CaptureConfig {
-            tether: self.tether.clone(),
-            accd: self.accd.clone(),
-            aircraft: self.aircraft.clone(),
-            boom: self.boom.clone(),
-            wake: self.wake.clone(),
-            turbulence: self.turbulence.clone(),
-        }
-    }
-
     /// Parses JSON (unknown keys are errors) and validates. A value of the wrong type is named
     /// by its dotted field (see [`crate::config::locate_parse_error`]).
     pub fn from_json(text: &str) -> Result<Valid<Self>> {
@@ -537,18 +456,21 @@ impl EnvConfig {
     /// and integrator buffers, and a fixed allowance for the rest. Shared parts (the wake and
     /// aerodynamic tables) are not counted.
     pub fn bytes_per_env(&self) -> usize {
-        let dofs = self.tether.dofs();
+        let dofs = self.physics.tether.dofs();
         // State, start state, RK4 stages and spares (about 20 vectors), and the model's
         // per-segment workspace (about 60 values a segment).
-        let tether = (20 * dofs + 60 * self.tether.segments) * std::mem::size_of::<f64>();
-        let turbulence = self.turbulence.history_bytes(self.aircraft.airspeed);
+        let tether = (20 * dofs + 60 * self.physics.tether.segments) * std::mem::size_of::<f64>();
+        let turbulence = self
+            .physics
+            .turbulence
+            .history_bytes(self.physics.aircraft.airspeed);
         const FIXED: usize = 16 << 10;
         turbulence.saturating_add(tether).saturating_add(FIXED)
     }
 
     /// Physics steps per agent step.
     pub fn substeps(&self) -> usize {
-        (self.agent_step / self.tether.time_step).round() as usize
+        (self.agent_step / self.physics.tether.time_step).round() as usize
     }
 
     /// Agent steps in the capture window.
@@ -556,79 +478,18 @@ impl EnvConfig {
         (self.capture_window / self.agent_step).round() as u64
     }
 
-    /// Checks every part.
+    /// Checks every field against its declared range and every rule ([`Rules`]), the physics
+    /// part's included; counted by [`crate::valid::validation_passes`] as one pass.
     pub fn validate(&self) -> Result<()> {
-        self.capture().validate()?;
-        let dt = self.tether.time_step;
-        if !(self.agent_step.is_finite() && self.agent_step >= dt && self.agent_step <= 10.0) {
-            return Err(SimError::invalid_config(
-                "agent_step",
-                self.agent_step,
-                &format!("[tether.time_step = {dt}, 10] s"),
-            ));
-        }
-        let k = self.substeps() as f64;
-        if (k * dt - self.agent_step).abs() > 1e-9 * self.agent_step {
-            return Err(SimError::invalid_config(
-                "agent_step",
-                self.agent_step,
-                &format!("a whole multiple of tether.time_step = {dt} s"),
-            ));
-        }
-        if !(self.capture_window.is_finite()
-            && self.capture_window >= self.agent_step
-            && self.capture_window <= 3600.0)
-        {
-            return Err(SimError::invalid_config(
-                "capture_window",
-                self.capture_window,
-                "[agent_step, 3600] s",
-            ));
-        }
-        let steps = self.capture_window / self.agent_step;
-        if (steps - steps.round()).abs() > 1e-9 * steps {
-            return Err(SimError::invalid_config(
-                "capture_window",
-                self.capture_window,
-                "a whole multiple of agent_step",
-            ));
-        }
-        check(
-            "initial.settle_time",
-            self.initial.settle_time,
-            0.0,
-            600.0,
-            "[0, 600] s",
-        )?;
-        for (i, v) in self.initial.offset.iter().enumerate() {
-            check(&format!("initial.offset[{i}]"), *v, 0.0, 50.0, "[0, 50] m")?;
-        }
-        check(
-            "initial.attitude_deg",
-            self.initial.attitude_deg,
-            0.0,
-            30.0,
-            "[0, 30] deg",
-        )?;
-        self.reward.validate()?;
-        self.limits.validate()?;
-        if let Some(list) = &self.wake_seeds {
-            if list.is_empty() {
-                return Err(SimError::invalid_config(
-                    "wake_seeds",
-                    "[]",
-                    "a non-empty list of wake seeds",
-                ));
-            }
-        }
-        Ok(())
+        crate::valid::count_validation_pass();
+        Ok(self.check_fields("")?)
     }
 }
 
 impl Valid<EnvConfig> {
     /// The physics part, valid with it ([`EnvConfig::validate`] checks it whole).
     pub fn capture(&self) -> Valid<CaptureConfig> {
-        Valid::trusted(EnvConfig::capture(self))
+        Valid::trusted(self.physics.clone())
     }
 }
 
@@ -641,6 +502,7 @@ pub fn tilt(attitude: &nalgebra::UnitQuaternion<f64>) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::accd::AccdConfig;
 
     #[test]
     fn defaults_validate_and_derive_the_step_counts() {
@@ -666,6 +528,173 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("capture_windw"), "{e}");
+    }
+
+    /// The keys of today's documents, in the order they are written (the state header hashes
+    /// this JSON: the order must not change).
+    const KEYS: [&str; 13] = [
+        "tether",
+        "accd",
+        "aircraft",
+        "boom",
+        "wake",
+        "turbulence",
+        "agent_step",
+        "capture_window",
+        "initial",
+        "reward",
+        "limits",
+        "wake_seed",
+        "wake_seeds",
+    ];
+
+    #[test]
+    fn env_config_reads_and_writes_flat_keys() {
+        let text = serde_json::to_string(&EnvConfig::default()).unwrap();
+        let doc: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let keys: Vec<&str> = doc
+            .as_object()
+            .unwrap()
+            .keys()
+            .map(|k| k.as_str())
+            .collect();
+        let mut sorted = KEYS.to_vec();
+        sorted.sort();
+        assert_eq!(keys, sorted, "serde_json's map is sorted");
+        assert!(text.starts_with(r#"{"tether":{"segments":30,"#), "{text}");
+        let order: Vec<usize> = KEYS
+            .iter()
+            .map(|k| text.find(&format!("\"{k}\":")).unwrap())
+            .collect();
+        assert!(order.windows(2).all(|w| w[0] < w[1]), "{text}");
+        let back: EnvConfig = serde_json::from_str(&text).unwrap();
+        assert_eq!(back, EnvConfig::default());
+        let c = EnvConfig::from_json(
+            r#"{"tether": {"segments": 20}, "reward": {"effort": 0.1}, "capture_window": 30}"#,
+        )
+        .unwrap();
+        assert_eq!(c.physics.tether.segments, 20);
+        assert_eq!(c.reward.effort, 0.1);
+        assert_eq!(c.capture_window, 30.0);
+        assert_eq!(c.physics.accd, AccdConfig::default());
+    }
+
+    #[test]
+    fn env_config_refuses_unknown_and_repeated_keys_by_dotted_path() {
+        for (doc, path) in [
+            (r#"{"capture_windw": 3}"#, "capture_windw"),
+            (r#"{"tether": {"lenght": 3}}"#, "tether.lenght"),
+            (r#"{"reward": {"effort": 0.1, "efort": 1}}"#, "reward.efort"),
+            (r#"{"wake": {"enabled": 3}}"#, "wake.enabled"),
+            (r#"{"boom": {"offset": [0, 1]}}"#, "boom.offset"),
+        ] {
+            let e = EnvConfig::from_json(doc).unwrap_err().to_string();
+            assert!(e.contains(&format!("`{path}`")), "{doc}: {e}");
+        }
+        let e = EnvConfig::from_json(r#"{"capture_window": 30, "capture_window": 40}"#)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("duplicate field `capture_window`"), "{e}");
+        let e = EnvConfig::from_json(r#"{"nope": 1}"#)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("`tether`") && e.contains("`wake_seeds`"), "{e}");
+    }
+
+    /// Every declared range reads, only numbers have one, sections have neither unit nor range.
+    #[test]
+    fn declarations_are_well_formed() {
+        let rows = accd_spec::walk(EnvConfig::FIELDS);
+        assert!(rows.len() > 70, "{}", rows.len());
+        let mut keys: Vec<&str> = rows.iter().map(|(k, _)| k.as_str()).collect();
+        keys.sort();
+        keys.dedup();
+        assert_eq!(keys.len(), rows.len());
+        for (key, f) in &rows {
+            assert!(
+                !f.description.is_empty() && !f.description.ends_with('.'),
+                "{key}"
+            );
+            if !f.range.is_empty() {
+                accd_spec::Range::parse(f.range).unwrap_or_else(|e| panic!("{key}: {e}"));
+                assert!(
+                    !f.unit.is_empty(),
+                    "{key}: a number has a unit (\"-\" for none)"
+                );
+            }
+            if !f.nested.is_empty() {
+                assert!(f.unit.is_empty() && f.range.is_empty(), "{key}");
+            }
+        }
+    }
+
+    /// Each declared range is what validation enforces: a value just outside it (each number of
+    /// the configuration in turn) is refused, naming the dotted field.
+    #[test]
+    fn every_declared_range_is_enforced() {
+        let default = serde_json::to_value(EnvConfig::default()).unwrap();
+        let mut checked = 0;
+        for (key, f) in accd_spec::walk(EnvConfig::FIELDS) {
+            if f.range.is_empty() {
+                continue;
+            }
+            let r = accd_spec::Range::parse(f.range).unwrap();
+            let (lo, hi) = match (r.lo, r.hi) {
+                (
+                    accd_spec::Bound::Open(lo) | accd_spec::Bound::Closed(lo),
+                    accd_spec::Bound::Open(hi) | accd_spec::Bound::Closed(hi),
+                ) => (lo, hi),
+            };
+            for outside in [hi + hi.abs() + 1.0, lo - lo.abs() - 1.0] {
+                if !outside.is_finite() {
+                    continue;
+                }
+                let mut doc = default.clone();
+                let mut slot = &mut doc;
+                for part in key.split('.') {
+                    slot = slot.get_mut(part).unwrap_or_else(|| panic!("{key}"));
+                }
+                let field = match slot {
+                    serde_json::Value::Array(a) => {
+                        a[0] = outside.into();
+                        format!("{key}[0]")
+                    }
+                    serde_json::Value::Null => {
+                        *slot = serde_json::json!([outside, outside, outside]);
+                        format!("{key}[0]")
+                    }
+                    other => {
+                        *other = if other.is_u64() {
+                            (outside.max(0.0) as u64).into()
+                        } else {
+                            outside.into()
+                        };
+                        key.clone()
+                    }
+                };
+                if slot_is_unsigned_below_zero(&default, &key, outside) {
+                    continue;
+                }
+                let e = EnvConfig::from_json(&doc.to_string())
+                    .unwrap_err()
+                    .to_string();
+                assert!(
+                    e.contains(&format!("`{field}`")) && e.contains(f.range),
+                    "{key} = {outside}: {e}"
+                );
+                checked += 1;
+            }
+        }
+        assert!(checked > 60, "{checked}");
+    }
+
+    /// A count (unsigned in JSON) cannot be negative: nothing to check below its range.
+    fn slot_is_unsigned_below_zero(default: &serde_json::Value, key: &str, v: f64) -> bool {
+        let mut slot = default;
+        for part in key.split('.') {
+            slot = &slot[part];
+        }
+        slot.is_u64() && v < 0.0
     }
 
     #[test]

@@ -74,6 +74,7 @@
 //! `advance` draws `3 * lanes (+ 3)` Gaussians per grid step (234 with the defaults);
 //! [`Turbulence::sample`] reads 24 (+ 6) ring entries. Neither allocates.
 
+use accd_spec::{join, out_of_range, Fields, OutOfRange, Range, Rules};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
@@ -157,57 +158,82 @@ pub enum LaneStreams {
     PerLane,
 }
 
-/// Configuration of the turbulence (model in the [module docs](self)).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct TurbulenceConfig {
-    /// Generate the wake-turbulence lanes. Default true. (Off saves their cost when there is no
-    /// wake; the wake fluctuation is then zero.)
-    pub wake_turbulence: bool,
-    /// Length scale L_t of the wake turbulence and spacing of its lanes, m, [1, 1000].
-    /// Default 10.
-    pub wake_length_scale_m: f64,
-    /// Lateral extent [min, max] of the lane grid (TA frame y), m, within [-1000, 1000].
-    /// Default [-30, 30].
-    pub lanes_y_m: [f64; 2],
-    /// Vertical extent [min, max] of the lane grid (TA frame z, down), m, within [-1000, 1000].
-    /// Default [-10, 90].
-    pub lanes_z_m: [f64; 2],
-    /// Distance behind the attachment over which the frozen history is kept, m, [0, 5000].
-    /// Default 400 (the 250 m tether with margin).
-    pub history_distance_m: f64,
-    /// Step of the gust time grid, s, [1e-4, 0.1]. Default 0.01 (the physics step).
-    pub time_step_s: f64,
-    /// Ambient turbulence. Default none.
-    pub ambient: AmbientTurbulence,
-    /// How the gusts' normal deviates are drawn: `"ziggurat"` (default; [`NormalSampler`]: 4-5x
-    /// cheaper than Box-Muller) or `"box_muller"` (the first releases' sampler: another
-    /// realisation of the same process per seed).
-    pub normal_sampler: NormalSampler,
-    /// Where the wake lanes' random numbers come from: `"per_lane"` (default; [`LaneStreams`]:
-    /// lanes far from the tether are then not generated) or `"shared"` (the first releases' one
-    /// stream).
-    pub lane_streams: LaneStreams,
-}
-
-impl Default for TurbulenceConfig {
-    fn default() -> Self {
-        TurbulenceConfig {
-            wake_turbulence: true,
-            wake_length_scale_m: 10.0,
-            lanes_y_m: [-30.0, 30.0],
-            lanes_z_m: [-10.0, 90.0],
-            history_distance_m: 400.0,
-            time_step_s: 0.01,
-            ambient: AmbientTurbulence::None,
-            normal_sampler: NormalSampler::Ziggurat,
-            lane_streams: LaneStreams::PerLane,
-        }
+accd_spec::config_struct! {
+    /// Configuration of the turbulence (model in the [module docs](self)).
+    #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+    #[serde(deny_unknown_fields, default)]
+    pub struct TurbulenceConfig {
+        /// Off saves their cost when there is no wake; the wake fluctuation is then zero.
+        pub wake_turbulence: bool = true, "", "", "generate the wake-turbulence lanes";
+        pub wake_length_scale_m: f64 = 10.0, "m", "[1, 1000]",
+            "length scale L_t of the wake turbulence and spacing of its lanes";
+        pub lanes_y_m: [f64; 2] = [-30.0, 30.0], "m", "[-1000, 1000]",
+            "lateral extent [min, max] of the lane grid (TA frame y)";
+        pub lanes_z_m: [f64; 2] = [-10.0, 90.0], "m", "[-1000, 1000]",
+            "vertical extent [min, max] of the lane grid (TA frame z, down)";
+        pub history_distance_m: f64 = 400.0, "m", "[0, 5000]",
+            "distance behind the attachment over which the frozen history is kept (400: the 250 m tether with margin)";
+        pub time_step_s: f64 = 0.01, "s", "[1e-4, 0.1]", "step of the gust time grid (0.01: the physics step)";
+        pub ambient: AmbientTurbulence = AmbientTurbulence::None, "", "",
+            "ambient turbulence: \"none\", a preset or {\"custom\": {\"sigma_mps\", \"length_scale_m\"}}";
+        /// [`NormalSampler`]: the ziggurat is 4-5x cheaper than Box-Muller (the first releases'
+        /// sampler), another realisation of the same process per seed.
+        pub normal_sampler: NormalSampler = NormalSampler::Ziggurat, "", "",
+            "how the gusts' normal deviates are drawn: \"ziggurat\" or \"box_muller\" (the exact scheme)";
+        /// [`LaneStreams`]: with `"per_lane"`, lanes far from the tether are not generated.
+        pub lane_streams: LaneStreams = LaneStreams::PerLane, "", "",
+            "where the wake lanes' random numbers come from: \"per_lane\" or \"shared\" (one stream, the exact scheme)";
     }
 }
 
+accd_spec::no_range!(AmbientTurbulence, NormalSampler, LaneStreams);
+
 fn lane_count(range: [f64; 2], spacing: f64) -> usize {
     ((range[1] - range[0]) / spacing - 1e-9).ceil().max(0.0) as usize + 1
+}
+
+/// The lane extents in order, at most [`MAX_LANES`] lanes, a custom ambient turbulence's
+/// intensity and length scale within their ranges.
+impl Rules for TurbulenceConfig {
+    fn check_rules(&self, prefix: &str) -> std::result::Result<(), OutOfRange> {
+        let l = self.wake_length_scale_m;
+        for (name, r) in [("lanes_y_m", self.lanes_y_m), ("lanes_z_m", self.lanes_z_m)] {
+            if r[1] < r[0] {
+                return Err(out_of_range(
+                    &format!("{}[1]", join(prefix, name)),
+                    r[1],
+                    format!("[{}, 1000] m (not below {name}[0])", r[0]),
+                ));
+            }
+        }
+        let lanes = lane_count(self.lanes_y_m, l) * lane_count(self.lanes_z_m, l);
+        if lanes > MAX_LANES {
+            return Err(out_of_range(
+                &join(prefix, "wake_length_scale_m"),
+                l,
+                format!(
+                    "a spacing giving at most {MAX_LANES} lanes over the lane extents (gives {lanes})"
+                ),
+            ));
+        }
+        if let AmbientTurbulence::Custom {
+            sigma_mps,
+            length_scale_m,
+        } = self.ambient
+        {
+            Range::closed(0.0, 50.0).check(
+                &join(prefix, "ambient.custom.sigma_mps"),
+                sigma_mps,
+                "m/s",
+            )?;
+            Range::closed(1.0, 10_000.0).check(
+                &join(prefix, "ambient.custom.length_scale_m"),
+                length_scale_m,
+                "m",
+            )?;
+        }
+        Ok(())
+    }
 }
 
 impl TurbulenceConfig {
@@ -242,86 +268,18 @@ impl TurbulenceConfig {
             .saturating_mul(std::mem::size_of::<f32>())
     }
 
-    /// Checks every value; errors name the field as `turbulence.<field>`.
+    /// Checks every value against its declared range and the [`Rules`]; errors name the field
+    /// as `turbulence.<field>`.
     pub fn validate(&self) -> Result<()> {
-        let l = self.wake_length_scale_m;
-        if !(l.is_finite() && (1.0..=1000.0).contains(&l)) {
-            return Err(SimError::invalid_config(
-                "turbulence.wake_length_scale_m",
-                l,
-                "[1, 1000] m",
-            ));
-        }
-        for (name, r) in [("lanes_y_m", self.lanes_y_m), ("lanes_z_m", self.lanes_z_m)] {
-            for (i, &v) in r.iter().enumerate() {
-                if !(v.is_finite() && v.abs() <= 1000.0) {
-                    return Err(SimError::invalid_config(
-                        &format!("turbulence.{name}[{i}]"),
-                        v,
-                        "[-1000, 1000] m",
-                    ));
-                }
-            }
-            if r[1] < r[0] {
-                return Err(SimError::invalid_config(
-                    &format!("turbulence.{name}[1]"),
-                    r[1],
-                    &format!("[{}, 1000] m (not below {name}[0])", r[0]),
-                ));
-            }
-        }
-        let lanes = lane_count(self.lanes_y_m, l) * lane_count(self.lanes_z_m, l);
-        if lanes > MAX_LANES {
-            return Err(SimError::invalid_config(
-                "turbulence.wake_length_scale_m",
-                l,
-                &format!(
-                    "a spacing giving at most {MAX_LANES} lanes over the lane extents (gives {lanes})"
-                ),
-            ));
-        }
-        let d = self.history_distance_m;
-        if !(d.is_finite() && (0.0..=5000.0).contains(&d)) {
-            return Err(SimError::invalid_config(
-                "turbulence.history_distance_m",
-                d,
-                "[0, 5000] m",
-            ));
-        }
-        let dt = self.time_step_s;
-        if !(dt.is_finite() && (1e-4..=0.1).contains(&dt)) {
-            return Err(SimError::invalid_config(
-                "turbulence.time_step_s",
-                dt,
-                "[1e-4, 0.1] s",
-            ));
-        }
-        if let AmbientTurbulence::Custom {
-            sigma_mps,
-            length_scale_m,
-        } = self.ambient
-        {
-            if !(sigma_mps.is_finite() && (0.0..=50.0).contains(&sigma_mps)) {
-                return Err(SimError::invalid_config(
-                    "turbulence.ambient.custom.sigma_mps",
-                    sigma_mps,
-                    "[0, 50] m/s",
-                ));
-            }
-            if !(length_scale_m.is_finite() && (1.0..=10_000.0).contains(&length_scale_m)) {
-                return Err(SimError::invalid_config(
-                    "turbulence.ambient.custom.length_scale_m",
-                    length_scale_m,
-                    "[1, 10000] m",
-                ));
-            }
-        }
-        Ok(())
+        Ok(self.check_fields("turbulence")?)
     }
 }
 
 /// Position of a point on a 1D lane axis: the first lane, the fraction towards the second, and
-/// whether there is a second.
+/// whether there is a second. Not [`crate::interp::Axis`]: the lanes are a computed uniform
+/// grid (first lane and spacing, no stored points) that may have a single lane, and beyond the
+/// outer lanes a point takes the outer lane's gusts (a clamp, `Edge::Hold` in the table
+/// interpolator's terms); its values (the lane histories) live in the turbulence's ring buffer.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct LaneAxis {
     first: f64,

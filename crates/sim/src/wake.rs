@@ -96,10 +96,12 @@
 use std::path::Path;
 use std::sync::{Arc, OnceLock};
 
+use accd_spec::Fields;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, SimError};
+use crate::interp::{Axis, Edge, Grid};
 
 /// Length of the towing aircraft L, m (paper section 2.2).
 pub const TA_LENGTH_M: f64 = 70.0;
@@ -137,99 +139,6 @@ pub struct WakeTableData {
     pub w: Vec<f64>,
     /// Turbulent kinetic energy, fraction of U_inf^2, >= 0; same layout.
     pub k: Vec<f64>,
-}
-
-/// One table axis with what makes locating a coordinate cheap.
-#[derive(Debug, Clone, PartialEq)]
-struct Axis {
-    values: Vec<f64>,
-    /// `Some((first, 1 / step))` when the axis is uniformly spaced (to 1e-9 of a step).
-    uniform: Option<(f64, f64)>,
-}
-
-impl Axis {
-    fn new(values: Vec<f64>) -> Axis {
-        let n = values.len();
-        let step = (values[n - 1] - values[0]) / (n - 1) as f64;
-        let is_uniform = values
-            .iter()
-            .enumerate()
-            .all(|(i, &v)| (v - (values[0] + i as f64 * step)).abs() <= 1e-9 * step);
-        Axis {
-            uniform: is_uniform.then(|| (values[0], 1.0 / step)),
-            values,
-        }
-    }
-
-    /// The cell `i` (values[i] <= x <= values[i + 1]) and the fraction within it, or `None` if
-    /// `x` is outside [first, last] (or NaN).
-    #[inline]
-    fn locate(&self, x: f64) -> Option<(usize, f64)> {
-        let v = &self.values;
-        let n = v.len();
-        if !(x >= v[0] && x <= v[n - 1]) {
-            return None;
-        }
-        let mut i = match self.uniform {
-            Some((first, inv_step)) => (((x - first) * inv_step) as usize).min(n - 2),
-            None => v.partition_point(|&a| a <= x).saturating_sub(1).min(n - 2),
-        };
-        // Guard against rounding in the uniform guess.
-        if x < v[i] && i > 0 {
-            i -= 1;
-        } else if x > v[i + 1] && i + 2 < n {
-            i += 1;
-        }
-        let f = ((x - v[i]) / (v[i + 1] - v[i])).clamp(0.0, 1.0);
-        Some((i, f))
-    }
-}
-
-/// A rectilinear 3D grid (x, y, z axes).
-#[derive(Debug, Clone, PartialEq)]
-struct Grid {
-    x: Axis,
-    y: Axis,
-    z: Axis,
-}
-
-/// A trilinear interpolation stencil: the first corner's flat index and the 8 corner weights.
-struct Stencil {
-    base: usize,
-    /// Flat-index offsets of the 8 corners.
-    offsets: [usize; 8],
-    weights: [f64; 8],
-}
-
-impl Grid {
-    fn len(&self) -> usize {
-        self.x.values.len() * self.y.values.len() * self.z.values.len()
-    }
-
-    #[inline]
-    fn stencil(&self, q: [f64; 3]) -> Option<Stencil> {
-        let (i, fx) = self.x.locate(q[0])?;
-        let (j, fy) = self.y.locate(q[1])?;
-        let (l, fz) = self.z.locate(q[2])?;
-        let nz = self.z.values.len();
-        let sy = nz;
-        let sx = self.y.values.len() * nz;
-        let (gx, gy, gz) = (1.0 - fx, 1.0 - fy, 1.0 - fz);
-        Some(Stencil {
-            base: i * sx + j * sy + l,
-            offsets: [0, 1, sy, sy + 1, sx, sx + 1, sx + sy, sx + sy + 1],
-            weights: [
-                gx * gy * gz,
-                gx * gy * fz,
-                gx * fy * gz,
-                gx * fy * fz,
-                fx * gy * gz,
-                fx * gy * fz,
-                fx * fy * gz,
-                fx * fy * fz,
-            ],
-        })
-    }
 }
 
 /// One validated wake table (one TA angle of attack). See the [module docs](self) for the
@@ -395,7 +304,10 @@ impl WakeTable {
     /// `(x / L, y / L, z / L)`, trilinearly interpolated; all zero outside the grid.
     pub fn sample(&self, x_over_l: f64, y_over_l: f64, z_over_l: f64) -> [f64; 4] {
         let mut out = [0.0; 4];
-        if let Some(s) = self.grid.stencil([x_over_l, y_over_l, z_over_l]) {
+        if let Some(s) = self
+            .grid
+            .stencil([x_over_l, y_over_l, z_over_l], Edge::Zero)
+        {
             let d = &self.data;
             for c in 0..8 {
                 let idx = s.base + s.offsets[c];
@@ -713,61 +625,41 @@ pub enum AirSampling {
     PerStep,
 }
 
-/// Configuration of the mean wake.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct WakeConfig {
-    /// Whether there is a wake at all. Default true. When false the air is free stream (and there
-    /// is no wake turbulence, k = 0).
-    pub enabled: bool,
-    /// TA angle of attack, deg, within the angles of the table pair ([0, 8] for the default
-    /// tables). Default 8 (the paper's high-angle-of-attack case, the hardest).
-    pub alpha_deg: f64,
-    /// Position of the tether attachment (the TA frame's origin) relative to the TA's nose, in the
-    /// TA frame (x forward, y starboard, z down), m; each component in [-1000, 1000].
-    /// Default [-60, 0, 0]: on the fuselage axis 60 m behind the nose (an assumption).
-    pub attachment_from_nose_m: [f64; 3],
-    /// User tables (JSON files); `None` (the default) uses the analytic model.
-    pub tables: Option<WakeTableFiles>,
-    /// Where the tether's segments sample the wake and its turbulence: `"per_step"` (default
-    /// since the fast scheme's measurement, BENCHMARKS.md) or `"per_stage"` (the exact scheme of
-    /// the first releases; [`AirSampling`]).
-    pub sampling: AirSampling,
-}
-
-impl Default for WakeConfig {
-    fn default() -> Self {
-        WakeConfig {
-            enabled: true,
-            alpha_deg: 8.0,
-            attachment_from_nose_m: DEFAULT_ATTACHMENT_FROM_NOSE_M,
-            tables: None,
-            sampling: AirSampling::PerStep,
-        }
+accd_spec::config_struct! {
+    /// Configuration of the mean wake.
+    #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+    #[serde(deny_unknown_fields, default)]
+    pub struct WakeConfig {
+        /// When false the air is free stream (and there is no wake turbulence, k = 0).
+        pub enabled: bool = true, "", "", "whether there is a wake at all";
+        /// 8 is the paper's high-angle-of-attack case, the hardest. Checked against the tables'
+        /// angles by [`Wake::new`].
+        pub alpha_deg: f64 = 8.0, "deg", "",
+            "TA angle of attack, within the angles of the table pair ([0, 8] for the default tables)";
+        /// In the TA frame (x forward, y starboard, z down); the default, on the fuselage axis
+        /// 60 m behind the nose, is an assumption.
+        pub attachment_from_nose_m: [f64; 3] = DEFAULT_ATTACHMENT_FROM_NOSE_M, "m", "[-1000, 1000]",
+            "position of the tether attachment (the TA frame's origin) relative to the TA's nose";
+        pub tables: Option<WakeTableFiles> = None, "", "",
+            "user wake tables, {\"low\": path, \"high\": path} (None: the analytic model)";
+        /// `"per_step"` is the default since the fast scheme's measurement (BENCHMARKS.md);
+        /// `"per_stage"` is the exact scheme of the first releases.
+        pub sampling: AirSampling = AirSampling::PerStep, "", "",
+            "where the tether's segments sample the wake and its turbulence: \"per_step\" or \"per_stage\" (the exact scheme)";
     }
 }
 
+accd_spec::no_range!(WakeTableFiles, AirSampling);
+
+/// Each field's range is all there is to check here (the angle is checked against the tables
+/// when they are loaded).
+impl accd_spec::Rules for WakeConfig {}
+
 impl WakeConfig {
-    /// Checks the values that do not depend on the tables (the angle is checked against the
-    /// tables by [`Wake::new`]). Errors name the field as `wake.<field>`.
+    /// Checks the values against their declared ranges (the angle is checked against the tables
+    /// by [`Wake::new`]). Errors name the field as `wake.<field>`.
     pub fn validate(&self) -> Result<()> {
-        if !self.alpha_deg.is_finite() {
-            return Err(SimError::invalid_config(
-                "wake.alpha_deg",
-                self.alpha_deg,
-                "a finite angle within the tables' angles ([0, 8] deg by default)",
-            ));
-        }
-        for (i, &c) in self.attachment_from_nose_m.iter().enumerate() {
-            if !(c.is_finite() && c.abs() <= 1000.0) {
-                return Err(SimError::invalid_config(
-                    &format!("wake.attachment_from_nose_m[{i}]"),
-                    c,
-                    "[-1000, 1000] m",
-                ));
-            }
-        }
-        Ok(())
+        Ok(self.check_fields("wake")?)
     }
 
     /// The table pair this config asks for: the files, or the shared analytic default.
@@ -896,7 +788,7 @@ impl Wake {
             return WakeSample::default();
         };
         let pair = &*tables.inner;
-        let Some(s) = pair.low.grid.stencil(self.table_coordinates(p)) else {
+        let Some(s) = pair.low.grid.stencil(self.table_coordinates(p), Edge::Zero) else {
             return WakeSample::default();
         };
         let mut acc = [0.0; 8];

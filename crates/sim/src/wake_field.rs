@@ -10,42 +10,18 @@
 //! [`accd_tether::Surroundings`] contract requires a pure function during a step). The wake and
 //! the frozen turbulence are still sampled at each stage's positions.
 //!
-//! A typical loop: `tether.step(&field)?; field.advance(dt)?;`.
+//! A typical loop: `tether.step(&field)?; field.advance(dt)?;`. The capture simulation builds
+//! its field with [`WakeField::from_parts`]; the tests build standalone fields from a small
+//! configuration of their own (`tests/support/wake_field.rs`).
 
-use accd_tether::{Atmosphere, Surroundings};
+use accd_tether::Surroundings;
 use nalgebra::Vector3;
-use serde::{Deserialize, Serialize};
 
 use crate::air::{AirDisturbance, AirState};
-use crate::error::{Result, SimError};
+use crate::error::Result;
 use crate::state_format::StateError;
-use crate::turbulence::{Turbulence, TurbulenceConfig};
-use crate::wake::{Wake, WakeConfig, WakeTables};
-
-/// Configuration of the air: flight condition, wake, turbulence.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct WakeFieldConfig {
-    /// Airspeed of the TA, U_inf, m/s, (0, 400]. Default 185 (paper).
-    pub airspeed_mps: f64,
-    /// Altitude for the ISA density, m, [-500, 20000]. Default 6000 (paper).
-    pub altitude_m: f64,
-    /// The mean wake.
-    pub wake: WakeConfig,
-    /// The turbulence.
-    pub turbulence: TurbulenceConfig,
-}
-
-impl Default for WakeFieldConfig {
-    fn default() -> Self {
-        WakeFieldConfig {
-            airspeed_mps: accd_tether::reference::TOWING_AIRSPEED,
-            altitude_m: accd_tether::reference::TOWING_ALTITUDE,
-            wake: WakeConfig::default(),
-            turbulence: TurbulenceConfig::default(),
-        }
-    }
-}
+use crate::turbulence::Turbulence;
+use crate::wake::Wake;
 
 /// Free stream + mean wake + turbulence, as the tether's [`Surroundings`].
 #[derive(Debug, Clone)]
@@ -58,35 +34,6 @@ pub struct WakeField {
 }
 
 impl WakeField {
-    /// The field a config asks for (tables from files or the shared analytic default), with its
-    /// turbulence drawn from `wake_seed`.
-    pub fn new(config: &WakeFieldConfig, wake_seed: u64) -> Result<WakeField> {
-        let tables = if config.wake.enabled {
-            config.wake.load_tables()?
-        } else {
-            WakeTables::analytic()
-        };
-        WakeField::with_tables(config, tables, wake_seed)
-    }
-
-    /// As [`WakeField::new`] with a given (shared) table pair; `config.wake.tables` is ignored.
-    pub fn with_tables(
-        config: &WakeFieldConfig,
-        tables: WakeTables,
-        wake_seed: u64,
-    ) -> Result<WakeField> {
-        let air = Atmosphere::isa(config.altitude_m).map_err(|_| {
-            SimError::invalid_config("altitude_m", config.altitude_m, "[-500, 20000] m")
-        })?;
-        let wake = Wake::new(&config.wake, config.airspeed_mps, tables)?;
-        let mut turbulence_config = config.turbulence.clone();
-        if !config.wake.enabled {
-            turbulence_config.wake_turbulence = false;
-        }
-        let turbulence = Turbulence::new(&turbulence_config, config.airspeed_mps, wake_seed)?;
-        Ok(WakeField::from_parts(wake, turbulence, air.density))
-    }
-
     /// Assembles a field; the free stream is `(-wake.airspeed(), 0, 0)`, `density` in kg/m^3.
     /// Every wake lane is generated (per-lane streams too, [`crate::turbulence::LaneStreams`]:
     /// a standalone field cannot know where it will be sampled).

@@ -22,11 +22,10 @@ fn episode(config: EnvConfig, k: u64) -> Episode {
 
 /// A 5 s window; the capture radius so small that no capture ends the episode early.
 fn quick() -> EnvConfig {
+    let mut physics = accd_sim::CaptureConfig::default();
+    physics.boom.capture_radius = 1e-6;
     EnvConfig {
-        boom: accd_sim::BoomConfig {
-            capture_radius: 1e-6,
-            ..Default::default()
-        },
+        physics,
         capture_window: 5.0,
         initial: accd_sim::task::InitialConfig {
             settle_time: 30.0,
@@ -77,9 +76,9 @@ fn episodes_truncate_at_the_capture_window_with_bounded_finite_observations() {
 
 /// The fast air scheme: per-step sampling, ziggurat normals, on-demand turbulence lanes.
 fn fast(mut config: EnvConfig) -> EnvConfig {
-    config.wake.sampling = accd_sim::AirSampling::PerStep;
-    config.turbulence.normal_sampler = accd_sim::NormalSampler::Ziggurat;
-    config.turbulence.lane_streams = accd_sim::LaneStreams::PerLane;
+    config.physics.wake.sampling = accd_sim::AirSampling::PerStep;
+    config.physics.turbulence.normal_sampler = accd_sim::NormalSampler::Ziggurat;
+    config.physics.turbulence.lane_streams = accd_sim::LaneStreams::PerLane;
     config
 }
 
@@ -95,7 +94,7 @@ fn same_seeds_same_episode_and_saved_states_continue_bit_for_bit() {
 #[test]
 fn per_lane_streams_do_not_depend_on_the_sampling_scheme() {
     let mut per_stage = fast(quick());
-    per_stage.wake.sampling = accd_sim::AirSampling::PerStage;
+    per_stage.physics.wake.sampling = accd_sim::AirSampling::PerStage;
     let mut a = episode(per_stage, 3);
     let mut b = episode(fast(quick()), 3);
     let (ra, rb) = (run(&mut a, 30), run(&mut b, 30));
@@ -151,8 +150,8 @@ fn non_finite_actions_are_rejected_and_out_of_range_ones_clipped() {
 #[test]
 fn capture_ends_the_episode_with_the_documented_bonus() {
     let mut config = quick();
-    config.boom.capture_radius = 100.0;
-    config.boom.max_closing_speed = 1000.0;
+    config.physics.boom.capture_radius = 100.0;
+    config.physics.boom.max_closing_speed = 1000.0;
     let w = config.reward.clone();
     let mut ep = episode(config, 2);
     let o = ep.step(&[0.0; 4]).unwrap();
@@ -202,13 +201,13 @@ fn a_diverging_simulation_ends_with_a_flag_and_the_last_good_observation() {
     // issue 13 the tether substeps through that, so what diverges is the ACCD's roll: a roll
     // damping far beyond any body's makes its rate equation stiff at 0.1 s.
     let mut config = quick();
-    config.tether.time_step = 0.1;
+    config.physics.tether.time_step = 0.1;
     config.initial.settle_time = 0.0;
     config.limits.max_distance = 1e4;
     let mut table: serde_json::Value =
         serde_json::from_str(&accd_sim::AeroModel::accd().to_json()).unwrap();
     table["damping"]["clp"] = (-1e5).into();
-    config.accd.aero_table = Some(table.to_string());
+    config.physics.accd.aero_table = Some(table.to_string());
     let config = Arc::new(config.validated().unwrap());
     let eq = Arc::new(Equilibrium::settle(&config).unwrap());
     let mut ep = Episode::new(config, eq, seeds(1)).unwrap();

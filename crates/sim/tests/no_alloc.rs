@@ -5,9 +5,11 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 
 use accd_sim::turbulence::AmbientTurbulence;
-use accd_sim::{WakeField, WakeFieldConfig};
+mod support;
+
 use accd_tether::{reference, Surroundings, Tether};
 use nalgebra::Vector3;
+use support::wake_field::{wake_field, WakeFieldConfig};
 
 struct Counting;
 
@@ -47,7 +49,7 @@ fn sampling_advancing_and_stepping_do_not_allocate() {
     let (cfg, flow) = reference::towed_table3();
     let mut config = WakeFieldConfig::default();
     config.turbulence.ambient = AmbientTurbulence::Moderate;
-    let mut field = WakeField::new(&config, 3)
+    let mut field = wake_field(&config, 3)
         .unwrap()
         .with_tip_drag_area(flow.tip_drag_area);
     let mut tether = Tether::new(&cfg).unwrap();

@@ -72,7 +72,7 @@ fn an_equilibrium_outside_the_episode_limits_is_reported_naming_the_limit() {
     // issue 13: a tangential drag coefficient of 1 hangs the ACCD about 62 m from the boom tip
     // (the default allows 60 m): every episode ended at its first step, silently.
     let mut c = EnvConfig::default();
-    c.tether.tangential_drag_coefficient = 1.0;
+    c.physics.tether.tangential_drag_coefficient = 1.0;
     let eq = Equilibrium::settle(&c.clone().validated().unwrap()).unwrap();
     let why = eq.outside_limits.expect("reported");
     assert!(

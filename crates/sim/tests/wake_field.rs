@@ -2,9 +2,12 @@
 
 use accd_sim::turbulence::{AmbientTurbulence, TurbulenceConfig};
 use accd_sim::wake::WakeConfig;
-use accd_sim::{SimError, WakeField, WakeFieldConfig};
+mod support;
+
+use accd_sim::SimError;
 use accd_tether::{reference, Surroundings, Tether};
 use nalgebra::Vector3;
+use support::wake_field::{wake_field, WakeFieldConfig};
 
 fn config(alpha_deg: f64, ambient: AmbientTurbulence) -> WakeFieldConfig {
     WakeFieldConfig {
@@ -22,7 +25,7 @@ fn config(alpha_deg: f64, ambient: AmbientTurbulence) -> WakeFieldConfig {
 
 #[test]
 fn air_is_free_stream_plus_wake_plus_turbulence() {
-    let mut field = WakeField::new(&config(8.0, AmbientTurbulence::Light), 17).unwrap();
+    let mut field = wake_field(&config(8.0, AmbientTurbulence::Light), 17).unwrap();
     field.advance(0.01).unwrap();
     assert!((field.density() - 0.6601).abs() < 1e-4);
     assert_eq!(field.free_stream(), Vector3::new(-185.0, 0.0, 0.0));
@@ -58,7 +61,7 @@ fn without_wake_and_turbulence_the_field_is_the_uniform_reference_flow() {
         },
         ..WakeFieldConfig::default()
     };
-    let mut field = WakeField::new(&field_config, 0)
+    let mut field = wake_field(&field_config, 0)
         .unwrap()
         .with_tip_drag_area(flow.tip_drag_area);
     assert_eq!(field.turbulence().wake_lanes(), 0);
@@ -78,7 +81,7 @@ fn without_wake_and_turbulence_the_field_is_the_uniform_reference_flow() {
 /// mean depth over the last 5 s and the field.
 fn fly(config: &WakeFieldConfig, seed: u64, seconds: f64) -> (f64, Tether) {
     let (cfg, flow) = reference::towed_table3();
-    let mut field = WakeField::new(config, seed)
+    let mut field = wake_field(config, seed)
         .unwrap()
         .with_tip_drag_area(flow.tip_drag_area);
     let mut tether = Tether::new(&cfg).unwrap();
@@ -128,18 +131,18 @@ fn config_errors_name_the_field() {
         altitude_m: 30_000.0,
         ..WakeFieldConfig::default()
     };
-    let err = WakeField::new(&c, 0).unwrap_err();
+    let err = wake_field(&c, 0).unwrap_err();
     assert!(
         matches!(&err, SimError::InvalidConfig { field, .. } if field == "altitude_m"),
         "{err}"
     );
     let mut c = WakeFieldConfig::default();
     c.wake.alpha_deg = 9.0;
-    let err = WakeField::new(&c, 0).unwrap_err();
+    let err = wake_field(&c, 0).unwrap_err();
     assert!(err.to_string().contains("wake.alpha_deg"), "{err}");
     let mut c = WakeFieldConfig::default();
     c.turbulence.time_step_s = 0.0;
-    let err = WakeField::new(&c, 0).unwrap_err();
+    let err = wake_field(&c, 0).unwrap_err();
     assert!(err.to_string().contains("turbulence.time_step_s"), "{err}");
     // Serde: unknown keys are rejected, defaults fill the rest.
     let c: WakeFieldConfig =

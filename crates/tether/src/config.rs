@@ -1,5 +1,6 @@
 //! Tether configuration: plain serde data, validated before a model is built.
 
+use accd_spec::Fields;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, TetherError};
@@ -9,66 +10,68 @@ use crate::state::TetherState;
 /// Standard gravity, m/s^2 (ISO 80000-3).
 pub const STANDARD_GRAVITY: f64 = 9.80665;
 
-/// Physical and numerical parameters of one tether. SI units throughout.
-///
-/// The tether is `segments` identical rigid rods of length `l = length / segments` and mass
-/// `m = mass_per_length * l` (rod inertia `m l^2 / 12` about axes normal to the rod), hung from the
-/// towing aircraft through one axial visco-elastic element and carrying a lumped tip mass.
-///
-/// Damping follows the paper's Table 3, which gives coefficients *per unit mass*:
-/// * joint (bending) damping `c_b = joint_damping_per_mass * m` (N m s), i.e. scaled by the mass of
-///   one segment, as in Fritzkowski & Kaminski's equations divided through by the segment mass;
-/// * axial damping `c_s = axial_damping_per_mass * m_tot` (N s/m), scaled by the total tether mass
-///   `m_tot = mass_per_length * length` that the axial element carries. For Table 3 this gives a
-///   damping ratio of about 0.85 of the axial mode with a 50 kg tip body.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct TetherConfig {
-    /// Number of rigid segments n (1 ..= 1000). Default 30 (Table 3).
-    pub segments: usize,
-    /// Unstretched length L, m (0, 5000]. Default 250 (Table 3).
-    pub length: f64,
-    /// Mass per unit length, kg/m (0, 100]. Default 0.329 (Table 3: 82.25 kg over 250 m).
-    pub mass_per_length: f64,
-    /// Diameter d, m (0, 0.5]; sets the aerodynamic areas. Default 0.024.
-    pub diameter: f64,
-    /// Axial stiffness k of the whole tether (EA / L), N/m (0, 1e12]. Default 157431.5 (Table 3).
-    pub axial_stiffness: f64,
-    /// Axial damping per unit tether mass c_k, N s/(m kg) [0, 1e6]. Default 100 (Table 3).
-    pub axial_damping_per_mass: f64,
-    /// Flexural rigidity EI of the joints' bending springs (the paper's k_t), N m^2 [0, 1e9].
-    /// Default 170 (Table 3).
-    pub flexural_rigidity: f64,
-    /// Joint damping per unit segment mass c1, N m s/kg [0, 1e6]. Default 1 (Table 3).
-    pub joint_damping_per_mass: f64,
-    /// Cross-flow (normal) drag coefficient C_n [0, 5]. Default 0.35: the tether's Reynolds number
-    /// (about 1.8e5) is at the cylinder drag crisis, and the paper's settled depths imply a value
-    /// well under the subcritical 1.2. 0.35 with the 50 kg stand-in body of
-    /// [`crate::reference::StandInBody::accd`] puts the settled depths of 250 m UHMWPE, 250 m steel
-    /// and 300 m UHMWPE at 54.5, 118 and 63.7 m (paper: about 50, over 100, about 70).
-    pub normal_drag_coefficient: f64,
-    /// Skin-friction (tangential) drag coefficient C_t [0, 1], on the wetted area pi d l.
-    /// Default 0.01.
-    pub tangential_drag_coefficient: f64,
-    /// Lumped mass at the free end (the capturing device), kg [0, 1e6]. Default 0.
-    pub tip_mass: f64,
-    /// Breaking (maximum allowable) tension, N (0, 1e9]. Default 550e3 (Table 2, UHMWPE 24 mm).
-    /// Not used by the dynamics; reported so that users can detect overload.
-    pub breaking_tension: f64,
-    /// Gravitational acceleration, m/s^2 [0, 100], acting along +z of the towing-aircraft frame.
-    /// Default 9.80665.
-    pub gravity: f64,
-    /// Fixed RK4 step, s (0, 1]. Default 0.01 (paper section 4).
-    pub time_step: f64,
-    /// Where the axial elasticity sits (JSON `"attachment"` or `"distributed"`). Default
-    /// `"attachment"`: the paper's simplified model, one visco-elastic element at the attachment
-    /// point (2n + 1 coordinates). `"distributed"`: the paper's full model (section 2.3.6), a
-    /// spring-damper in every segment with stiffness `n k` and damping `n c_s`, so that the static
-    /// stretch under a tip load is the same (3n coordinates; see [`crate::dynamics`]). Omitted from
-    /// the JSON when it is the default, so that default configurations serialize as before.
-    #[serde(skip_serializing_if = "Elasticity::is_attachment")]
-    pub elasticity: Elasticity,
+accd_spec::config_struct! {
+    /// Physical and numerical parameters of one tether. SI units throughout.
+    ///
+    /// The tether is `segments` identical rigid rods of length `l = length / segments` and mass
+    /// `m = mass_per_length * l` (rod inertia `m l^2 / 12` about axes normal to the rod), hung from the
+    /// towing aircraft through one axial visco-elastic element and carrying a lumped tip mass.
+    ///
+    /// Damping follows the paper's Table 3, which gives coefficients *per unit mass*:
+    /// * joint (bending) damping `c_b = joint_damping_per_mass * m` (N m s), i.e. scaled by the mass of
+    ///   one segment, as in Fritzkowski & Kaminski's equations divided through by the segment mass;
+    /// * axial damping `c_s = axial_damping_per_mass * m_tot` (N s/m), scaled by the total tether mass
+    ///   `m_tot = mass_per_length * length` that the axial element carries. For Table 3 this gives a
+    ///   damping ratio of about 0.85 of the axial mode with a 50 kg tip body.
+    #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+    #[serde(deny_unknown_fields, default)]
+    pub struct TetherConfig {
+        pub segments: usize = 30, "-", "[1, 1000]", "number of rigid segments n (Table 3: 30)";
+        pub length: f64 = 250.0, "m", "(0, 5000]", "unstretched length L (Table 3)";
+        pub mass_per_length: f64 = 82.25 / 250.0, "kg/m", "(0, 100]",
+            "mass per unit length (Table 3: 82.25 kg over 250 m)";
+        pub diameter: f64 = 0.024, "m", "(0, 0.5]", "diameter d; sets the aerodynamic areas";
+        pub axial_stiffness: f64 = 157_431.5, "N/m", "(0, 1e12]",
+            "axial stiffness k of the whole tether, EA / L (Table 3)";
+        pub axial_damping_per_mass: f64 = 100.0, "N s/(m kg)", "[0, 1e6]",
+            "axial damping per unit tether mass c_k (Table 3)";
+        pub flexural_rigidity: f64 = 170.0, "N m^2", "[0, 1e9]",
+            "flexural rigidity EI of the joints' bending springs, the paper's k_t (Table 3)";
+        pub joint_damping_per_mass: f64 = 1.0, "N m s/kg", "[0, 1e6]",
+            "joint damping per unit segment mass c1 (Table 3)";
+        /// 0.35: the tether's Reynolds number (about 1.8e5) is at the cylinder drag crisis, and
+        /// the paper's settled depths imply a value well under the subcritical 1.2. 0.35 with the
+        /// 50 kg stand-in body of [`crate::reference::StandInBody::accd`] puts the settled depths
+        /// of 250 m UHMWPE, 250 m steel and 300 m UHMWPE at 54.5, 118 and 63.7 m (paper: about
+        /// 50, over 100, about 70).
+        pub normal_drag_coefficient: f64 = 0.35, "-", "[0, 5]",
+            "cross-flow (normal) drag coefficient C_n";
+        pub tangential_drag_coefficient: f64 = 0.01, "-", "[0, 1]",
+            "skin-friction (tangential) drag coefficient C_t, on the wetted area pi d l";
+        pub tip_mass: f64 = 0.0, "kg", "[0, 1e6]", "lumped mass at the free end (the capturing device)";
+        /// Not used by the dynamics; reported so that users can detect overload.
+        pub breaking_tension: f64 = 550e3, "N", "(0, 1e9]",
+            "breaking (maximum allowable) tension (Table 2, UHMWPE 24 mm)";
+        pub gravity: f64 = STANDARD_GRAVITY, "m/s^2", "[0, 100]",
+            "gravitational acceleration, along +z of the towing-aircraft frame";
+        pub time_step: f64 = 0.01, "s", "(0, 1]", "fixed RK4 step (paper section 4)";
+        /// `"attachment"`: the paper's simplified model, one visco-elastic element at the
+        /// attachment point (2n + 1 coordinates). `"distributed"`: the paper's full model (section
+        /// 2.3.6), a spring-damper in every segment with stiffness `n k` and damping `n c_s`, so
+        /// that the static stretch under a tip load is the same (3n coordinates; see
+        /// [`crate::dynamics`]). Omitted from the JSON when it is the default, so that default
+        /// configurations serialize as before.
+        #[serde(skip_serializing_if = "Elasticity::is_attachment")]
+        pub elasticity: Elasticity = Elasticity::Attachment, "", "",
+            "where the axial elasticity sits: \"attachment\" (one element, the paper's simplified model) or \"distributed\" (one per segment)";
+    }
 }
+
+accd_spec::no_range!(Elasticity);
+
+/// Each field's range is all there is to check ([`TetherConfig::check_stability`] is a rule of
+/// the stepping, with the tension it is run at).
+impl accd_spec::Rules for TetherConfig {}
 
 /// Where the tether's axial elasticity sits ([`TetherConfig::elasticity`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
@@ -108,12 +111,6 @@ impl<'de> Deserialize<'de> for Elasticity {
                 "invalid value of `elasticity`: {other:?}; allowed: \"attachment\" or \"distributed\""
             ))),
         }
-    }
-}
-
-impl Default for TetherConfig {
-    fn default() -> Self {
-        TetherConfig::table3()
     }
 }
 
@@ -196,62 +193,10 @@ impl StepLoad {
     }
 }
 
-/// The checks of one numeric field: name, value, lower bound (inclusive?), upper bound, unit.
-struct Range {
-    field: &'static str,
-    value: f64,
-    lo: f64,
-    lo_open: bool,
-    hi: f64,
-    unit: &'static str,
-}
-
-impl Range {
-    fn check(&self) -> Result<()> {
-        let lo_ok = if self.lo_open {
-            self.value > self.lo
-        } else {
-            self.value >= self.lo
-        };
-        if self.value.is_finite() && lo_ok && self.value <= self.hi {
-            return Ok(());
-        }
-        let open = if self.lo_open { "(" } else { "[" };
-        let unit = if self.unit.is_empty() {
-            String::new()
-        } else {
-            format!(" {}", self.unit)
-        };
-        Err(TetherError::invalid_config(
-            self.field,
-            self.value,
-            &format!("{open}{}, {}]{unit}", self.lo, self.hi),
-        ))
-    }
-}
-
 impl TetherConfig {
     /// Table 3 of the paper: the tether selected for In-Air Capturing (24 mm UHMWPE, 250 m, n = 30).
     pub fn table3() -> Self {
-        let length = 250.0;
-        let total_mass = 82.25;
-        TetherConfig {
-            segments: 30,
-            length,
-            mass_per_length: total_mass / length,
-            diameter: 0.024,
-            axial_stiffness: 157_431.5,
-            axial_damping_per_mass: 100.0,
-            flexural_rigidity: 170.0,
-            joint_damping_per_mass: 1.0,
-            normal_drag_coefficient: 0.35,
-            tangential_drag_coefficient: 0.01,
-            tip_mass: 0.0,
-            breaking_tension: 550e3,
-            gravity: STANDARD_GRAVITY,
-            time_step: 0.01,
-            elasticity: Elasticity::Attachment,
-        }
+        TetherConfig::default()
     }
 
     /// Table 1 of the paper: the 10 m verification case (n = 4, m_tot = 5 kg, k = 10 kN/m,
@@ -288,24 +233,12 @@ impl TetherConfig {
     /// into Table 3's 30 segments, with Table 3's damping and drag (see [`crate::material`] for
     /// how stiffness and mass follow from material and diameter).
     pub fn from_material(material: Material, length: f64, diameter: f64) -> Result<Self> {
-        Range {
-            field: "length",
-            value: length,
-            lo: 0.0,
-            lo_open: true,
-            hi: 5000.0,
-            unit: "m",
+        // Checked before the material's formulas use them (the message names these inputs).
+        for (name, value) in [("length", length), ("diameter", diameter)] {
+            if let Some(spec) = Self::field(name) {
+                accd_spec::check_number(name, value, spec)?;
+            }
         }
-        .check()?;
-        Range {
-            field: "diameter",
-            value: diameter,
-            lo: 0.0,
-            lo_open: true,
-            hi: 0.5,
-            unit: "m",
-        }
-        .check()?;
         let config = TetherConfig {
             length,
             diameter,
@@ -366,122 +299,10 @@ impl TetherConfig {
         serde_json::to_string(self).expect("a config of plain numbers always serializes")
     }
 
-    /// Checks every field against its allowed range.
+    /// Checks every field against its declared range ([`Fields::FIELDS`]); errors name the
+    /// field as declared (`length`; the capture configuration adds `tether.`).
     pub fn validate(&self) -> Result<()> {
-        if !(1..=1000).contains(&self.segments) {
-            return Err(TetherError::invalid_config(
-                "segments",
-                self.segments,
-                "[1, 1000]",
-            ));
-        }
-        let ranges = [
-            Range {
-                field: "length",
-                value: self.length,
-                lo: 0.0,
-                lo_open: true,
-                hi: 5000.0,
-                unit: "m",
-            },
-            Range {
-                field: "mass_per_length",
-                value: self.mass_per_length,
-                lo: 0.0,
-                lo_open: true,
-                hi: 100.0,
-                unit: "kg/m",
-            },
-            Range {
-                field: "diameter",
-                value: self.diameter,
-                lo: 0.0,
-                lo_open: true,
-                hi: 0.5,
-                unit: "m",
-            },
-            Range {
-                field: "axial_stiffness",
-                value: self.axial_stiffness,
-                lo: 0.0,
-                lo_open: true,
-                hi: 1e12,
-                unit: "N/m",
-            },
-            Range {
-                field: "axial_damping_per_mass",
-                value: self.axial_damping_per_mass,
-                lo: 0.0,
-                lo_open: false,
-                hi: 1e6,
-                unit: "N s/(m kg)",
-            },
-            Range {
-                field: "flexural_rigidity",
-                value: self.flexural_rigidity,
-                lo: 0.0,
-                lo_open: false,
-                hi: 1e9,
-                unit: "N m^2",
-            },
-            Range {
-                field: "joint_damping_per_mass",
-                value: self.joint_damping_per_mass,
-                lo: 0.0,
-                lo_open: false,
-                hi: 1e6,
-                unit: "N m s/kg",
-            },
-            Range {
-                field: "normal_drag_coefficient",
-                value: self.normal_drag_coefficient,
-                lo: 0.0,
-                lo_open: false,
-                hi: 5.0,
-                unit: "",
-            },
-            Range {
-                field: "tangential_drag_coefficient",
-                value: self.tangential_drag_coefficient,
-                lo: 0.0,
-                lo_open: false,
-                hi: 1.0,
-                unit: "",
-            },
-            Range {
-                field: "tip_mass",
-                value: self.tip_mass,
-                lo: 0.0,
-                lo_open: false,
-                hi: 1e6,
-                unit: "kg",
-            },
-            Range {
-                field: "breaking_tension",
-                value: self.breaking_tension,
-                lo: 0.0,
-                lo_open: true,
-                hi: 1e9,
-                unit: "N",
-            },
-            Range {
-                field: "gravity",
-                value: self.gravity,
-                lo: 0.0,
-                lo_open: false,
-                hi: 100.0,
-                unit: "m/s^2",
-            },
-            Range {
-                field: "time_step",
-                value: self.time_step,
-                lo: 0.0,
-                lo_open: true,
-                hi: 1.0,
-                unit: "s",
-            },
-        ];
-        ranges.iter().try_for_each(Range::check)
+        Ok(self.check_fields("")?)
     }
 
     /// [`TetherConfig::validate`] and the rule a configuration to be stepped must also meet: a

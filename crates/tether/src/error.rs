@@ -73,5 +73,16 @@ impl TetherError {
     }
 }
 
+impl From<accd_spec::OutOfRange> for TetherError {
+    /// A field outside its declared range ([`accd_spec::Fields::check_fields`]).
+    fn from(e: accd_spec::OutOfRange) -> Self {
+        TetherError::InvalidConfig {
+            field: e.field,
+            value: e.value,
+            allowed: e.allowed,
+        }
+    }
+}
+
 /// Result alias of this crate.
 pub type Result<T, E = TetherError> = std::result::Result<T, E>;
