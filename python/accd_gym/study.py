@@ -114,7 +114,9 @@ MAX_TENSION_TIME_STEP_S = 0.005
 PAPER_MAX_TENSION_MEAN_N = 125e3
 PAPER_MAX_TENSION_PEAK_N = 225e3
 
-STUDIES = ("material", "length", "diameter", "selected", "max-tension")
+STUDIES = ("material", "length", "diameter", "selected", "max-tension", "fig9")
+#: Longer studies, run by name only (not by ``all``): :mod:`accd_gym.fidelity`.
+EXTRA_STUDIES = ("tension", "sweep")
 
 
 @dataclass(frozen=True)
@@ -796,7 +798,7 @@ def run_study(
     """Runs one study and writes ``<figure>.png``, ``<study>.json`` and ``<study>.md`` into ``out_dir``.
 
     Args:
-        study: one of :data:`STUDIES`.
+        study: one of :data:`STUDIES` or :data:`EXTRA_STUDIES`.
         out_dir: output folder (created).
         progress: show a tqdm progress bar on stderr.
         commands: flap commands for the commanded studies (default :func:`fig12_commands`).
@@ -808,7 +810,11 @@ def run_study(
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    if study == "max-tension":
+    if study in ("fig9", *EXTRA_STUDIES):
+        from accd_gym import fidelity
+
+        doc, md = fidelity.run_study(study, out_dir, dpi=dpi, progress=progress)
+    elif study == "max-tension":
         case = max_tension
         samples = round(case.duration_s / (max(1, round(SAMPLE_INTERVAL_S / case.time_step)) * case.time_step))
         bar = _bar(samples, study, progress)
@@ -864,12 +870,13 @@ def run(
     progress: bool = True,
     dpi: int = 90,
 ) -> dict[str, dict[str, Any]]:
-    """Runs ``studies`` (names from :data:`STUDIES`, or ``all``) into ``out_dir``; with more than
-    one, also writes ``summary.md`` (every study's tables). Returns {study: its JSON document}."""
-    names = list(STUDIES) if "all" in studies else list(dict.fromkeys(studies))
+    """Runs ``studies`` (names from :data:`STUDIES` or :data:`EXTRA_STUDIES`, or ``all`` for every
+    one of :data:`STUDIES`) into ``out_dir``; with more than one, also writes ``summary.md`` (every
+    study's tables). Returns {study: its JSON document}."""
+    names = list(dict.fromkeys([*(STUDIES if "all" in studies else ()), *(s for s in studies if s != "all")]))
     for name in names:
-        if name not in STUDIES:
-            raise ValueError(f"unknown study {name!r}; choose from {', '.join(STUDIES)} or all")
+        if name not in STUDIES + EXTRA_STUDIES:
+            raise ValueError(f"unknown study {name!r}; choose from {', '.join(STUDIES + EXTRA_STUDIES)} or all")
     docs = {}
     for name in names:
         docs[name] = run_study(name, out_dir, progress=progress, dpi=dpi)

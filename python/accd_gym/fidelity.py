@@ -1,0 +1,274 @@
+"""Fidelity past the paper (issue 18, items 3-5): Fig. 9 reproduced, the tension under both
+elasticities, and the sweeps behind the two open claims of ``docs/paper-reproduction.md``.
+
+Run by ``accd-gym study fig9`` (part of ``all``), ``accd-gym study tension`` and ``accd-gym study
+sweep`` (both longer, not part of ``all``). Each writes a PNG, ``<study>.json`` and ``<study>.md``
+like the other studies (:mod:`accd_gym.study`). SI units in the towing-aircraft frame (x forward,
+z down) unless a name says otherwise.
+
+**Fig. 9 (paper 2.3.6).** Table 1's 10 m chain (n = 4, m_tot = 5 kg, k = 10 000 N/m, c1 = 20 N m s/kg
+on the joints and as the axial damping per mass, no air), (a) hanging vertically, released
+unstretched, stretching under its own weight; (b) released at rest with every segment at
+phi = psi = pi/4, swinging. The paper's "simplified" model is the default attachment element (k,
+c_s = c1 m_tot); its "full model" has "springs at every joint". The paper does not say how stiff
+each of those springs is, so two readings are run (:data:`FIG9_MODELS`):
+
+* ``full (n k)``: every element ``n k``, ``n c_s``, so the n in series have the whole tether's k
+  and c_s and the static stretch under a tip load is the simplified model's (our
+  ``elasticity = "distributed"``);
+* ``full (k per joint)``: Table 1's ``k`` (and ``c_s``) at every joint, i.e. the distributed
+  model with ``axial_stiffness = k / n``, ``axial_damping_per_mass = c1 / n``: a chain n times
+  softer in series.
+
+RK4 at :data:`FIG9_TIME_STEP_S` (the chain's axial ring is 7 Hz), every step sampled.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import accd_gym
+
+#: Simulated time of each Fig. 9 run, s (four swings of case (b)).
+FIG9_DURATION_S = 10.0
+#: RK4 step of the Fig. 9 runs, s (sampled every step).
+FIG9_TIME_STEP_S = 1e-3
+#: Case (b) starts from phi = psi = pi/4 (paper 2.3.6), rad.
+FIG9_RELEASE_ANGLE_RAD = math.pi / 4
+#: Case (a) is plotted over its first seconds (the axial ring; the level then stays), s.
+FIG9_VERTICAL_PLOT_S = 2.0
+#: In case (b) the elongation's swing oscillation is measured after this time, when the axial
+#: ring of the release has decayed, s.
+FIG9_SWING_FROM_S = 1.0
+
+
+@dataclass(frozen=True)
+class Fig9Model:
+    """One elongation model of Fig. 9: ``key``, legend ``label`` and the overrides of Table 1's
+    preset that make it (a function of Table 1's config, so that a changed preset follows)."""
+
+    key: str
+    label: str
+
+    def overrides(self, table1: dict[str, Any]) -> dict[str, Any]:
+        """Config overrides of the ``table1`` preset (given as its dict) for this model."""
+        if self.key == "simplified":
+            return {}
+        if self.key == "full-nk":
+            return {"elasticity": "distributed"}
+        if self.key == "full-k":
+            n = table1["segments"]
+            return {
+                "elasticity": "distributed",
+                "axial_stiffness": table1["axial_stiffness"] / n,
+                "axial_damping_per_mass": table1["axial_damping_per_mass"] / n,
+            }
+        raise ValueError(f"unknown Fig. 9 model {self.key!r}")
+
+
+#: The models of Fig. 9 (module doc).
+FIG9_MODELS = (
+    Fig9Model("simplified", "simplified (one element k at the attachment)"),
+    Fig9Model("full-nk", "full, elements n k (same static tip-load stretch)"),
+    Fig9Model("full-k", "full, Table 1's k at every joint"),
+)
+#: The cases of Fig. 9: key, title.
+FIG9_CASES = (
+    ("vertical", "(a) vertical tether stretching under its own weight"),
+    ("swing", "(b) swing released from phi = psi = pi/4"),
+)
+
+
+def fig9_tether(model: Fig9Model, case: str, time_step: float = FIG9_TIME_STEP_S) -> accd_gym.Tether:
+    """Table 1's chain under ``model`` in the start state of ``case`` (``vertical`` or ``swing``),
+    at rest and unstretched, in vacuum."""
+    table1 = accd_gym.tether_config("table1")
+    tether = accd_gym.Tether({"time_step": time_step, **model.overrides(table1)}, preset="table1")
+    n = tether.segments
+    if case == "vertical":
+        tether.set_state(np.tile([0.0, 0.0, 1.0], (n, 1)))
+    elif case == "swing":
+        angle = np.full(n, FIG9_RELEASE_ANGLE_RAD)
+        tether.set_angles(angle, angle)
+    else:
+        raise ValueError(f"unknown Fig. 9 case {case!r}; choose from vertical, swing")
+    return tether
+
+
+def simulate_fig9(
+    model: Fig9Model, case: str, duration_s: float = FIG9_DURATION_S, time_step: float = FIG9_TIME_STEP_S
+) -> tuple[np.ndarray, np.ndarray]:
+    """Runs one Fig. 9 case; returns (time in s, total elongation in m), sampled every step from
+    t = 0."""
+    tether = fig9_tether(model, case, time_step)
+    steps = round(duration_s / time_step)
+    time, elongation = np.empty(steps + 1), np.empty(steps + 1)
+    time[0], elongation[0] = tether.time, tether.total_elongation
+    for i in range(1, steps + 1):
+        tether.step(1)
+        time[i], elongation[i] = tether.time, tether.total_elongation
+    return time, elongation
+
+
+def _maxima(x: np.ndarray) -> np.ndarray:
+    return np.nonzero((x[1:-1] > x[:-2]) & (x[1:-1] >= x[2:]))[0] + 1
+
+
+def fig9_metrics(case: str, time: np.ndarray, elongation: np.ndarray) -> dict[str, float]:
+    """Amplitude (m) and frequency (Hz) of the elongation's oscillation in one Fig. 9 run.
+
+    * ``vertical``: the axial ring of the release. ``static_m`` the level it settles to (mean over
+      the last second), ``first_peak_m``, ``amplitude_m`` = first peak minus the static level,
+      ``frequency_hz`` from the first two maxima.
+    * ``swing``: the elongation follows the swing (it peaks as the chain passes the bottom, twice
+      per swing). After :data:`FIG9_SWING_FROM_S`: ``amplitude_m`` half the range,
+      ``mean_m`` the mean, ``frequency_hz`` from the spacing of the maxima of the elongation
+      smoothed over 0.2 s (the axial ring is gone by then), ``first_peak_m`` the largest value
+      before it (the release's ring).
+    """
+    if case == "vertical":
+        static = float(np.mean(elongation[time >= time[-1] - 1.0]))
+        peaks = _maxima(elongation)
+        first = float(elongation[peaks[0]]) if peaks.size else float("nan")
+        freq = 1.0 / float(time[peaks[1]] - time[peaks[0]]) if peaks.size > 1 else float("nan")
+        return {"static_m": static, "first_peak_m": first, "amplitude_m": first - static, "frequency_hz": freq}
+    late = time >= FIG9_SWING_FROM_S
+    t, s = time[late], elongation[late]
+    dt = float(time[1] - time[0])
+    width = max(1, round(0.2 / dt))
+    smooth = np.convolve(s, np.ones(width) / width, mode="valid")
+    peaks = _maxima(smooth)
+    freq = 1.0 / float(np.mean(np.diff(t[peaks]))) if peaks.size > 1 else float("nan")
+    return {
+        "mean_m": float(np.mean(s)),
+        "amplitude_m": 0.5 * float(np.max(s) - np.min(s)),
+        "frequency_hz": freq,
+        "first_peak_m": float(np.max(elongation[~late])),
+    }
+
+
+def fig9_closed_forms() -> dict[str, float]:
+    """What the vertical case must give, from Table 1 alone: the simplified model's static stretch
+    ``M g / k`` and axial ring ``sqrt(k / M) / 2 pi`` (the element carries the whole chain; damped
+    by ``zeta = c_s / 2 sqrt(k M)``), and the full model's (elements ``n k``) hanging stretch
+    ``(n + 1) / (2 n) M g / k`` (rods lumped: docs/design-notes.md)."""
+    c = accd_gym.tether_config("table1")
+    n, k, mass, g = c["segments"], c["axial_stiffness"], c["mass_per_length"] * c["length"], c["gravity"]
+    zeta = c["axial_damping_per_mass"] * mass / (2.0 * math.sqrt(k * mass))
+    return {
+        "simplified_static_m": mass * g / k,
+        "simplified_frequency_hz": math.sqrt(k / mass) * math.sqrt(1.0 - zeta**2) / (2.0 * math.pi),
+        "simplified_damping_ratio": zeta,
+        "full_nk_static_m": (n + 1) / (2.0 * n) * mass * g / k,
+        "full_k_static_m": n * (n + 1) / (2.0 * n) * mass * g / k,
+    }
+
+
+def run_fig9(out_dir: Path, dpi: int = 90, duration_s: float = FIG9_DURATION_S) -> tuple[dict[str, Any], str]:
+    """Runs Fig. 9 (both cases, every model), plots it side by side as the paper does, and returns
+    (the JSON document, the markdown) for :func:`accd_gym.study.run_study` to write."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(12, 3.8), constrained_layout=True)
+    results: dict[str, dict[str, Any]] = {}
+    for ax, (case, title) in zip(axes, FIG9_CASES):
+        results[case] = {}
+        for model in FIG9_MODELS:
+            t, s = simulate_fig9(model, case, duration_s)
+            results[case][model.key] = fig9_metrics(case, t, s)
+            ax.plot(t, s * 1e3, lw=0.9, label=model.label)
+        if case == "vertical":
+            ax.set_xlim(0.0, min(FIG9_VERTICAL_PLOT_S, duration_s))  # the ring; then it stays level
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("elongation of the tether [mm]")
+        ax.set_title(title, fontsize=10)
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.suptitle("Fig. 9: comparison of elongation approaches (Table 1: n = 4, L = 10 m, 5 kg, k = 1e4 N/m, c1 = 20)")
+    fig.savefig(out_dir / "fig9.png", dpi=dpi)
+    plt.close(fig)
+    closed = fig9_closed_forms()
+    verdict = fig9_verdict(results)
+    doc = {
+        "study": "fig9",
+        "figures": ["fig9.png"],
+        "inputs": {
+            "preset": "table1",
+            "time_step": FIG9_TIME_STEP_S,
+            "duration_s": duration_s,
+            "models": {m.key: {"label": m.label, "overrides": m.overrides(accd_gym.tether_config("table1"))} for m in FIG9_MODELS},
+        },
+        "cases": results,
+        "closed_forms": closed,
+        "paper": "the full model 'appears to have larger amplitude of oscillations' in both (a) and (b) (2.3.6)",
+        "verdict": verdict,
+    }
+    lines = [
+        "## fig9 (paper 2.3.6, Fig. 9)",
+        "",
+        "![fig9](fig9.png)",
+        "",
+        "| case | model | amplitude [mm] | frequency [Hz] | level [mm] | first peak [mm] |",
+        "|---|---|---|---|---|---|",
+    ]
+    for case, _ in FIG9_CASES:
+        for model in FIG9_MODELS:
+            m = results[case][model.key]
+            level = m.get("static_m", m.get("mean_m"))
+            lines.append(
+                f"| {case} | {model.label} | {m['amplitude_m'] * 1e3:.2f} | {m['frequency_hz']:.2f} | "
+                f"{level * 1e3:.2f} | {m['first_peak_m'] * 1e3:.2f} |"
+            )
+    lines += [
+        "",
+        (
+            "Level: the static stretch (vertical) or the mean over the swing (swing). Closed forms (vertical): "
+            f"simplified M g / k = {closed['simplified_static_m'] * 1e3:.2f} mm ringing at "
+            f"{closed['simplified_frequency_hz']:.2f} Hz; full (n k) (n + 1)/(2n) M g / k = "
+            f"{closed['full_nk_static_m'] * 1e3:.2f} mm; full (k per joint) {closed['full_k_static_m'] * 1e3:.2f} mm."
+        ),
+        "",
+        verdict,
+        "",
+    ]
+    return doc, "\n".join(lines)
+
+
+def fig9_verdict(results: dict[str, dict[str, Any]]) -> str:
+    """The sentence comparing the models' amplitudes with the paper's "the full model has larger
+    amplitude", from the measured amplitudes."""
+
+    def ratio(case: str, key: str) -> float:
+        return results[case][key]["amplitude_m"] / results[case]["simplified"]["amplitude_m"]
+
+    parts = []
+    for key, name in (("full-nk", "with elements n k"), ("full-k", "with Table 1's k at every joint")):
+        rv, rs = ratio("vertical", key), ratio("swing", key)
+        agree = "as the paper says" if rv > 1 and rs > 1 else ("against the paper" if rv < 1 and rs < 1 else "in part as the paper says")
+        parts.append(
+            f"the full model {name} has {rv:.2f} times the simplified model's amplitude in (a) and {rs:.2f} times in (b) ({agree})"
+        )
+    return (
+        "Paper: the full model 'appears to have larger amplitude of oscillations' in (a) and (b). Here "
+        + "; ".join(parts)
+        + ". So the paper's observation holds if its full model put Table 1's k at every joint (a chain n times softer), "
+        "not if the elements are stiffened to keep the tether's k."
+        if ratio("vertical", "full-k") > 1 and ratio("swing", "full-k") > 1 and ratio("vertical", "full-nk") < 1
+        else "Paper: the full model 'appears to have larger amplitude of oscillations' in (a) and (b). Here " + "; ".join(parts) + "."
+    )
+
+
+def run_study(study: str, out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[dict[str, Any], str]:
+    """Runs ``fig9``, ``tension`` or ``sweep`` into ``out_dir`` (its PNGs); returns (the JSON
+    document, the markdown) for :func:`accd_gym.study.run_study` to write."""
+    if study == "fig9":
+        return run_fig9(out_dir, dpi=dpi)
+    raise ValueError(f"unknown study {study!r}")
