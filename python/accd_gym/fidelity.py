@@ -28,7 +28,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Optional
 
 import numpy as np
 
@@ -266,9 +266,257 @@ def fig9_verdict(results: dict[str, dict[str, Any]]) -> str:
     )
 
 
+# ----------------------------------------------------------------------------------------------
+# Item 4: the tension under both elasticities
+
+
+@dataclass(frozen=True)
+class TensionRun:
+    """One tether discretization of the tension study: ``elasticity``, ``segments`` and the RK4
+    ``time_step`` (s) it needs (the distributed model's stiff axial modes set it, see
+    :data:`TENSION_RUNS`); ``window_s`` limits the maximum-tension run to its first seconds
+    (None: the whole run)."""
+
+    elasticity: str
+    segments: int
+    time_step: float
+    window_s: Optional[float] = None
+
+    @property
+    def key(self) -> str:
+        """Short name, ``<elasticity>-n<segments>-dt<time_step>``."""
+        return f"{self.elasticity}-n{self.segments}-dt{self.time_step:g}"
+
+    def overrides(self) -> dict[str, Any]:
+        """Tether config overrides of this run."""
+        return {"elasticity": self.elasticity, "segments": self.segments, "time_step": self.time_step}
+
+
+#: The runs of the tension study. With Table 3's axial damping (c_k = 100 per kg) the distributed
+#: model's highest axial mode is overdamped with a rate of about ``4 n c_s / m = 4 n^2 c_s / m_tot``
+#: (3.6e5 1/s at n = 30, 4e4 at n = 10, 1e4 at n = 5), so its stable step falls as 1/n^2
+#: (6.25e-6 s at n = 30). The damping is the paper's (no other reading of it is taken): the
+#: discretization is what changes. The elasticity is compared at equal n (5 and 10, the whole
+#: runs) and at the study's n = 30 over the peak of the maximum-tension run only (its first
+#: :data:`TENSION_N30_WINDOW_S`). Steps: each the largest of 0.01 / 0.005 / 0.002 ... s that
+#: needs at most :data:`accd_gym` MAX_SUBSTEPS (64) substeps; the attachment runs at the study's
+#: steps (the maximum-tension study's 0.005 s, the capture's 0.01 s).
+TENSION_N30_WINDOW_S = 10.0
+TENSION_RUNS = (
+    TensionRun("attachment", 30, 0.005),
+    TensionRun("attachment", 10, 0.005),
+    TensionRun("attachment", 5, 0.005),
+    TensionRun("distributed", 5, 0.005),
+    TensionRun("distributed", 10, 0.002),
+    TensionRun("distributed", 30, 2.5e-4, window_s=TENSION_N30_WINDOW_S),
+)
+#: The capture episode of the tension study: the default env (wake and turbulence) flown by the
+#: default guidance baseline from this reset seed (it captures after 16.8 s).
+CAPTURE_SEED = 3
+#: Before the replayed commands the tether settles this long behind the aircraft with neutral
+#: flaps (the env's ``initial.settle_time``), s.
+CAPTURE_SETTLE_S = 40.0
+#: The capture runs: the elasticity at the env's n = 30 (both at the distributed model's
+#: 2.5e-4 s step, and the attachment model also at the env's 0.01 s) and at n = 10 (0.002 s).
+CAPTURE_RUNS = (
+    TensionRun("attachment", 30, 0.01),
+    TensionRun("attachment", 30, 2.5e-4),
+    TensionRun("distributed", 30, 2.5e-4),
+    TensionRun("attachment", 10, 0.002),
+    TensionRun("distributed", 10, 0.002),
+)
+
+
+def guidance_episode(seed: int = CAPTURE_SEED) -> dict[str, Any]:
+    """One episode of the default env flown by :class:`accd_gym.baselines.GuidancePolicy`: its
+    flap commands (deg, shape (k, 4), one per agent step), agent step (s), wake seed, the peak
+    attachment tension per agent step (N) and whether it captured."""
+    import gymnasium as gym
+
+    from accd_gym.baselines import GuidancePolicy
+
+    env = gym.make(accd_gym.ENV_ID)
+    policy = GuidancePolicy()
+    obs, info = env.reset(seed=seed)
+    wake_seed, actions, peaks, done = info["wake_seed"], [], [], False
+    while not done:
+        action = policy.predict(obs[None])[0]
+        actions.append(action)
+        obs, _, terminated, truncated, info = env.step(action)
+        peaks.append(info["peak_tension"])
+        done = terminated or truncated
+    cfg = env.unwrapped.config
+    env.close()
+    return {
+        "flap_commands_deg": np.asarray(actions) * cfg["accd"]["flap_limit_deg"],
+        "agent_step": cfg["agent_step"],
+        "wake_seed": int(wake_seed),
+        "peak_tension_N": np.asarray(peaks),
+        "captured": bool(info["captured"]),
+        "seed": seed,
+    }
+
+
+def replay_capture(episode: dict[str, Any], run: TensionRun) -> tuple[np.ndarray, np.ndarray]:
+    """The episode's flap commands replayed open loop in :class:`accd_gym.CaptureSim` (the same
+    wake seed, wake and turbulence on) under ``run``'s tether, after :data:`CAPTURE_SETTLE_S` of
+    settling with neutral flaps. Returns (time from the first command in s, attachment tension in
+    N), every physics step."""
+    sim = accd_gym.CaptureSim({"tether": run.overrides()}, seed=0, wake_seed=episode["wake_seed"])
+    sim.settle(CAPTURE_SETTLE_S)
+    start = sim.time
+    per_command = round(episode["agent_step"] / sim.time_step)
+    time, tension = [], []
+    for command in episode["flap_commands_deg"]:
+        for _ in range(per_command):
+            state = sim.step(command, steps=1)
+            time.append(state["time"] - start)
+            tension.append(state["attachment_tension"])
+    return np.asarray(time), np.asarray(tension)
+
+
+def run_tension(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[dict[str, Any], str]:
+    """Item 4: the maximum-tension case (:func:`accd_gym.study.simulate_max_tension`) and one
+    capture episode's tension (:func:`replay_capture`) under both elasticities, the peak ratios,
+    and what they say about the paper's factor of safety of 3. Writes ``tension.png``."""
+    import time as clock
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from accd_gym import study
+
+    base = study.MaxTensionCase()
+    fig, axes = plt.subplots(1, 2, figsize=(12, 3.8), constrained_layout=True)
+    max_runs: dict[str, Any] = {}
+    for run in TENSION_RUNS:
+        case = study.MaxTensionCase(
+            duration_s=run.window_s if run.window_s is not None else base.duration_s, time_step=run.time_step
+        )
+        sample = run.time_step * max(1, round(0.01 / run.time_step))
+        cpu = clock.process_time()
+        result = study.simulate_max_tension(case, sample_interval=sample, overrides=run.overrides())
+        cpu = clock.process_time() - cpu
+        m = study.max_tension_metrics(result)
+        max_runs[run.key] = {
+            "elasticity": run.elasticity,
+            "segments": run.segments,
+            "time_step": run.time_step,
+            "duration_s": case.duration_s,
+            "cpu_s": cpu,
+            "cpu_s_per_simulated_s": cpu / case.duration_s,
+            "peak_tension_N": m["peak_tension_N"],
+            "mean_tension_N": m["mean_tension_N"] if run.window_s is None else None,
+            "oscillation_period_s": m["oscillation_period_s"] if run.window_s is None else None,
+        }
+        if progress:
+            print(f"tension: max-tension {run.key}: peak {m['peak_tension_N'] / 1e3:.1f} kN, {cpu:.1f} s CPU")
+        axes[0].plot(result.time, result.tension / 1e3, lw=0.9, label=run.key)
+    episode = guidance_episode()
+    cap_runs: dict[str, Any] = {}
+    for run in CAPTURE_RUNS:
+        cpu = clock.process_time()
+        t, tension = replay_capture(episode, run)
+        cpu = clock.process_time() - cpu
+        cap_runs[run.key] = {
+            "elasticity": run.elasticity,
+            "segments": run.segments,
+            "time_step": run.time_step,
+            "cpu_s": cpu,
+            "peak_tension_N": float(np.max(tension)),
+            "mean_tension_N": float(np.mean(tension)),
+        }
+        if progress:
+            print(f"tension: capture {run.key}: peak {np.max(tension) / 1e3:.2f} kN, {cpu:.1f} s CPU")
+        axes[1].plot(t, tension / 1e3, lw=0.8, label=run.key)
+    axes[0].axhline(study.PAPER_MAX_TENSION_PEAK_N / 1e3, color="tab:red", ls="-.", lw=0.8, label="paper peak")
+    axes[0].set_title("maximum-tension case (full thrust at 5 s)", fontsize=10)
+    axes[1].set_title(
+        f"capture episode (seed {episode['seed']}, guidance commands replayed after {CAPTURE_SETTLE_S:.0f} s)", fontsize=10
+    )
+    for ax in axes:
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("tension at the attachment [kN]")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.suptitle("Attachment tension: simplified (attachment) vs full (distributed) elasticity")
+    fig.savefig(out_dir / "tension.png", dpi=dpi)
+    plt.close(fig)
+
+    def ratio(runs: dict[str, Any], a: str, b: str) -> float:
+        return runs[a]["peak_tension_N"] / runs[b]["peak_tension_N"]
+
+    ratios = {
+        "max_tension_distributed_over_attachment_n5": ratio(max_runs, "distributed-n5-dt0.005", "attachment-n5-dt0.005"),
+        "max_tension_distributed_over_attachment_n10": ratio(max_runs, "distributed-n10-dt0.002", "attachment-n10-dt0.005"),
+        "max_tension_distributed_over_attachment_n30": ratio(max_runs, "distributed-n30-dt0.00025", "attachment-n30-dt0.005"),
+        "capture_distributed_over_attachment_n30": ratio(cap_runs, "distributed-n30-dt0.00025", "attachment-n30-dt0.00025"),
+        "capture_distributed_over_attachment_n10": ratio(cap_runs, "distributed-n10-dt0.002", "attachment-n10-dt0.002"),
+        "capture_attachment_step_2.5e-4_over_0.01_n30": ratio(cap_runs, "attachment-n30-dt0.00025", "attachment-n30-dt0.01"),
+        "capture_attachment_n10_over_n30": ratio(cap_runs, "attachment-n10-dt0.002", "attachment-n30-dt0.01"),
+    }
+    breaking = accd_gym.tether_config("table3")["breaking_tension"]
+    peak = max_runs["attachment-n30-dt0.005"]["peak_tension_N"]
+    doc = {
+        "study": "tension",
+        "figures": ["tension.png"],
+        "max_tension": max_runs,
+        "capture": {
+            "seed": episode["seed"],
+            "wake_seed": episode["wake_seed"],
+            "captured_in_env": episode["captured"],
+            "commands": len(episode["flap_commands_deg"]),
+            "env_peak_tension_N": float(np.max(episode["peak_tension_N"])),
+            "runs": cap_runs,
+        },
+        "peak_ratios": ratios,
+        "breaking_tension_N": breaking,
+        "safety_factor_on_peak": breaking / peak,
+    }
+    lines = [
+        "## tension (issue 18 item 4)",
+        "",
+        "![tension](tension.png)",
+        "",
+        "| run | case | n | step [s] | simulated [s] | peak [kN] | mean [kN] | CPU [s] |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for key, r in max_runs.items():
+        mean = "-" if r["mean_tension_N"] is None else f"{r['mean_tension_N'] / 1e3:.1f}"
+        lines.append(
+            f"| {key} | max-tension | {r['segments']} | {r['time_step']:g} | {r['duration_s']:.0f} | "
+            f"{r['peak_tension_N'] / 1e3:.1f} | {mean} | {r['cpu_s']:.1f} |"
+        )
+    for key, r in cap_runs.items():
+        lines.append(
+            f"| {key} | capture | {r['segments']} | {r['time_step']:g} | "
+            f"{len(episode['flap_commands_deg']) * episode['agent_step']:.1f} | {r['peak_tension_N'] / 1e3:.2f} | "
+            f"{r['mean_tension_N'] / 1e3:.2f} | {r['cpu_s']:.1f} |"
+        )
+    lines += ["", "| peak ratio | value |", "|---|---|"]
+    lines += [f"| {k} | {v:.4f} |" for k, v in ratios.items()]
+    lines += [
+        "",
+        (
+            f"Breaking tension {breaking / 1e3:.0f} kN over the model's peak {peak / 1e3:.0f} kN: a margin of "
+            f"{breaking / peak:.2f}. The full model moves the peaks by "
+            f"{100 * (ratios['max_tension_distributed_over_attachment_n30'] - 1):+.2f} % (max-tension, n = 30) and "
+            f"{100 * (ratios['capture_distributed_over_attachment_n30'] - 1):+.2f} % (capture, n = 30); "
+            f"the discretization alone (attachment, n = 10 against 30) moves the capture's by "
+            f"{100 * (ratios['capture_attachment_n10_over_n30'] - 1):+.2f} %."
+        ),
+        "",
+    ]
+    return doc, "\n".join(lines)
+
+
 def run_study(study: str, out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[dict[str, Any], str]:
     """Runs ``fig9``, ``tension`` or ``sweep`` into ``out_dir`` (its PNGs); returns (the JSON
     document, the markdown) for :func:`accd_gym.study.run_study` to write."""
     if study == "fig9":
         return run_fig9(out_dir, dpi=dpi)
+    if study == "tension":
+        return run_tension(out_dir, dpi=dpi, progress=progress)
     raise ValueError(f"unknown study {study!r}")

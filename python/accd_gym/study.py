@@ -376,7 +376,10 @@ class MaxTensionResult:
 
 
 def simulate_max_tension(
-    case: MaxTensionCase = MaxTensionCase(), sample_interval: float = SAMPLE_INTERVAL_S, bar: Any = None
+    case: MaxTensionCase = MaxTensionCase(),
+    sample_interval: float = SAMPLE_INTERVAL_S,
+    bar: Any = None,
+    overrides: Optional[dict[str, Any]] = None,
 ) -> MaxTensionResult:
     """Runs the maximum-tension case with :class:`accd_gym.Tether` (module doc).
 
@@ -387,14 +390,24 @@ def simulate_max_tension(
         case: the inputs.
         sample_interval: time between samples, s (rounded to whole steps).
         bar: a tqdm bar to advance by one per sample, or None.
+        overrides: further tether config overrides (e.g. ``{"elasticity": "distributed",
+            "segments": 10}``); with the distributed elasticity every element starts stretched by
+            the cruise tension.
     """
-    tether = accd_gym.Tether({"tip_mass": case.rlv_mass_kg, "time_step": case.time_step}, preset=case.preset)
+    tether = accd_gym.Tether(
+        {"tip_mass": case.rlv_mass_kg, "time_step": case.time_step, **(overrides or {})}, preset=case.preset
+    )
     tether.tow(airspeed=case.airspeed, altitude=case.altitude)
     cfg = tether.config
     lift = -case.rlv_mass_kg * cfg["gravity"]  # balances the RLV's weight (z down)
     tether.set_surroundings(tip_force=np.array([-case.rlv_drag_N, 0.0, lift]), frame_acceleration=np.zeros(3))
     directions = np.tile([-1.0, 0.0, 0.0], (tether.segments, 1))
     tether.set_state(directions, elongation=case.rlv_drag_N / cfg["axial_stiffness"])
+    if tether.elasticity == "distributed":
+        n = tether.segments
+        q = tether.q
+        q[0] = q[2 * n + 1 :] = case.rlv_drag_N / (n * cfg["axial_stiffness"])
+        tether.set_coordinates(q, np.zeros_like(q))
     steps = max(1, round(sample_interval / tether.time_step))
     samples = round(case.duration_s / (steps * tether.time_step))
     step_sample = round(case.step_s / (steps * tether.time_step))
