@@ -5,6 +5,7 @@ Everything here runs in seconds; the long studies (``tension``, ``sweep``) are e
 shortened inputs through the same functions.
 """
 
+import dataclasses
 import json
 import math
 
@@ -94,3 +95,93 @@ def test_fig9_step_is_converged():
     fine = fidelity.fig9_metrics("vertical", *fidelity.simulate_fig9(model, "vertical", 2.0, time_step=5e-4))
     assert coarse["amplitude_m"] == pytest.approx(fine["amplitude_m"], rel=0.01)
     assert coarse["frequency_hz"] == pytest.approx(fine["frequency_hz"], rel=0.02)
+
+
+def test_max_tension_peak_is_the_same_under_both_elasticities():
+    # The RLV's 80 t dwarf the tether's 82 kg: where the axial elasticity sits moves the peak of
+    # the suddenly applied load by well under 1 % (the full study: 0.16 % at n = 30).
+    case = study.MaxTensionCase(duration_s=9.0)
+    peaks = {}
+    for run in (fidelity.TensionRun("attachment", 5, 0.005), fidelity.TensionRun("distributed", 5, 0.005)):
+        result = study.simulate_max_tension(case, overrides=run.overrides())
+        peaks[run.elasticity] = study.max_tension_metrics(result)["peak_tension_N"]
+        # Both start from the cruise equilibrium: every element stretched by the RLV's drag.
+        assert result.tension[0] == pytest.approx(case.rlv_drag_N, rel=1e-9)
+    assert peaks["distributed"] / peaks["attachment"] == pytest.approx(1.0, abs=0.01)
+    assert peaks["distributed"] != peaks["attachment"]
+
+
+def test_capture_sim_reports_the_distributed_attachment_tension_and_replays_commands():
+    run = fidelity.TensionRun("distributed", 5, 0.005)
+    sim = accd_gym.CaptureSim({"tether": run.overrides()}, seed=0, wake_seed=1)
+    sim.settle(3.0)
+    # Newton's law at the attachment equals the first element's n k s_1 + n c_s s_1'.
+    assert sim.tensions()[0] == pytest.approx(sim.state()["attachment_tension"], rel=1e-6)
+    episode = {
+        "flap_commands_deg": np.tile([5.0, 5.0, -3.0, -3.0], (10, 1)),
+        "agent_step": 0.1,
+        "wake_seed": 1,
+    }
+    tensions = {}
+    for r in (fidelity.TensionRun("attachment", 5, 0.005), run):
+        t, tension = fidelity.replay_capture(episode, r, settle_s=3.0)
+        assert t.size == 200 and t[-1] == pytest.approx(1.0)
+        tensions[r.elasticity] = tension
+    assert np.max(tensions["distributed"]) == pytest.approx(np.max(tensions["attachment"]), rel=0.05)
+
+
+def test_paper_max_tension_reproduced_with_lapsed_thrust_and_the_aircrafts_drag():
+    # The one unknown (the aircraft's mass) fitted from the paper's 125 kN mean lies between the
+    # A340-600's landing and take-off masses; the peak is then a prediction: the loads applied at
+    # once on the unstretched tether ring to 1 + exp(-pi zeta / sqrt(1 - zeta^2)) = 1.89 times the
+    # mean, the paper's 225 / 125 = 1.8 within the tolerance; from the cruise equilibrium they do not.
+    mass = fidelity.implied_ta_mass()
+    assert fidelity.TA_MLW_KG < mass < study.TA_MASS_KG
+    literal = fidelity.TensionReading(lapsed=True, ta_mass_kg=mass, ta_drag=True, pre_stretched=False)
+    m = study.max_tension_metrics(study.simulate_max_tension(literal.case()))
+    assert m["mean_tension_N"] == pytest.approx(study.PAPER_MAX_TENSION_MEAN_N, rel=fidelity.PAPER_TOLERANCE)
+    assert m["peak_tension_N"] == pytest.approx(study.PAPER_MAX_TENSION_PEAK_N, rel=fidelity.PAPER_TOLERANCE)
+    stepped = dataclasses.replace(literal, pre_stretched=True)
+    s = study.max_tension_metrics(study.simulate_max_tension(stepped.case()))
+    assert s["mean_tension_N"] == pytest.approx(m["mean_tension_N"], rel=0.01)
+    assert s["peak_tension_N"] < (1 - fidelity.PAPER_TOLERANCE) * study.PAPER_MAX_TENSION_PEAK_N
+    # At sea-level thrust no aircraft mass or drag of the grid comes near the paper's mean.
+    sea = fidelity.TensionReading(lapsed=False, ta_mass_kg=study.TA_MASS_KG, ta_drag=True, pre_stretched=True)
+    assert sea.case().quasi_static_tension() > 1.5 * study.PAPER_MAX_TENSION_MEAN_N
+
+
+def test_settling_readings_map_onto_the_tether_config():
+    fixed = fidelity.SettlingReading("relative", "fixed", "per_joint", 0.35)
+    c1 = accd_gym.tether_config("table3")["joint_damping_per_mass"]
+    mu = accd_gym.tether_config("uhmwpe-300m-24mm")["mass_per_length"]
+    for length, n in ((150.0, 18), (250.0, 30), (300.0, 36)):
+        t = fixed.tether(length)
+        assert t["segments"] == n
+        # Per joint: c_b = c1' m_seg held at the 250 m / 30-segment tether's c1 m_seg.
+        assert t["joint_damping_per_mass"] * mu * length / n == pytest.approx(c1 * mu * 250.0 / 30)
+    free = fidelity.SettlingReading("free_stream", "30", "per_mass", 1.2).tether(300.0)
+    assert free == {"segments": 30, "normal_drag_coefficient": 1.2, "joint_damping_per_mass": c1, "drag_velocity": "free_stream"}
+    assert len(fidelity.settling_readings()) == 16 and len(fidelity.tension_readings()) == 24
+
+
+def _depths(reading, key, length, duration_s):
+    case = dataclasses.replace(
+        {c.key: c for c in study.study_cases("length")["length"]}[key], duration_s=duration_s, commands=(), tether=reading.tether(length)
+    )
+    r = study.simulate_case(case)
+    return r.time, r.position[:, 2]
+
+
+def test_why_the_sweep_readings_do_not_count_as_reproducing_the_settling_claim():
+    # Eq. 9 read literally (drag from the free stream alone): nothing damps the swing; 20 s after
+    # release the 150 m tether still swings by tens of metres (it diverges at 45 s), while with the
+    # relative velocity it has settled.
+    t, free = _depths(fidelity.SettlingReading("free_stream", "30", "per_mass", 0.35), "150m", 150.0, 40.0)
+    _, rel = _depths(fidelity.SettlingReading("relative", "30", "per_mass", 0.35), "150m", 150.0, 40.0)
+    late = t > 30.0
+    assert np.ptp(free[late]) > 20.0 and np.ptp(rel[late]) < 1.0
+    # The subcritical cylinder's C_n = 1.2: the 300 m tether "settles slower" only by never
+    # settling (a limit cycle of several metres), at half the paper's 70 m depth.
+    t, cn12 = _depths(fidelity.SettlingReading("relative", "30", "per_mass", 1.2), "300m", 300.0, 60.0)
+    late = t > 40.0
+    assert np.ptp(cn12[late]) > 2 * study.SETTLING_BAND_M and np.mean(cn12[late]) < 0.6 * 70.0

@@ -55,6 +55,7 @@ steps automatically (issue 13), so 0.01 s runs too and agrees with :data:`MAX_TE
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from dataclasses import dataclass, field
@@ -178,6 +179,8 @@ class Case:
             otherwise calm air.
         paper: the paper's numbers for this case (text, with the figure), keyed like the metrics;
             missing keys are reported as "n/a".
+        tether: overrides of the preset's tether config (the sweeps' readings); empty for the
+            studies.
     """
 
     key: str
@@ -187,6 +190,7 @@ class Case:
     commands: tuple[CommandPhase, ...] = ()
     wake: bool = False
     paper: dict[str, str] = field(default_factory=dict)
+    tether: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass
@@ -228,7 +232,8 @@ def simulate_case(case: Case, sample_interval: float = SAMPLE_INTERVAL_S, bar: A
     Returns:
         The sampled history.
     """
-    sim = accd_gym.CaptureSim(tether_preset=case.preset, calm=not case.wake, seed=0, wake_seed=WAKE_SEED)
+    config = {"tether": dict(case.tether)} if case.tether else None
+    sim = accd_gym.CaptureSim(config, tether_preset=case.preset, calm=not case.wake, seed=0, wake_seed=WAKE_SEED)
     steps = max(1, round(sample_interval / sim.time_step))
     samples = round(case.duration_s / (steps * sim.time_step))
     state = sim.state()
@@ -341,6 +346,10 @@ class MaxTensionCase:
         duration_s: simulated time, s.
         time_step: RK4 step, s.
         airspeed: airspeed, m/s; altitude: m (ISA).
+        pre_stretched: start from the towed cruise equilibrium (stretched by the RLV's drag, the
+            RLV's drag and lift applied) and step the thrust at ``step_s`` (this study); False: the
+            literal reading of section 4's initial condition, the tether straight and unstretched
+            with every load applied from t = 0 (``step_s`` is then ignored).
     """
 
     thrust_N: float = ENGINES * ENGINE_THRUST_N
@@ -354,6 +363,7 @@ class MaxTensionCase:
     time_step: float = MAX_TENSION_TIME_STEP_S
     airspeed: float = 185.0
     altitude: float = 6000.0
+    pre_stretched: bool = True
 
     def acceleration(self) -> float:
         """Acceleration of aircraft and RLV together at full thrust, m/s^2."""
@@ -402,8 +412,11 @@ def simulate_max_tension(
     lift = -case.rlv_mass_kg * cfg["gravity"]  # balances the RLV's weight (z down)
     tether.set_surroundings(tip_force=np.array([-case.rlv_drag_N, 0.0, lift]), frame_acceleration=np.zeros(3))
     directions = np.tile([-1.0, 0.0, 0.0], (tether.segments, 1))
-    tether.set_state(directions, elongation=case.rlv_drag_N / cfg["axial_stiffness"])
-    if tether.elasticity == "distributed":
+    if not case.pre_stretched:
+        case = dataclasses.replace(case, step_s=0.0)
+    stretch = case.rlv_drag_N / cfg["axial_stiffness"] if case.pre_stretched else 0.0
+    tether.set_state(directions, elongation=stretch)
+    if tether.elasticity == "distributed" and case.pre_stretched:
         n = tether.segments
         q = tether.q
         q[0] = q[2 * n + 1 :] = case.rlv_drag_N / (n * cfg["axial_stiffness"])
