@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Optional
@@ -694,7 +695,9 @@ def sweep_settling(progress: bool = False) -> list[dict[str, Any]]:
             try:
                 m = study.case_metrics(study.simulate_case(case))
             except accd_gym.SimulationError as e:
-                row[key] = {"diverged": str(e).splitlines()[0].split(":")[0]}
+                message = str(e).splitlines()[0]
+                at = re.search(r"at t = ([0-9.]+) s", message)
+                row[key] = {"diverged": message, "diverged_at_s": float(at.group(1)) if at else None}
                 continue
             row[key] = {
                 k: m[k]
@@ -778,7 +781,11 @@ def run_sweep(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[dict
 
     def verdict(row: dict[str, Any]) -> str:
         if "diverged" in row["150m"] or "diverged" in row["300m"]:
-            return "diverges (" + "; ".join(row[k]["diverged"] for k in ("150m", "300m") if "diverged" in row[k]) + ")"
+            return "diverges (" + ", ".join(
+                f"{k[:-1]} m " + (f"at {row[k]['diverged_at_s']:.1f} s" if row[k]["diverged_at_s"] is not None else "")
+                for k in ("150m", "300m")
+                if "diverged" in row[k]
+            ) + ")"
         if row["reproduces_paper"]:
             return "**yes**"
         slower = row["slower_after_release"] and row["slower_after_pitch"]
