@@ -185,3 +185,45 @@ def test_why_the_sweep_readings_do_not_count_as_reproducing_the_settling_claim()
     t, cn12 = _depths(fidelity.SettlingReading("relative", "30", "per_mass", 1.2), "300m", 300.0, 60.0)
     late = t > 40.0
     assert np.ptp(cn12[late]) > 2 * study.SETTLING_BAND_M and np.mean(cn12[late]) < 0.6 * 70.0
+
+
+def test_cli_runs_fig9_and_all_leaves_the_long_studies_out(tmp_path):
+    from accd_gym.cli import main
+
+    assert "fig9" in study.STUDIES and not set(study.EXTRA_STUDIES) & set(study.STUDIES)
+    assert main(["study", "fig9", "--out", str(tmp_path), "--quiet"]) == 0
+    assert json.loads((tmp_path / "fig9.json").read_text())["cases"]["swing"]["full-k"]["amplitude_m"] > 0
+    with pytest.raises(ValueError, match="tension, sweep or all"):
+        study.run(["fig10"], tmp_path)
+
+
+def test_tension_and_sweep_studies_write_their_outputs_on_shortened_inputs(tmp_path, monkeypatch):
+    # The whole studies take minutes (docs/paper-reproduction.md); here the same code on short runs.
+    monkeypatch.setattr(
+        fidelity,
+        "TENSION_RUNS",
+        (fidelity.TensionRun("attachment", 5, 0.005, window_s=8.0), fidelity.TensionRun("distributed", 5, 0.005, window_s=8.0)),
+    )
+    monkeypatch.setattr(
+        fidelity, "CAPTURE_RUNS", (fidelity.TensionRun("attachment", 5, 0.005), fidelity.TensionRun("distributed", 5, 0.005))
+    )
+    monkeypatch.setattr(fidelity, "CAPTURE_SETTLE_S", 2.0)
+    short = {"flap_commands_deg": np.tile([4.0, 4.0, 0.0, 0.0], (5, 1)), "agent_step": 0.1, "wake_seed": 2,
+             "peak_tension_N": np.ones(5), "captured": False, "seed": 0}
+    monkeypatch.setattr(fidelity, "guidance_episode", lambda seed=0: short)
+    doc = study.run_study("tension", tmp_path, progress=False)
+    assert set(doc["peak_ratios"]) == {"max_tension_distributed_over_attachment_n5", "capture_distributed_over_attachment_n5"}
+    assert doc["peak_ratios"]["max_tension_distributed_over_attachment_n5"] == pytest.approx(1.0, abs=0.01)
+    assert doc["capture"]["runs"]["distributed-n5-dt0.005"]["simulated_s"] == pytest.approx(2.5)
+    assert "| distributed-n5-dt0.005 | capture |" in (tmp_path / "tension.md").read_text()
+    monkeypatch.setattr(fidelity, "settling_readings", lambda: [fidelity.SettlingReading("relative", "30", "per_mass", 0.35)])
+    monkeypatch.setattr(fidelity, "tension_readings", lambda: [fidelity.TensionReading(True, fidelity.TA_MLW_KG, True, True)])
+    doc = study.run_study("sweep", tmp_path, progress=False)
+    (row,) = doc["settling"]
+    # The default reading is the study's own: the known deviation, 150 m settling slower.
+    assert not row["reproduces_paper"] and row["150m"]["settling_time_s"] > row["300m"]["settling_time_s"]
+    assert doc["max_tension"][0]["reproduces_paper"]  # sweep row 14: 137 / 214 kN
+    text = (tmp_path / "sweep.md").read_text()
+    assert "| 0 | drag relative, n 30, c_b per mass, C_n 0.35 | 26.4 / 24.4 |" in text
+    for png in ("tension.png", "sweep.png"):
+        assert (tmp_path / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
