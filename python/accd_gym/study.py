@@ -16,7 +16,12 @@ length         24 mm UHMWPE, 150 / 250 / 300 m, Fig. 12 commands; and 250 /    F
 diameter       UHMWPE 250 m, 16 / 24 / 32 mm, Fig. 12 commands                 Fig. 18
 selected       Table 3's tether, no flap deflection                            Fig. 19
 max-tension    Table 3's tether towing the captured RLV at full thrust        Figs. 13, 14
+fig9           Table 1's chain, simplified vs full elasticity (in ``all``)     Fig. 9
+tension        both elasticities: max-tension and a capture episode (by name)  4.1, 2.3.6
+sweep          readings behind the two open claims (by name)                   4.1, 4.2
 =============  ==============================================================  ===========
+
+``fig9``, ``tension`` and ``sweep`` live in :mod:`accd_gym.fidelity` (issue 18, items 3-5).
 
 **The Fig. 12 commands, reconstructed.** Fig. 12 ("open loop control rates for sensitivity study")
 is an image the text does not tabulate. The text says what it contains: "a simple set of open-loop
