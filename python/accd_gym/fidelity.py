@@ -36,7 +36,7 @@ import numpy as np
 
 import accd_gym
 
-#: Simulated time of each Fig. 9 run, s (four swings of case (b)).
+#: Simulated time of each Fig. 9 run, s (about two swings of case (b), four cycles of its elongation).
 FIG9_DURATION_S = 10.0
 #: RK4 step of the Fig. 9 runs, s (sampled every step).
 FIG9_TIME_STEP_S = 1e-3
