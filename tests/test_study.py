@@ -63,7 +63,8 @@ def test_length_300_m_about_70_m_below_and_moves_more_than_150_m(docs):
 @pytest.mark.xfail(
     strict=True,
     reason="known deviation (docs/paper-reproduction.md): in this model the 150 m tether rings longer "
-    "than the 300 m one after release and after each command; the paper reports the opposite",
+    "than the 300 m one after release and after each command; the paper reports the opposite, and no "
+    "reading of `accd-gym study sweep` (drag velocity, discretization, joint damping, C_n) reproduces it",
 )
 def test_length_300_m_settles_slower_than_150_m(docs):
     short, long = metrics(docs, "length", "150m"), metrics(docs, "length", "300m")

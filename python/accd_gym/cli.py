@@ -252,11 +252,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="simulated time in seconds (default 120)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_settle)
-    from accd_gym.study import STUDIES
+    from accd_gym.study import EXTRA_STUDIES, STUDIES
 
     p = sub.add_parser("study", help="run the paper's section-4 tether design studies: plots, JSON, markdown tables")
-    p.add_argument("studies", nargs="+", choices=[*STUDIES, "all"], metavar="STUDY",
-                   help=f"one or more of: {', '.join(STUDIES)}, all")
+    p.add_argument("studies", nargs="+", choices=[*STUDIES, *EXTRA_STUDIES, "all"], metavar="STUDY",
+                   help=f"one or more of: {', '.join(STUDIES)}, all (these), or the longer {', '.join(EXTRA_STUDIES)}")
     p.add_argument("--out", default="runs/study", help="output folder (default: runs/study)")
     p.add_argument("--dpi", type=int, default=90, help="resolution of the PNGs (default 90)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -16,7 +16,12 @@ length         24 mm UHMWPE, 150 / 250 / 300 m, Fig. 12 commands; and 250 /    F
 diameter       UHMWPE 250 m, 16 / 24 / 32 mm, Fig. 12 commands                 Fig. 18
 selected       Table 3's tether, no flap deflection                            Fig. 19
 max-tension    Table 3's tether towing the captured RLV at full thrust        Figs. 13, 14
+fig9           Table 1's chain, simplified vs full elasticity (in ``all``)     Fig. 9
+tension        both elasticities: max-tension and a capture episode (by name)  4.1, 2.3.6
+sweep          readings behind the two open claims (by name)                   4.1, 4.2
 =============  ==============================================================  ===========
+
+``fig9``, ``tension`` and ``sweep`` live in :mod:`accd_gym.fidelity` (issue 18, items 3-5).
 
 **The Fig. 12 commands, reconstructed.** Fig. 12 ("open loop control rates for sensitivity study")
 is an image the text does not tabulate. The text says what it contains: "a simple set of open-loop
@@ -55,6 +60,7 @@ steps automatically (issue 13), so 0.01 s runs too and agrees with :data:`MAX_TE
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from dataclasses import dataclass, field
@@ -114,7 +120,9 @@ MAX_TENSION_TIME_STEP_S = 0.005
 PAPER_MAX_TENSION_MEAN_N = 125e3
 PAPER_MAX_TENSION_PEAK_N = 225e3
 
-STUDIES = ("material", "length", "diameter", "selected", "max-tension")
+STUDIES = ("material", "length", "diameter", "selected", "max-tension", "fig9")
+#: Longer studies, run by name only (not by ``all``): :mod:`accd_gym.fidelity`.
+EXTRA_STUDIES = ("tension", "sweep")
 
 
 @dataclass(frozen=True)
@@ -176,6 +184,8 @@ class Case:
             otherwise calm air.
         paper: the paper's numbers for this case (text, with the figure), keyed like the metrics;
             missing keys are reported as "n/a".
+        tether: overrides of the preset's tether config (the sweeps' readings); empty for the
+            studies.
     """
 
     key: str
@@ -185,6 +195,7 @@ class Case:
     commands: tuple[CommandPhase, ...] = ()
     wake: bool = False
     paper: dict[str, str] = field(default_factory=dict)
+    tether: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass
@@ -226,7 +237,8 @@ def simulate_case(case: Case, sample_interval: float = SAMPLE_INTERVAL_S, bar: A
     Returns:
         The sampled history.
     """
-    sim = accd_gym.CaptureSim(tether_preset=case.preset, calm=not case.wake, seed=0, wake_seed=WAKE_SEED)
+    config = {"tether": dict(case.tether)} if case.tether else None
+    sim = accd_gym.CaptureSim(config, tether_preset=case.preset, calm=not case.wake, seed=0, wake_seed=WAKE_SEED)
     steps = max(1, round(sample_interval / sim.time_step))
     samples = round(case.duration_s / (steps * sim.time_step))
     state = sim.state()
@@ -339,6 +351,10 @@ class MaxTensionCase:
         duration_s: simulated time, s.
         time_step: RK4 step, s.
         airspeed: airspeed, m/s; altitude: m (ISA).
+        pre_stretched: start from the towed cruise equilibrium (stretched by the RLV's drag, the
+            RLV's drag and lift applied) and step the thrust at ``step_s`` (this study); False: the
+            literal reading of section 4's initial condition, the tether straight and unstretched
+            with every load applied from t = 0 (``step_s`` is then ignored).
     """
 
     thrust_N: float = ENGINES * ENGINE_THRUST_N
@@ -352,6 +368,7 @@ class MaxTensionCase:
     time_step: float = MAX_TENSION_TIME_STEP_S
     airspeed: float = 185.0
     altitude: float = 6000.0
+    pre_stretched: bool = True
 
     def acceleration(self) -> float:
         """Acceleration of aircraft and RLV together at full thrust, m/s^2."""
@@ -374,7 +391,10 @@ class MaxTensionResult:
 
 
 def simulate_max_tension(
-    case: MaxTensionCase = MaxTensionCase(), sample_interval: float = SAMPLE_INTERVAL_S, bar: Any = None
+    case: MaxTensionCase = MaxTensionCase(),
+    sample_interval: float = SAMPLE_INTERVAL_S,
+    bar: Any = None,
+    overrides: Optional[dict[str, Any]] = None,
 ) -> MaxTensionResult:
     """Runs the maximum-tension case with :class:`accd_gym.Tether` (module doc).
 
@@ -385,14 +405,27 @@ def simulate_max_tension(
         case: the inputs.
         sample_interval: time between samples, s (rounded to whole steps).
         bar: a tqdm bar to advance by one per sample, or None.
+        overrides: further tether config overrides (e.g. ``{"elasticity": "distributed",
+            "segments": 10}``); with the distributed elasticity every element starts stretched by
+            the cruise tension.
     """
-    tether = accd_gym.Tether({"tip_mass": case.rlv_mass_kg, "time_step": case.time_step}, preset=case.preset)
+    tether = accd_gym.Tether(
+        {"tip_mass": case.rlv_mass_kg, "time_step": case.time_step, **(overrides or {})}, preset=case.preset
+    )
     tether.tow(airspeed=case.airspeed, altitude=case.altitude)
     cfg = tether.config
     lift = -case.rlv_mass_kg * cfg["gravity"]  # balances the RLV's weight (z down)
     tether.set_surroundings(tip_force=np.array([-case.rlv_drag_N, 0.0, lift]), frame_acceleration=np.zeros(3))
     directions = np.tile([-1.0, 0.0, 0.0], (tether.segments, 1))
-    tether.set_state(directions, elongation=case.rlv_drag_N / cfg["axial_stiffness"])
+    if not case.pre_stretched:
+        case = dataclasses.replace(case, step_s=0.0)
+    stretch = case.rlv_drag_N / cfg["axial_stiffness"] if case.pre_stretched else 0.0
+    tether.set_state(directions, elongation=stretch)
+    if tether.elasticity == "distributed" and case.pre_stretched:
+        n = tether.segments
+        q = tether.q
+        q[0] = q[2 * n + 1 :] = case.rlv_drag_N / (n * cfg["axial_stiffness"])
+        tether.set_coordinates(q, np.zeros_like(q))
     steps = max(1, round(sample_interval / tether.time_step))
     samples = round(case.duration_s / (steps * tether.time_step))
     step_sample = round(case.step_s / (steps * tether.time_step))
@@ -796,7 +829,7 @@ def run_study(
     """Runs one study and writes ``<figure>.png``, ``<study>.json`` and ``<study>.md`` into ``out_dir``.
 
     Args:
-        study: one of :data:`STUDIES`.
+        study: one of :data:`STUDIES` or :data:`EXTRA_STUDIES`.
         out_dir: output folder (created).
         progress: show a tqdm progress bar on stderr.
         commands: flap commands for the commanded studies (default :func:`fig12_commands`).
@@ -808,7 +841,11 @@ def run_study(
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    if study == "max-tension":
+    if study in ("fig9", *EXTRA_STUDIES):
+        from accd_gym import fidelity
+
+        doc, md = fidelity.run_study(study, out_dir, dpi=dpi, progress=progress)
+    elif study == "max-tension":
         case = max_tension
         samples = round(case.duration_s / (max(1, round(SAMPLE_INTERVAL_S / case.time_step)) * case.time_step))
         bar = _bar(samples, study, progress)
@@ -864,12 +901,13 @@ def run(
     progress: bool = True,
     dpi: int = 90,
 ) -> dict[str, dict[str, Any]]:
-    """Runs ``studies`` (names from :data:`STUDIES`, or ``all``) into ``out_dir``; with more than
-    one, also writes ``summary.md`` (every study's tables). Returns {study: its JSON document}."""
-    names = list(STUDIES) if "all" in studies else list(dict.fromkeys(studies))
+    """Runs ``studies`` (names from :data:`STUDIES` or :data:`EXTRA_STUDIES`, or ``all`` for every
+    one of :data:`STUDIES`) into ``out_dir``; with more than one, also writes ``summary.md`` (every
+    study's tables). Returns {study: its JSON document}."""
+    names = list(dict.fromkeys([*(STUDIES if "all" in studies else ()), *(s for s in studies if s != "all")]))
     for name in names:
-        if name not in STUDIES:
-            raise ValueError(f"unknown study {name!r}; choose from {', '.join(STUDIES)} or all")
+        if name not in STUDIES + EXTRA_STUDIES:
+            raise ValueError(f"unknown study {name!r}; choose from {', '.join(STUDIES + EXTRA_STUDIES)} or all")
     docs = {}
     for name in names:
         docs[name] = run_study(name, out_dir, progress=progress, dpi=dpi)

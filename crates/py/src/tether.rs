@@ -164,12 +164,28 @@ impl PyTether {
         self.inner.config().segments
     }
 
+    /// Stretch of each segment's element, m (see `stretches`).
+    fn stretch_values(&self) -> Vec<f64> {
+        let (n, q) = (self.n(), &self.inner.state().q);
+        let mut out = vec![0.0; n];
+        out[0] = q[0];
+        if self.inner.config().is_distributed() {
+            out[1..].copy_from_slice(&q[2 * n + 1..3 * n]);
+        }
+        out
+    }
+
     fn install(
         &mut self,
         state: Result<TetherState, accd_tether::TetherError>,
         time: f64,
     ) -> PyResult<()> {
         let mut state = state.py_err()?;
+        // States built from directions or angles are in the attachment layout (2n + 1); a
+        // distributed tether takes the same geometry with the elongation on segment 1's element.
+        if self.inner.config().is_distributed() && state.q.len() == 2 * self.n() + 1 {
+            state = state.to_distributed().py_err()?;
+        }
         if !time.is_finite() {
             return Err(raise(
                 Kind::State,
@@ -205,7 +221,15 @@ impl PyTether {
         self.n()
     }
 
-    /// Number of generalized coordinates, 2n + 1.
+    /// Where the axial elasticity sits: ``"attachment"`` (one element at the attachment, the
+    /// paper's simplified model, the default) or ``"distributed"`` (an element ``n k``, ``n c_s``
+    /// in every segment, the paper's full model of section 2.3.6).
+    #[getter]
+    fn elasticity(&self) -> &'static str {
+        self.inner.config().elasticity.name()
+    }
+
+    /// Number of generalized coordinates: 2n + 1 (attachment elasticity) or 3n (distributed).
     #[getter]
     fn dofs(&self) -> usize {
         self.inner.config().dofs()
@@ -223,7 +247,9 @@ impl PyTether {
         self.inner.time_step()
     }
 
-    /// Generalized coordinates ``[s, phi_1, psi_1, ..., phi_n, psi_n]`` (m, rad), a copy.
+    /// Generalized coordinates ``[s, phi_1, psi_1, ..., phi_n, psi_n]`` (m, rad), a copy; with
+    /// the distributed elasticity followed by the stretches ``s_2, ..., s_n`` of the elements of
+    /// segments 2 to n (m), and ``s`` is segment 1's element.
     ///
     /// ``phi`` is the in-plane angle below the trailing direction (0 trailing back, pi/2 hanging
     /// down), ``psi`` the lateral angle towards starboard; the chart is singular only for a
@@ -239,10 +265,25 @@ impl PyTether {
         PyArray1::from_slice(py, &self.inner.state().qd)
     }
 
-    /// Elongation s of the axial element at the attachment, m.
+    /// Elongation s of the axial element at the attachment, m (segment 1's element when the
+    /// elasticity is distributed; the whole tether's is :attr:`total_elongation`).
     #[getter]
     fn elongation(&self) -> f64 {
         self.inner.state().elongation()
+    }
+
+    /// Stretch of the axial element at the inboard end of each segment, shape (n,), m: the
+    /// attachment element's ``s`` first; the other entries are zero unless the elasticity is
+    /// distributed.
+    #[getter]
+    fn stretches<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_vec(py, self.stretch_values())
+    }
+
+    /// Total elongation of the tether, the sum of :attr:`stretches`, m.
+    #[getter]
+    fn total_elongation(&self) -> f64 {
+        self.stretch_values().iter().sum()
     }
 
     /// Unit direction of each segment, shape (n, 3), pointing away from the aircraft.
@@ -302,14 +343,14 @@ impl PyTether {
         Ok(d)
     }
 
-    /// Mass matrix M(q) at the current state, shape (2n + 1, 2n + 1).
+    /// Mass matrix M(q) at the current state, shape (dofs, dofs) (see :attr:`dofs`).
     fn mass_matrix<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let q = self.inner.state().q.clone();
         let m = self.inner.model_mut().mass_matrix(&q).py_err()?;
         Ok(Array2::from_shape_fn((m.nrows(), m.ncols()), |(i, j)| m[(i, j)]).into_pyarray(py))
     }
 
-    /// Generalized accelerations q'' at the current state and surroundings, shape (2n + 1,).
+    /// Generalized accelerations q'' at the current state and surroundings, shape (dofs,).
     fn accelerations<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let flow = self.flow;
         let a = self.inner.accelerations(&flow).py_err()?;
@@ -323,7 +364,8 @@ impl PyTether {
     ///         here; must not point straight sideways).
     ///     direction_rates: shape (n, 3), rate of each unit direction, 1/s (the part along the
     ///         direction is dropped). Default: at rest.
-    ///     elongation: s, m. elongation_rate: s', m/s. time: s.
+    ///     elongation: s, m (with the distributed elasticity on segment 1's element, the others
+    ///         unstretched). elongation_rate: s', m/s. time: s.
     #[pyo3(signature = (directions, direction_rates = None, elongation = 0.0, elongation_rate = 0.0, time = 0.0))]
     fn set_state(
         &mut self,
@@ -346,7 +388,8 @@ impl PyTether {
     }
 
     /// Sets the state from the angles (rad) and their rates (rad/s), each of shape (n,),
-    /// with the elongation s (m), its rate (m/s) and the time (s).
+    /// with the elongation s (m), its rate (m/s) and the time (s); with the distributed
+    /// elasticity s is segment 1's element's and the others are unstretched.
     #[pyo3(signature = (phi, psi, phi_rate = None, psi_rate = None, elongation = 0.0, elongation_rate = 0.0, time = 0.0))]
     #[allow(clippy::too_many_arguments)]
     fn set_angles(
@@ -383,7 +426,7 @@ impl PyTether {
         )
     }
 
-    /// Sets the generalized coordinates and rates directly, each of shape (2n + 1,).
+    /// Sets the generalized coordinates and rates directly, each of shape (dofs,) (see :attr:`q`).
     #[pyo3(signature = (q, qd, time = 0.0))]
     fn set_coordinates(
         &mut self,

@@ -312,6 +312,11 @@ impl CaptureSim {
         let tether_config = config.tether_with_tip();
         let mut model = TetherModel::new(&tether_config)?;
         let tether = TetherState::straight(tether_config.segments, V3::new(-1.0, 0.0, 0.0), 0.0)?;
+        let tether = if tether_config.is_distributed() {
+            tether.to_distributed()?
+        } else {
+            tether
+        };
         let accd = AccdState::default();
         let capture_offset = config.accd.capture_point();
         let (tip, tip_velocity) = model.tip_state(&tether.q, &tether.qd)?;
@@ -416,7 +421,7 @@ impl CaptureSim {
             }
             .into());
         }
-        state.validate()?;
+        state.validate_for(self.model.segments())?;
         self.time_origin = state.time;
         self.steps = 0;
         self.tether = state;
@@ -435,7 +440,7 @@ impl CaptureSim {
             }
             .into());
         }
-        tether.validate()?;
+        tether.validate_for(self.model.segments())?;
         Self::check_accd_state(&accd)?;
         self.accd = accd;
         self.tether.q.copy_from_slice(&tether.q);
@@ -668,10 +673,11 @@ impl CaptureSim {
         Ok(())
     }
 
-    /// Tension at the attachment from the axial element, `k s + c s'`, N.
+    /// Tension at the attachment from the axial element, `k s + c s'` (segment 1's element,
+    /// `n k s_1 + n c_s s_1'`, when the elasticity is distributed), N.
     pub fn attachment_tension(&self) -> f64 {
         let c = &self.config.tether;
-        c.axial_stiffness * self.tether.q[0] + c.axial_damping() * self.tether.qd[0]
+        c.element_stiffness() * self.tether.q[0] + c.element_damping() * self.tether.qd[0]
     }
 
     /// The capture criteria at the current state (cheaper than a [`CaptureSim::snapshot`]: no

@@ -103,6 +103,9 @@ pub(crate) struct LoadConstants {
     /// 1/2 d l C_n and 1/2 pi d l C_t, m^2.
     pub normal_drag: f64,
     pub tangential_drag: f64,
+    /// Weight of the segment's own velocity in its drag: 1 (relative velocity, the default) or
+    /// 0 (free stream, [`crate::DragVelocity`]).
+    pub segment_velocity_weight: f64,
     /// Gravity, m/s^2 (along +z).
     pub gravity: f64,
     /// Segment length l, m.
@@ -506,7 +509,9 @@ fn segment_loads<M: Madd, S: Surroundings + ?Sized>(
         let e = V3::new(ex[k], ey[k], ez[k]);
         let com = V3::new(cx[k], cy[k], cz[k]);
         let rho = surroundings.air_density(time, &com);
-        let rel = surroundings.segment_air_velocity(time, k, &com) - V3::new(vx[k], vy[k], vz[k]);
+        // x * 1.0 == x exactly: the default (relative) drag is bit for bit the plain difference.
+        let rel = surroundings.segment_air_velocity(time, k, &com)
+            - V3::new(vx[k], vy[k], vz[k]) * c.segment_velocity_weight;
         let vt = dot::<M>(&rel, &e);
         let vn = axpy::<M>(&e, -vt, &rel);
         let vn_abs = dot::<M>(&vn, &vn).sqrt();

@@ -64,10 +64,66 @@ accd_spec::config_struct! {
         #[serde(skip_serializing_if = "Elasticity::is_attachment")]
         pub elasticity: Elasticity = Elasticity::Attachment, "", "",
             "where the axial elasticity sits: \"attachment\" (one element, the paper's simplified model) or \"distributed\" (one per segment)";
+        /// `"relative"`: the air velocity relative to each segment's centre, so a swinging tether
+        /// is damped by its own motion through the air. `"free_stream"`: a literal reading of the
+        /// paper's Eq. 9 (`u = U_inf cos(phi) cos(psi)`, no segment velocity): the drag depends on
+        /// the segments' angles but does not damp their motion (for the sweeps of
+        /// `docs/paper-reproduction.md`; the tip body's drag stays relative). Omitted from the
+        /// JSON when it is the default.
+        #[serde(skip_serializing_if = "DragVelocity::is_relative")]
+        pub drag_velocity: DragVelocity = DragVelocity::Relative, "", "",
+            "which velocity the segments' drag is computed from: \"relative\" or \"free_stream\" (Eq. 9 read literally)";
     }
 }
 
-accd_spec::no_range!(Elasticity);
+accd_spec::no_range!(Elasticity, DragVelocity);
+
+/// Which velocity the segments' aerodynamic drag sees ([`TetherConfig::drag_velocity`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DragVelocity {
+    /// The air velocity relative to the segment's centre (the default).
+    #[default]
+    Relative,
+    /// The air velocity alone (the paper's Eq. 9 read literally).
+    FreeStream,
+}
+
+impl DragVelocity {
+    /// Whether this is the default, [`DragVelocity::Relative`].
+    pub fn is_relative(&self) -> bool {
+        *self == DragVelocity::Relative
+    }
+
+    /// The name used in JSON.
+    pub fn name(&self) -> &'static str {
+        match self {
+            DragVelocity::Relative => "relative",
+            DragVelocity::FreeStream => "free_stream",
+        }
+    }
+
+    /// The weight of the segment's own velocity in its drag: 1 (relative) or 0 (free stream).
+    pub fn segment_velocity_weight(&self) -> f64 {
+        match self {
+            DragVelocity::Relative => 1.0,
+            DragVelocity::FreeStream => 0.0,
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for DragVelocity {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        let name = String::deserialize(d)?;
+        match name.as_str() {
+            "relative" => Ok(DragVelocity::Relative),
+            "free_stream" => Ok(DragVelocity::FreeStream),
+            other => Err(serde::de::Error::custom(format!(
+                "invalid value of `drag_velocity`: {other:?}; allowed: \"relative\" or \"free_stream\""
+            ))),
+        }
+    }
+}
 
 /// Each field's range is all there is to check ([`TetherConfig::check_stability`] is a rule of
 /// the stepping, with the tension it is run at).
@@ -226,6 +282,7 @@ impl TetherConfig {
             gravity: STANDARD_GRAVITY,
             time_step: 0.01,
             elasticity: Elasticity::Attachment,
+            drag_velocity: DragVelocity::Relative,
         }
     }
 

@@ -42,7 +42,7 @@
 //! chart), and `c_s s'` on the axial element.
 //!
 //! **Aerodynamics.** Per segment, from the air velocity relative to its centre,
-//! `v = v_air(c_i) - c_i'`, split into `v_t = (v . e_i) e_i` and `v_n = v - v_t`:
+//! `v = v_air(c_i) - c_i'` (or `v_air(c_i)` alone with [`crate::DragVelocity::FreeStream`]), split into `v_t = (v . e_i) e_i` and `v_n = v - v_t`:
 //! `F = 1/2 rho d l (C_n |v_n| v_n + pi C_t |v_t| v_t)`.
 //!
 //! The distributed elasticity ([`crate::Elasticity::Distributed`]: an element in every segment,
@@ -115,6 +115,8 @@ pub struct TetherModel {
     normal_drag: f64,
     /// 1/2 pi d l C_t, m^2: times rho |v_t| v_t gives the skin friction.
     tangential_drag: f64,
+    /// Weight of a segment's own velocity in its drag ([`crate::DragVelocity`]): 1 or 0.
+    segment_velocity_weight: f64,
     solver: Solver,
     /// Whether the elasticity is distributed ([`crate::distributed`]).
     distributed: bool,
@@ -164,6 +166,7 @@ impl TetherModel {
                 * config.diameter
                 * l
                 * config.tangential_drag_coefficient,
+            segment_velocity_weight: config.drag_velocity.segment_velocity_weight(),
             ws: Workspace {
                 chain: ChainState::new(n),
                 com_acc0: Vec::new(),
@@ -255,6 +258,7 @@ impl TetherModel {
             c_b: self.c_b,
             normal_drag: self.normal_drag,
             tangential_drag: self.tangential_drag,
+            segment_velocity_weight: self.segment_velocity_weight,
             gravity: self.gravity,
             l: self.l,
         }

@@ -40,7 +40,7 @@ pub mod tether;
 mod trig;
 
 pub use atmosphere::Atmosphere;
-pub use config::{Elasticity, TetherConfig, STANDARD_GRAVITY};
+pub use config::{DragVelocity, Elasticity, TetherConfig, STANDARD_GRAVITY};
 pub use direction::DirectionJet;
 pub use dynamics::{Energy, Solver, TetherModel};
 pub use error::{Result, TetherError};
