@@ -346,7 +346,9 @@ def test_config_docs_are_generated_from_the_declarations():
                 yield from leaves(v, key + ".")
 
     assert set(leaves(defaults)) <= keys
-    assert set(leaves(defaults)) | {"tether.elasticity"} == keys
+    # The tether's model options are left out of the JSON at their defaults (saved states keep
+    # their config hash); every other declared key is in the default configuration.
+    assert set(leaves(defaults)) | {"tether.elasticity", "tether.drag_velocity"} == keys
 
 
 def test_the_id_loads_through_gymnasiums_module_syntax():

@@ -101,11 +101,17 @@ def self_contained(config: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _default_text(defaults: Mapping[str, Any], key: str, declared: str) -> str:
-    """The default of dotted ``key`` as Python shows it (from ``default_config()``), or the
-    declaration's text for a key the configuration omits at its default."""
+    """The default of dotted ``key`` as Python shows it (from ``default_config()``), or, for a
+    key the configuration omits at its default, the declaration's text with a Rust enum variant
+    (``Elasticity::Attachment``) shown as the string the configuration takes (``'attachment'``)."""
     value: Any = defaults
     for part in key.split("."):
         if not isinstance(value, Mapping) or part not in value:
+            import re
+
+            variant = re.fullmatch(r"[A-Z]\w*::([A-Z]\w*)", declared)
+            if variant:
+                return repr(re.sub(r"(?<!^)(?=[A-Z])", "_", variant.group(1)).lower())
             return declared
         value = value[part]
     return repr(value)
