@@ -100,11 +100,13 @@ fn an_interruptible_step_is_bitwise_the_plain_step() {
 
 #[test]
 fn an_interrupted_step_stops_part_way_and_the_batch_refuses_until_reset() {
-    // 10 s agent steps of 1000 physics steps each: a step takes far longer than one check
-    // interval, so the check runs while the envs are part-way through it.
+    // 10 s agent steps of 1000 physics steps each of a 100-segment tether (about 50 ms per env,
+    // the two envs one after the other on one thread): a step takes far longer than one check
+    // interval, so the check runs while the first env is part-way through it.
     let mut c = quick();
     c.agent_step = 10.0;
     c.capture_window = 20.0;
+    c.physics.tether.segments = 100;
     let mut env =
         BatchEnv::new(c.clone().validated().unwrap(), 2, 1, Autoreset::SameStep, 1).unwrap();
     let actions = [0.0f32; 8];
