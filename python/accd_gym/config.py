@@ -151,6 +151,26 @@ def with_arguments(doc: Optional[str]) -> Optional[str]:
     raise ValueError(f"docstring has no {ARGUMENTS_MARKER} line")
 
 
+def read_json_object(path: "str | Path", what: str) -> dict[str, Any]:
+    """The JSON object in file ``path`` (a training, sweep or other config named ``what`` in the
+    messages); raises :class:`~accd_gym.ConfigError` if the file is missing, is not JSON or
+    holds something other than an object."""
+    from pathlib import Path
+
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(f"invalid config: {what} file {str(path)!r} does not exist")
+    try:
+        raw = json.loads(p.read_text())
+    except json.JSONDecodeError as e:
+        raise ConfigError(f"invalid config: {str(path)!r} is not valid JSON ({e})") from None
+    if not isinstance(raw, dict):
+        raise ConfigError(
+            f"invalid config: {str(path)!r} holds a JSON {type(raw).__name__}; a {what} must be a JSON object"
+        )
+    return raw
+
+
 def config_json(config: Mapping[str, Any]) -> str:
     """A configuration as the JSON text the Rust core reads."""
     return json.dumps(config, default=_plain)
@@ -163,6 +183,7 @@ __all__ = [
     "config_json",
     "self_contained",
     "config_table_markdown",
+    "read_json_object",
     "EXACT_AIR_SCHEME",
 ]
 

@@ -92,14 +92,9 @@ def bootstrap_interval(values: Sequence[float], stat: Any = iqm, *, resamples: i
 
 def load_config(path: str | Path) -> dict[str, Any]:
     """A complete, validated sweep config from a JSON file."""
-    p = Path(path)
-    if not p.is_file():
-        raise ConfigError(f"invalid config: sweep config file {str(path)!r} does not exist")
-    try:
-        raw = json.loads(p.read_text())
-    except json.JSONDecodeError as e:
-        raise ConfigError(f"invalid config: {str(path)!r} is not valid JSON ({e})") from None
-    return validate_config(raw)
+    from accd_gym.config import read_json_object
+
+    return validate_config(read_json_object(path, "sweep config"))
 
 
 def validate_config(raw: Any) -> dict[str, Any]:
@@ -164,15 +159,9 @@ def train_config(sweep: dict[str, Any], point: dict[str, Any], seed: int) -> dic
     point, the seed and ``timesteps`` applied (RLlib trials sample in-process)."""
     from accd_gym import rllib, training
 
-    p = Path(sweep["train_config"])
-    if not p.is_file():
-        raise ConfigError(f"invalid config: `train_config` = {str(p)!r} does not exist")
-    try:
-        raw = json.loads(p.read_text())
-    except json.JSONDecodeError as e:
-        raise ConfigError(f"invalid config: {str(p)!r} is not valid JSON ({e})") from None
-    if not isinstance(raw, dict):
-        raise ConfigError(f"invalid config: {str(p)!r} is not a JSON object")
+    from accd_gym.config import read_json_object
+
+    raw = read_json_object(sweep["train_config"], "`train_config` (training config)")
     for key, value in point.items():
         _set_dotted(raw, key, value)
     raw["seed"] = seed

@@ -72,17 +72,9 @@ _ACTIVATIONS = ("tanh", "relu", "elu")
 
 def load_config(path: str | Path, **overrides: Any) -> dict[str, Any]:
     """A complete, validated training config from a JSON file plus overrides (None values ignored)."""
-    p = Path(path)
-    if not p.is_file():
-        raise ConfigError(f"invalid config: training config file {str(path)!r} does not exist")
-    try:
-        raw = json.loads(p.read_text())
-    except json.JSONDecodeError as e:
-        raise ConfigError(f"invalid config: {str(path)!r} is not valid JSON ({e})") from None
-    if not isinstance(raw, dict):
-        raise ConfigError(
-            f"invalid config: {str(path)!r} holds a JSON {type(raw).__name__}; a training config must be a JSON object"
-        )
+    from accd_gym.config import read_json_object
+
+    raw = read_json_object(path, "training config")
     raw.update({k: v for k, v in overrides.items() if v is not None})
     return validate_config(raw)
 
