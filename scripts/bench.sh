@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # Runs every benchmark and prints the ratios the performance work tracks:
-#   criterion: the tether (n = 10 .. 300), one capture-system physics step (exact and fast air
-#   schemes beside the tether), the batch env (N = 1, 16, 256; 1 thread and all cores);
+#   criterion: the tether (n = 10 .. 300), one capture-system physics step (the default fast and
+#   the exact air scheme beside the tether), the batch env (N = 1, 16, 256; 1 thread and all cores);
 #   scripts/bench_physics.py: MuJoCo's bare chain, the tether and the capture system in one process;
-#   scripts/bench_envs.py: the Python envs (default and fast scheme);
+#   scripts/bench_envs.py: the Python envs (default fast scheme and the exact one);
 #   scripts/bench_training.py: PPO end to end with the time split.
 # Does its own set-up (the venv with the sb3 extras and mujoco). Takes about 15 minutes.
 #   bash scripts/bench.sh [OUT_DIR]      (default runs/bench)
@@ -14,7 +14,7 @@ OUT="${1:-runs/bench}"
 mkdir -p "$OUT"
 ACCD_EXTRAS="${ACCD_EXTRAS:-sb3}" source scripts/setup.sh
 "$ACCD_PY" -m pip --disable-pip-version-check -q install "mujoco>=3"
-FAST='{"wake": {"sampling": "per_step"}, "turbulence": {"normal_sampler": "ziggurat", "lane_streams": "per_lane"}}'
+EXACT='{"wake": {"sampling": "per_stage"}, "turbulence": {"normal_sampler": "box_muller", "lane_streams": "shared"}}'
 {
   echo "date: $(date -u +%FT%TZ)  load: $(cut -d' ' -f1-3 /proc/loadavg)  cores: $(nproc)"
   echo "== criterion: tether"
@@ -25,12 +25,12 @@ FAST='{"wake": {"sampling": "per_step"}, "turbulence": {"normal_sampler": "ziggu
   cargo bench -q -p accd-batch --bench batch -- --warm-up-time 1 --measurement-time 4 2>&1 | grep -E "time:|thrpt:|batch_step" || true
   echo "== physics steps side by side (one process)"
   "$ACCD_PY" scripts/bench_physics.py --json "$OUT/physics.json"
-  echo "== Python envs, default scheme"
+  echo "== Python envs, default (fast) scheme"
   "$ACCD_PY" scripts/bench_envs.py --seconds 4 --json "$OUT/envs_default.json"
-  echo "== Python envs, fast scheme"
-  "$ACCD_PY" scripts/bench_envs.py --seconds 4 --config "$FAST" --json "$OUT/envs_fast.json"
+  echo "== Python envs, exact scheme"
+  "$ACCD_PY" scripts/bench_envs.py --seconds 4 --config "$EXACT" --json "$OUT/envs_exact.json"
   echo "== PPO training (training/ppo.json): | env | agent steps/s | env s | inference, wrappers, SB3 s | gradient updates s | other s | wall s |"
   "$ACCD_PY" scripts/bench_training.py --json "$OUT/training_default.json"
-  echo "== PPO training, fast scheme"
-  "$ACCD_PY" scripts/bench_training.py --env "$FAST" --json "$OUT/training_fast.json"
+  echo "== PPO training, exact scheme"
+  "$ACCD_PY" scripts/bench_training.py --env "$EXACT" --json "$OUT/training_exact.json"
 } 2>&1 | tee "$OUT/bench.txt"

@@ -8,11 +8,11 @@ minimum over rounds is reported, so the ratios compare runs made under the same 
 * ``tether n=30``: Table 3's towed tether with the stand-in body, aerodynamics on every segment,
   RK4 at 0.01 s (``accd_gym.towed_tether().advance``); ``tether n=300`` at 0.005 s (RK4 at 0.01 s
   is outside its stability region for 0.83 m segments).
-* ``capture exact``: the whole capture system at its defaults apart from the sampling scheme
-  (tether n = 30, ACCD 6-DoF with aerodynamics, 8 deg wake with turbulence sampled at every RK4
-  stage, boom, capture check), ``CaptureSim.step(steps=N)``;
+* ``capture exact``: the whole capture system (tether n = 30, ACCD 6-DoF with aerodynamics, 8 deg
+  wake with turbulence, boom, capture check) under the exact air scheme of the first releases
+  (sampled at every RK4 stage, Box-Muller, one turbulence stream), ``CaptureSim.step(steps=N)``;
   ``capture fast``: per-step sampling, ziggurat normals, per-lane turbulence streams;
-  ``capture (default)``: the default configuration.
+  ``capture (default)``: the default configuration (the fast scheme).
 
     python scripts/bench_physics.py [--rounds 7] [--seconds 0.5] [--json OUT]
 """
@@ -27,7 +27,7 @@ import time
 import accd_gym
 
 FAST = {"wake": {"sampling": "per_step"}, "turbulence": {"normal_sampler": "ziggurat", "lane_streams": "per_lane"}}
-EXACT = {"wake": {"sampling": "per_stage"}, "turbulence": {"normal_sampler": "box_muller"}}
+EXACT = {"wake": {"sampling": "per_stage"}, "turbulence": {"normal_sampler": "box_muller", "lane_streams": "shared"}}
 
 
 def mujoco_chain(n: int = 30, length: float = 250.0):

@@ -5,19 +5,20 @@ use accd_batch::{Autoreset, BatchEnv, StepOutputs};
 use accd_sim::{EnvConfig, ACT_DIM};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 
-/// The fast air scheme: per-step sampling, ziggurat normals, per-lane turbulence streams.
-fn fast() -> EnvConfig {
+/// The exact air scheme of the first releases: per-stage sampling, Box-Muller normals, one
+/// shared turbulence stream (the default is the fast scheme).
+fn exact() -> EnvConfig {
     let mut config = EnvConfig::default();
-    config.physics.wake.sampling = accd_sim::AirSampling::PerStep;
-    config.physics.turbulence.normal_sampler = accd_sim::NormalSampler::Ziggurat;
-    config.physics.turbulence.lane_streams = accd_sim::LaneStreams::PerLane;
+    config.physics.wake.sampling = accd_sim::AirSampling::PerStage;
+    config.physics.turbulence.normal_sampler = accd_sim::NormalSampler::BoxMuller;
+    config.physics.turbulence.lane_streams = accd_sim::LaneStreams::Shared;
     config
 }
 
 fn bench(c: &mut Criterion) {
     let mut group = c.benchmark_group("batch_step");
     group.sample_size(10);
-    for (scheme, config) in [("default", EnvConfig::default()), ("fast", fast())] {
+    for (scheme, config) in [("default", EnvConfig::default()), ("exact", exact())] {
         for &n in &[1usize, 16, 256] {
             for &threads in &[1usize, 0] {
                 let mut env = BatchEnv::new(

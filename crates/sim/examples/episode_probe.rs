@@ -51,6 +51,13 @@ fn main() {
     if only == "default" {
         return time("mean wake + turbulence", EnvConfig::default(), steps);
     }
+    if only == "exact" {
+        let mut exact = EnvConfig::default();
+        exact.physics.wake.sampling = AirSampling::PerStage;
+        exact.physics.turbulence.normal_sampler = NormalSampler::BoxMuller;
+        exact.physics.turbulence.lane_streams = LaneStreams::Shared;
+        return time("exact scheme (first releases)", exact, steps);
+    }
     let mut calm = EnvConfig::default();
     calm.physics.wake.enabled = false;
     calm.physics.turbulence.wake_turbulence = false;
@@ -59,7 +66,7 @@ fn main() {
     mean.physics.turbulence.wake_turbulence = false;
     time("mean wake", mean, steps);
     time("mean wake + turbulence", EnvConfig::default(), steps);
-    let mut per_step = EnvConfig::default();
-    per_step.physics.wake.sampling = AirSampling::PerStep;
-    time("... sampled once per step", per_step, steps);
+    let mut per_stage = EnvConfig::default();
+    per_stage.physics.wake.sampling = AirSampling::PerStage;
+    time("... sampled at every RK4 stage", per_stage, steps);
 }
