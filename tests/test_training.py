@@ -9,7 +9,7 @@ import accd_gym
 from accd_gym import training
 from accd_gym.baselines import BASELINES, GuidancePolicy, RandomPolicy, ZeroPolicy, quaternion_to_euler
 from accd_gym.cli import main
-from accd_gym.evaluation import run_episodes, summarize, wilson_interval
+from accd_gym.evaluation import mcnemar_exact, paired_comparisons, run_episodes, summarize, wilson_interval
 from accd_gym.task import OBS_DIM, OBSERVATION_SCALE, observation_indices
 
 SHORT = {"capture_window": 5.0}  # 50 agent steps per episode
@@ -71,6 +71,26 @@ def test_wilson_interval_matches_the_closed_form():
     assert wilson_interval(5, 10) == pytest.approx((0.23659, 0.76341), abs=1e-4)
     lo, hi = wilson_interval(10, 10)
     assert hi == pytest.approx(1.0) and lo == pytest.approx(0.72247, abs=1e-4)
+
+
+def test_mcnemar_exact_matches_the_binomial_tail():
+    """Two-sided exact McNemar: 2 P(X <= min(b, c)) for X ~ Binomial(b + c, 1/2), at most 1."""
+    assert mcnemar_exact(0, 5) == 2 / 2**5
+    assert mcnemar_exact(10, 2) == pytest.approx(2 * (1 + 12 + 66) / 2**12, rel=1e-15)
+    assert mcnemar_exact(3, 3) == 1.0 and mcnemar_exact(0, 0) == 1.0 and mcnemar_exact(1, 0) == 1.0
+    assert mcnemar_exact(196, 52) == mcnemar_exact(52, 196)
+    assert mcnemar_exact(196, 52) == pytest.approx(7.591015324052e-21, rel=1e-9)  # scipy.stats.binomtest
+    with pytest.raises(accd_gym.ConfigError, match="discordant"):
+        mcnemar_exact(-1, 3)
+
+
+def test_paired_comparisons_count_the_discordant_episodes():
+    from types import SimpleNamespace as E
+
+    runs = {"a": [E(captured=c) for c in (1, 1, 0, 0, 1)], "b": [E(captured=c) for c in (1, 0, 1, 0, 0)]}
+    (c,) = paired_comparisons(runs)
+    assert (c["a"], c["b"], c["both"], c["only_a"], c["only_b"]) == ("a", "b", 1, 2, 1)
+    assert c["mcnemar_p"] == mcnemar_exact(2, 1)
 
 
 def test_run_episodes_on_held_out_seeds_records_every_episode():
@@ -169,6 +189,9 @@ def test_short_ppo_training_then_held_out_evaluation(tmp_path):
         assert len(firsts) == 3 and all(np.array_equal(firsts[0], f) for f in firsts)
     md = (out / "summary.md").read_text()
     assert "| ppo |" in md and "| guidance |" in md and "Wilson" in md
+    assert len(res["paired"]) == 3 and "McNemar" in md  # every pair of the three policies
+    for c in res["paired"]:
+        assert c["both"] + c["only_a"] + c["only_b"] <= 3 and 0 < c["mcnemar_p"] <= 1
     for png in ("trajectories.png", "miss_distance_cdf.png"):
         assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 

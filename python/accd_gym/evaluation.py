@@ -374,6 +374,40 @@ def _policy_starts(policy: Any, rows: np.ndarray, ep_of: np.ndarray, last: np.nd
         policy.reset(rows.copy())
 
 
+def mcnemar_exact(only_a: int, only_b: int) -> float:
+    """Two-sided exact McNemar test of paired outcomes: the probability, if both policies
+    captured equally often, of a split of the ``only_a + only_b`` discordant episodes (captured
+    by one policy only) at least as uneven as the one seen: ``min(1, 2 P(X <= min))`` for
+    ``X ~ Binomial(only_a + only_b, 1/2)``; 1 when no episode is discordant. Exact in integer
+    arithmetic up to the final division."""
+    if only_a < 0 or only_b < 0:
+        raise ConfigError(f"invalid config: discordant counts {only_a}, {only_b} are outside the allowed range >= 0")
+    n = only_a + only_b
+    if n == 0:
+        return 1.0
+    from math import comb
+
+    tail = sum(comb(n, k) for k in range(min(only_a, only_b) + 1))
+    return min(1.0, 2 * tail / 2**n)
+
+
+def paired_comparisons(runs: dict[str, list["Episode"]]) -> list[dict[str, Any]]:
+    """Every pair of policies evaluated on the same episodes: the episodes captured by both, by
+    the first only, by the second only, and the exact McNemar p-value (:func:`mcnemar_exact`)."""
+    specs = list(runs)
+    out = []
+    for i, a in enumerate(specs):
+        for b in specs[i + 1:]:
+            pa = [e.captured for e in runs[a]]
+            pb = [e.captured for e in runs[b]]
+            both = sum(x and y for x, y in zip(pa, pb))
+            only_a = sum(x and not y for x, y in zip(pa, pb))
+            only_b = sum(y and not x for x, y in zip(pa, pb))
+            out.append({"a": a, "b": b, "both": both, "only_a": only_a, "only_b": only_b,
+                        "mcnemar_p": mcnemar_exact(only_a, only_b)})
+    return out
+
+
 def summarize(episodes: Sequence[Episode]) -> dict[str, Any]:
     """Capture rate with its Wilson 95 % interval, miss distance, capture time, tension, flap usage."""
     n = len(episodes)
@@ -468,6 +502,7 @@ def evaluate(
         results["policies"][spec] = {"summary": summarize(eps), "episodes": [e.metrics() for e in eps]}
         if getattr(policy, "note", None):
             results["policies"][spec]["note"] = policy.note
+    results["paired"] = paired_comparisons(runs)
     if replay:
         from accd_gym.replay import write_evaluation_replays
 
@@ -525,6 +560,13 @@ def summary_markdown(results: dict[str, Any]) -> str:
             f"| {s['peak_tension_N']['median'] / 1e3:.2f} / {s['peak_tension_N']['max'] / 1e3:.2f} "
             f"| {s['mean_abs_action']:.3f} | {s['mean_abs_delta_action']:.3f} | {outcomes} |"
         )
+    if results.get("paired"):
+        lines += ["", "Paired on the same episodes (captured by both / by the first only / by the second only; "
+                  "exact McNemar test, two-sided):", "",
+                  "| policies | both | first only | second only | McNemar p |", "|---|---|---|---|---|"]
+        for c in results["paired"]:
+            lines.append(f"| {_label(c['a'])} vs {_label(c['b'])} | {c['both']} | {c['only_a']} | {c['only_b']} "
+                         f"| {c['mcnemar_p']:.3g} |")
     notes = [f"- {_label(spec)}: {doc['note']}" for spec, doc in results["policies"].items() if doc.get("note")]
     if notes:
         lines += ["", "Notes:", *notes]
