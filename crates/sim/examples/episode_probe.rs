@@ -51,6 +51,24 @@ fn main() {
     if only == "default" {
         return time("mean wake + turbulence", EnvConfig::default(), steps);
     }
+    if only == "legacy" {
+        // The three runs of the probe at a3be75f (before the capture-layer rebuild), each under
+        // the exact air scheme it then had by default: the same work, for instruction counts.
+        for (label, wake, turbulence) in [
+            ("no wake, no turbulence", false, false),
+            ("mean wake", true, false),
+            ("mean wake + turbulence", true, true),
+        ] {
+            let mut c = EnvConfig::default();
+            c.physics.wake.enabled = wake;
+            c.physics.turbulence.wake_turbulence = turbulence;
+            c.physics.wake.sampling = AirSampling::PerStage;
+            c.physics.turbulence.normal_sampler = NormalSampler::BoxMuller;
+            c.physics.turbulence.lane_streams = LaneStreams::Shared;
+            time(label, c, steps);
+        }
+        return;
+    }
     if only == "exact" {
         let mut exact = EnvConfig::default();
         exact.physics.wake.sampling = AirSampling::PerStage;
