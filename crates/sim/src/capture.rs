@@ -607,23 +607,13 @@ impl CaptureSim {
         };
         self.boom.advance(t, dt, capture_x);
         self.disturbance.advance(t, dt)?;
-        // Substeps for the chain's fastest mode (one at the default discretization).
-        let k = self.substeps();
-        if k > accd_tether::config::MAX_SUBSTEPS {
-            return Err(SimError::Diverged {
-                time: t,
-                reason: format!(
-                    "the tether's fastest mode needs {k} RK4 substeps per step (at most {})",
-                    accd_tether::config::MAX_SUBSTEPS
-                ),
-            });
-        }
         // Per-step sampling: the disturbance at the step's start, held over every (sub)step.
         let hold = self.config.wake.sampling == AirSampling::PerStep;
         if hold {
             self.hold_disturbance(t);
         }
         let inertia = self.inertia;
+        let (accd_mass, airspeed) = (self.config.accd.mass, self.config.aircraft.airspeed);
         let mut x = accd_to_states(&self.accd);
         // The state is advanced while the stage borrows the rest: lend it out for the step.
         let mut q = std::mem::take(&mut self.tether.q);
@@ -634,7 +624,24 @@ impl CaptureSim {
                 stage,
                 inertia,
             };
-            Ok(rk4.advance(&mut system, t, dt, k, &mut q, &mut qd, &mut x)?)
+            // Substeps for the chain's fastest mode (one at the default discretization), chosen
+            // after the first stage, whose evaluation gives the state's axial mass.
+            let choose = |system: &Coupled<'_>, q: &[f64], qd: &[f64]| {
+                let model = &*system.model;
+                let k = substeps_at(model.config(), accd_mass, airspeed, q, qd, model.axial_mass());
+                if k > accd_tether::config::MAX_SUBSTEPS {
+                    return Err(accd_tether::TetherError::Diverged {
+                        time: t,
+                        reason: format!(
+                            "the tether's fastest mode needs {k} RK4 substeps per step (at most {})",
+                            accd_tether::config::MAX_SUBSTEPS
+                        ),
+                    });
+                }
+                Ok(k)
+            };
+            rk4.advance_adaptive(&mut system, t, dt, &mut q, &mut qd, &mut x, choose)?;
+            Ok(())
         });
         self.tether.q = q;
         self.tether.qd = qd;
@@ -650,19 +657,27 @@ impl CaptureSim {
     }
 
     /// RK4 substeps of the next step ([`accd_tether::TetherConfig::substeps_for`]) under the load of the
-    /// current state ([`accd_tether::config::StepLoad::of_state`], the ACCD as tip mass), with
-    /// sea-level density (an upper bound) at the aircraft's airspeed. One for the default
-    /// configuration.
-    pub fn substeps(&self) -> usize {
-        let c = &self.config.tether;
-        let load = accd_tether::config::StepLoad::of_state(
-            c,
-            &self.tether,
+    /// current state ([`accd_tether::config::StepLoad::of_state`], the ACCD as tip mass, the
+    /// state's effective axial mass [`TetherModel::axial_mass`]), with sea-level density (an
+    /// upper bound) at the aircraft's airspeed. One for the default configuration. Evaluates the
+    /// tether's accelerations at the current state for the axial mass (which depends on the
+    /// coordinates only; a step reads it from its first stage).
+    pub fn substeps(&mut self) -> Result<usize> {
+        let mut qdd = std::mem::take(&mut self.qdd);
+        let s = &self.tether;
+        let evaluated =
+            self.model
+                .accelerations(s.time, &s.q, &s.qd, &accd_tether::Vacuum, &mut qdd);
+        self.qdd = qdd;
+        evaluated?;
+        Ok(substeps_at(
+            self.model.config(),
             self.config.accd.mass,
-            SEA_LEVEL_DENSITY,
             self.config.aircraft.airspeed,
-        );
-        c.substeps_for(&load)
+            &self.tether.q,
+            &self.tether.qd,
+            self.model.axial_mass(),
+        ))
     }
 
     /// Steps `steps` times with the same commands.
@@ -779,4 +794,27 @@ pub struct CaptureState {
     pub boom: BoomState,
     /// The air disturbance.
     pub air: AirState,
+}
+
+/// RK4 substeps of a step of the tether `c` from `(q, qd)` with the ACCD's `accd_mass` (kg) at
+/// its tip and effective axial mass `axial_mass` (kg), under sea-level density at the aircraft's
+/// `airspeed` (m/s) ([`CaptureSim::substeps`]).
+fn substeps_at(
+    c: &accd_tether::TetherConfig,
+    accd_mass: f64,
+    airspeed: f64,
+    q: &[f64],
+    qd: &[f64],
+    axial_mass: f64,
+) -> usize {
+    let load = accd_tether::config::StepLoad::of_coordinates(
+        c,
+        q,
+        qd,
+        accd_mass,
+        SEA_LEVEL_DENSITY,
+        airspeed,
+        axial_mass,
+    );
+    c.substeps_for(&load)
 }

@@ -97,7 +97,7 @@ fn towed_distributed(n: usize, solver: Solver) -> (Tether, accd_tether::UniformF
     eprintln!(
         "distributed, n = {n}: time_step {:.3e} s, {} substep(s)",
         cfg.time_step,
-        tether.substeps(&flow)
+        tether.substeps(&flow).unwrap()
     );
     (tether, flow)
 }

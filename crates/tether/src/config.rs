@@ -191,8 +191,10 @@ pub struct StepLoad {
     pub airspeed: f64,
     /// The fastest segment's angular rate, rad/s.
     pub max_rate: f64,
-    /// Mass the axial element moves, kg: the whole tether and tip for a straight chain (less
-    /// where a kink lets the chain beyond it swing instead of following).
+    /// Mass the axial element moves, kg: `1 / (M^-1)_00`, exactly (the axial damping is rank
+    /// one, so `c_s / axial_mass` is its mode's rate). The whole tether and tip for a straight
+    /// chain, far less where a kink lets the chain beyond it swing instead of following
+    /// ([`crate::TetherModel::axial_mass`]).
     pub axial_mass: f64,
 }
 
@@ -216,29 +218,44 @@ impl StepLoad {
     }
 
     /// The load of `state`: the tension is the larger of the axial element's (`k s` and
-    /// `k s + c_s s'`) and the hanging weight, the fastest rate the largest angular rate; the
-    /// axial mass that of a straight chain. (The point-mass apparent mass along segment 1,
-    /// `m_1 + cos^2(theta_12) (m_2 + ...)`, was tried and does not foresee the divergence of a
-    /// 50 kg/m tether either, at n trigonometric evaluations a step; see issue 13.)
+    /// `k s + c_s s'`) and the hanging weight, the fastest rate the largest angular rate, and
+    /// `axial_mass` (kg) the effective mass the axial element moves at this state,
+    /// `1 / (M^-1)_00` ([`crate::TetherModel::axial_mass`] after evaluating the accelerations
+    /// there; [`StepLoad::of_coordinates`] for the coordinates alone).
     pub fn of_state(
         config: &TetherConfig,
         state: &TetherState,
         tip_mass: f64,
         density: f64,
         airspeed: f64,
+        axial_mass: f64,
     ) -> StepLoad {
-        let elastic = config.element_stiffness() * state.q[0];
+        StepLoad::of_coordinates(
+            config, &state.q, &state.qd, tip_mass, density, airspeed, axial_mass,
+        )
+    }
+
+    /// [`StepLoad::of_state`] from the coordinates `q` and rates `qd`.
+    pub fn of_coordinates(
+        config: &TetherConfig,
+        q: &[f64],
+        qd: &[f64],
+        tip_mass: f64,
+        density: f64,
+        airspeed: f64,
+        axial_mass: f64,
+    ) -> StepLoad {
+        let elastic = config.element_stiffness() * q[0];
         let tension = elastic
             .abs()
-            .max((elastic + config.element_damping() * state.qd[0]).abs())
+            .max((elastic + config.element_damping() * qd[0]).abs())
             .max((config.total_mass() + tip_mass) * config.gravity);
         // The angle rates only (the distributed model's stretch rates follow them in qd).
-        let angles = state.qd.len().min(2 * config.segments + 1);
-        let max_rate = state.qd[..angles]
+        let angles = qd.len().min(2 * config.segments + 1);
+        let max_rate = qd[..angles]
             .iter()
             .skip(1)
             .fold(0.0, |m: f64, v| m.max(v.abs()));
-        let axial_mass = config.total_mass() + tip_mass;
         StepLoad {
             tension,
             density,
@@ -447,9 +464,9 @@ impl TetherConfig {
     ///
     /// At n = 300 (Table 3 otherwise) and 3.4 kN the zig-zag gives about 480 rad/s: RK4 at
     /// 0.01 s is outside its stability region there, at n = 30 (about 45 rad/s) far inside.
-    /// Known gap: a 50 kg/m tether (axial damping 1.25e6 N s/m) diverges through its axial mode
-    /// about 15 s after the straight start at 0.01 s (it runs at 0.0025 s) although this estimate
-    /// stays low: the mass the axial element moves must drop far below the straight chain's.
+    /// `M_a` is the exact `1 / (M^-1)_00` of the state ([`StepLoad::axial_mass`]): for a towed
+    /// 10 or 50 kg/m tether it falls to a quarter of the straight chain's, and with it the
+    /// damping mode's rate climbs past what one step at 0.01 s can take (issue 13).
     pub fn fastest_rate(&self, load: &StepLoad) -> f64 {
         let l = self.segment_length();
         let mu = self.mass_per_length;

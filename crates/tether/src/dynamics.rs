@@ -123,6 +123,9 @@ pub struct TetherModel {
     /// Stiffness and damping of one distributed element, n k and n c_s.
     element_k: f64,
     element_c: f64,
+    /// The effective axial mass at the last state the accelerations were evaluated at, kg
+    /// ([`TetherModel::axial_mass`]).
+    axial_mass: f64,
     ws: Workspace,
 }
 
@@ -140,6 +143,8 @@ struct Workspace {
     articulated: Vec<Articulated>,
     /// The same for the distributed elasticity (empty otherwise).
     axial: Vec<distributed::Articulated>,
+    /// `L^-1 e_0` of the dense solve's Cholesky factor (sized on first use).
+    unit: Vec<f64>,
 }
 
 impl TetherModel {
@@ -178,7 +183,9 @@ impl TetherModel {
                 } else {
                     Vec::new()
                 },
+                unit: Vec::new(),
             },
+            axial_mass: config.total_mass() + config.tip_mass,
             solver: Solver::default(),
             distributed: config.is_distributed(),
             element_k: config.element_stiffness(),
@@ -482,7 +489,23 @@ impl TetherModel {
             reason: format!("mass matrix lost positive definiteness at column {col}"),
         })?;
         cholesky_solve(&self.ws.mass, dim, qdd);
+        if !self.distributed {
+            self.axial_mass = dense_axial_mass(&self.ws.mass, dim, &mut self.ws.unit);
+        }
         Ok(report)
+    }
+
+    /// The effective mass the axial element moves, `1 / (M^-1)_00` (kg), at the state the
+    /// accelerations were last evaluated at (by either solver); before the first evaluation, and
+    /// always for the distributed elasticity, the straight chain's `m_tot + M_t`.
+    ///
+    /// The axial damping `c_s` acts on the elongation alone, so `c_s (M^-1)_00` is exactly the rate
+    /// of its damping mode ([`crate::config::StepLoad::axial_mass`]). A straight chain moves all of
+    /// its mass; a bent one much less (the chain beyond a kink swings instead of following): a
+    /// towed 10 kg/m tether falls to about a quarter. The recursion reads it from its root
+    /// system at a few operations; the dense solve from its Cholesky factor, O(n^2).
+    pub fn axial_mass(&self) -> f64 {
+        self.axial_mass
     }
 
     fn solve_recursive<S: Surroundings + ?Sized>(
@@ -555,7 +578,7 @@ impl TetherModel {
         };
         let report = self.prepare::<M, S>(time, q, qd, surroundings)?;
         let ws = &mut self.ws;
-        recursive::solve::<M>(
+        self.axial_mass = recursive::solve::<M>(
             time,
             &constants,
             &ws.chain,
@@ -845,6 +868,25 @@ fn cholesky_in_place(a: &mut [f64], dim: usize) -> std::result::Result<(), usize
         }
     }
     Ok(())
+}
+
+/// `1 / (M^-1)_00` from the Cholesky factor L of M ([`cholesky_in_place`]): `(M^-1)_00 =
+/// |L^-1 e_0|^2`, by forward substitution into `unit` (resized to `dim` on first use).
+fn dense_axial_mass(l: &[f64], dim: usize, unit: &mut Vec<f64>) -> f64 {
+    if unit.len() != dim {
+        unit.resize(dim, 0.0);
+    }
+    let mut sum = 0.0;
+    for i in 0..dim {
+        let row = i * dim;
+        let mut v = if i == 0 { 1.0 } else { 0.0 };
+        for k in 0..i {
+            v -= l[row + k] * unit[k];
+        }
+        unit[i] = v / l[row + i];
+        sum += unit[i] * unit[i];
+    }
+    1.0 / sum
 }
 
 /// Solves L L^T x = b in place, with L from [`cholesky_in_place`].

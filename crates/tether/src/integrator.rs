@@ -203,6 +203,51 @@ impl Rk4 {
         qd: &mut Vec<f64>,
         x: &mut [f64],
     ) -> Result<()> {
+        self.advance_choosing(system, time, dt, q, qd, x, false, |_, _, _| Ok(substeps))
+            .map(|_| ())
+    }
+
+    /// [`Rk4::advance`] with the number of substeps chosen from the state: the first stage's
+    /// derivatives at `(time, q, qd, x)` do not depend on the step length, so they are evaluated
+    /// first, then `substeps(system, q, qd)` (which may read what that evaluation left in the
+    /// system, e.g. [`TetherModel::axial_mass`]) gives the substeps or an error, and the step
+    /// goes on from that stage. The result is bitwise that of [`Rk4::advance`] with the same
+    /// number. Returns the substeps taken. Allocates nothing.
+    #[allow(clippy::too_many_arguments)]
+    pub fn advance_adaptive<Y, F>(
+        &mut self,
+        system: &mut Y,
+        time: f64,
+        dt: f64,
+        q: &mut Vec<f64>,
+        qd: &mut Vec<f64>,
+        x: &mut [f64],
+        substeps: F,
+    ) -> Result<usize>
+    where
+        Y: System + ?Sized,
+        F: FnOnce(&Y, &[f64], &[f64]) -> Result<usize>,
+    {
+        self.advance_choosing(system, time, dt, q, qd, x, true, substeps)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn advance_choosing<Y, F>(
+        &mut self,
+        system: &mut Y,
+        time: f64,
+        dt: f64,
+        q: &mut Vec<f64>,
+        qd: &mut Vec<f64>,
+        x: &mut [f64],
+        evaluate_first: bool,
+        substeps: F,
+    ) -> Result<usize>
+    where
+        Y: System + ?Sized,
+        F: FnOnce(&Y, &[f64], &[f64]) -> Result<usize>,
+    {
         let (dim, first) = (system.dofs(), system.first_order_states());
         let sizes = [
             ("q", q.len(), dim),
@@ -218,7 +263,11 @@ impl Rk4 {
                 found,
             });
         }
-        let substeps = substeps.max(1);
+        let evaluated = evaluate_first;
+        if evaluated {
+            system.derivatives(time, q, qd, x, &mut self.a_k[0], &mut self.xd_k[0])?;
+        }
+        let substeps = substeps(system, q, qd)?.max(1);
         let h = dt / substeps as f64;
         let [first_slot, second_slot] = &mut self.slots;
         let mut stages = Stages {
@@ -228,18 +277,18 @@ impl Rk4 {
             x_stage: &mut self.x_stage,
             xd_k: &mut self.xd_k,
         };
-        stages.step(system, time, h, q, qd, x, first_slot)?;
+        stages.step(system, time, h, q, qd, x, first_slot, evaluated)?;
         let (mut done, mut spare) = (first_slot, second_slot);
         for j in 1..substeps {
             let t = time + j as f64 * h;
-            stages.step(system, t, h, &done.q, &done.qd, &done.x, spare)?;
+            stages.step(system, t, h, &done.q, &done.qd, &done.x, spare, false)?;
             std::mem::swap(&mut done, &mut spare);
         }
         // The new state is in `done`; the old vectors become its buffers.
         std::mem::swap(q, &mut done.q);
         std::mem::swap(qd, &mut done.qd);
         x.copy_from_slice(&done.x);
-        Ok(())
+        Ok(substeps)
     }
 }
 
@@ -253,7 +302,8 @@ struct Stages<'a> {
 }
 
 impl Stages<'_> {
-    /// One RK4 step of length `dt` from `(q0, qd0, x0)` at `t` into `out`.
+    /// One RK4 step of length `dt` from `(q0, qd0, x0)` at `t` into `out`; with `evaluated` the
+    /// first stage's derivatives at `(t, q0, qd0, x0)` are already in `a_k[0]`, `xd_k[0]`.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn step<Y: System + ?Sized>(
@@ -265,12 +315,15 @@ impl Stages<'_> {
         qd0: &[f64],
         x0: &[f64],
         out: &mut Slot,
+        evaluated: bool,
     ) -> Result<()> {
         let h = 0.5 * dt;
         let (q, qd_k, a_k) = (&mut *self.q_stage, &mut *self.qd_k, &mut *self.a_k);
         let (x, xd_k) = (&mut *self.x_stage, &mut *self.xd_k);
 
-        system.derivatives(t, q0, qd0, x0, &mut a_k[0], &mut xd_k[0])?;
+        if !evaluated {
+            system.derivatives(t, q0, qd0, x0, &mut a_k[0], &mut xd_k[0])?;
+        }
         stage_state(q, &mut qd_k[0], q0, qd0, qd0, &a_k[0], h);
         stage_first_order(x, x0, &xd_k[0], h);
         system.derivatives(t + h, q, &qd_k[0], x, &mut a_k[1], &mut xd_k[1])?;

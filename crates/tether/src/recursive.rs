@@ -171,6 +171,7 @@ fn singular(time: f64, segment: usize) -> TetherError {
 /// Solves the equations of motion in O(n) from the kinematics and loads in `chain`: the backward
 /// sweep (tip to root), the root's 3x3 system and the forward sweep. Writes `q''` into `qdd` and,
 /// if given, the tensions (n + 1 values, as [`crate::TetherModel::tensions`]) into `tensions`.
+/// Returns the effective axial mass `1 / (M^-1)_00`, kg (see [`root_axial_mass`]).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 pub(crate) fn solve<M: Madd>(
@@ -182,7 +183,7 @@ pub(crate) fn solve<M: Madd>(
     work: &mut [Articulated],
     qdd: &mut [f64],
     tensions: Option<&mut [f64]>,
-) -> Result<()> {
+) -> Result<f64> {
     let n = chain.segments();
     let (l, m) = (c.l, c.m);
     let inv_l = 1.0 / l;
@@ -290,6 +291,7 @@ pub(crate) fn solve<M: Madd>(
     if !(d1 > 0.0 && d2 > 0.0 && d3 > 0.0) {
         return Err(singular(time, 1));
     }
+    let axial_mass = root_axial_mass(m11, m12, m13, m22, m23, m33);
     let y2 = M::madd(-l21, r0, r1);
     let y3 = M::madd(-l32, y2, M::madd(-l31, r0, r2));
     let z2 = y3 / d3;
@@ -332,5 +334,27 @@ pub(crate) fn solve<M: Madd>(
     if let Some(t) = tensions {
         t[n] = (chain.tip_force - acc * c.tip_mass).dot(&chain.e.get(n - 1));
     }
-    Ok(())
+    Ok(axial_mass)
+}
+
+/// The effective mass the axial element moves, `1 / (M^-1)_00`, kg, from the root's 3x3 system
+/// (rows `m11 .. m33` in the order s, phi_1, psi_1).
+///
+/// The backward sweep eliminates every outboard angle exactly, so the root matrix is the Schur
+/// complement of the outboard block of `M`, and by the block-inverse formula its inverse is the
+/// root block of `M^-1`: `(M^-1)_00 = (M_root^-1)_00`. Its reciprocal is in turn the Schur
+/// complement of segment 1's angle block in `M_root`:
+///
+/// ```text
+/// 1 / (M^-1)_00 = m11 - [m12 m13] [[m22 m23] [m23 m33]]^-1 [m12 m13]^T.
+/// ```
+///
+/// The axial damping `c_s` acts on s alone (a rank-one damping matrix `c_s e_0 e_0^T`), so
+/// `c_s (M^-1)_00` is exactly the rate of its damping mode. At least the segment mass (segment
+/// 1's centre moves at s' along e whatever the angle rates), which the caller's guard keeps.
+#[inline(always)]
+fn root_axial_mass(m11: f64, m12: f64, m13: f64, m22: f64, m23: f64, m33: f64) -> f64 {
+    let det = m22 * m33 - m23 * m23;
+    let quad = m33 * m12 * m12 - 2.0 * m23 * m12 * m13 + m22 * m13 * m13;
+    m11 - quad / det
 }

@@ -91,39 +91,65 @@ impl Tether {
     }
 
     /// RK4 substeps the next step takes, from the state and the air at the attachment
-    /// ([`StepLoad::of_state`], [`TetherConfig::substeps_for`]).
-    pub fn substeps<S: Surroundings + ?Sized>(&self, surroundings: &S) -> usize {
-        let c = self.config();
+    /// ([`StepLoad::of_state`] with the state's effective axial mass, [`TetherModel::axial_mass`],
+    /// [`TetherConfig::substeps_for`]). Evaluates the accelerations at the current state for it
+    /// (a step does that as its first stage anyway).
+    pub fn substeps<S: Surroundings + ?Sized>(&mut self, surroundings: &S) -> Result<usize> {
         let s = &self.state;
-        let origin = Vector3::zeros();
-        let airspeed = surroundings.air_velocity(s.time, &origin).norm();
-        let density = surroundings.air_density(s.time, &origin);
-        c.substeps_for(&StepLoad::of_state(c, s, c.tip_mass, density, airspeed))
+        self.model
+            .accelerations(s.time, &s.q, &s.qd, surroundings, &mut self.qdd)?;
+        let (density, airspeed) = attachment_air(surroundings, s.time);
+        let c = self.model.config();
+        Ok(c.substeps_for(&StepLoad::of_state(
+            c,
+            s,
+            c.tip_mass,
+            density,
+            airspeed,
+            self.model.axial_mass(),
+        )))
     }
 
-    /// One step of the configured length (see [`Tether::substeps`]). On error the state is
+    /// One step of the configured length (see [`Tether::substeps`]; the substeps are chosen
+    /// after the first stage, whose evaluation gives the axial mass). On error the state is
     /// unchanged. A step that would need more than [`crate::config::MAX_SUBSTEPS`] substeps is
     /// a divergence.
     pub fn step<S: Surroundings + ?Sized>(&mut self, surroundings: &S) -> Result<()> {
         let dt = self.model.config().time_step;
-        let k = self.substeps(surroundings);
-        if k > crate::config::MAX_SUBSTEPS {
-            return Err(TetherError::Diverged {
-                time: self.state.time,
-                reason: format!(
-                    "the chain's fastest mode needs {k} RK4 substeps per step (at most {}): the \
-                     tension or the rates are beyond what this discretization can follow",
-                    crate::config::MAX_SUBSTEPS
-                ),
-            });
-        }
+        let time = self.state.time;
+        let (density, airspeed) = attachment_air(surroundings, time);
         let mut system = InSurroundings {
             model: &mut self.model,
             surroundings,
         };
         let s = &mut self.state;
+        let choose = |system: &InSurroundings<'_, S>, q: &[f64], qd: &[f64]| {
+            let model = &*system.model;
+            let c = model.config();
+            let load = StepLoad::of_coordinates(
+                c,
+                q,
+                qd,
+                c.tip_mass,
+                density,
+                airspeed,
+                model.axial_mass(),
+            );
+            let k = c.substeps_for(&load);
+            if k > crate::config::MAX_SUBSTEPS {
+                return Err(TetherError::Diverged {
+                    time,
+                    reason: format!(
+                        "the chain's fastest mode needs {k} RK4 substeps per step (at most {}): \
+                         the tension or the rates are beyond what this discretization can follow",
+                        crate::config::MAX_SUBSTEPS
+                    ),
+                });
+            }
+            Ok(k)
+        };
         self.rk4
-            .advance(&mut system, s.time, dt, k, &mut s.q, &mut s.qd, &mut [])?;
+            .advance_adaptive(&mut system, time, dt, &mut s.q, &mut s.qd, &mut [], choose)?;
         self.steps += 1;
         s.time = self.time_origin + self.steps as f64 * dt;
         Ok(())
@@ -204,4 +230,13 @@ impl Tether {
         let c = self.config();
         c.element_stiffness() * self.state.q[0] + c.element_damping() * self.state.qd[0]
     }
+}
+
+/// Air density (kg/m^3) and airspeed (m/s) at the attachment at `time`.
+fn attachment_air<S: Surroundings + ?Sized>(surroundings: &S, time: f64) -> (f64, f64) {
+    let origin = Vector3::zeros();
+    (
+        surroundings.air_density(time, &origin),
+        surroundings.air_velocity(time, &origin).norm(),
+    )
 }
