@@ -15,6 +15,7 @@ docstrings' Arguments and in ``docs/environment.md``.
 from __future__ import annotations
 
 import json
+import re
 from typing import Any, Mapping, Optional
 
 import numpy as np
@@ -107,8 +108,6 @@ def _default_text(defaults: Mapping[str, Any], key: str, declared: str) -> str:
     value: Any = defaults
     for part in key.split("."):
         if not isinstance(value, Mapping) or part not in value:
-            import re
-
             variant = re.fullmatch(r"[A-Z]\w*::([A-Z]\w*)", declared)
             if variant:
                 return repr(re.sub(r"(?<!^)(?=[A-Z])", "_", variant.group(1)).lower())

@@ -312,6 +312,9 @@ def iter_recordings(
 
     # Episode k is the first episode of seed base + k with wake_seeds[k], whatever else runs beside
     # it (evaluation.run_episode_range): only the kept episodes run; idle rows repeat their last.
+    if not wanted:
+        env.close()
+        return  # keep=[]: nothing to record (as before: no episode is run)
     pending = iter(sorted(wanted))
     first = min(wanted)
     ep_of = np.full(batch, -1)
