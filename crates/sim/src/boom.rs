@@ -14,8 +14,17 @@
 //! `approach_speed * dt`. With `approach_speed = 0` the tip holds `offset[0]` instead (a fixed
 //! formation, which the tether can reach only for some offsets).
 //!
+//! **Placement.** The formation is set relative to the capture point's open-loop equilibrium of the
+//! episode's own configuration ([`BoomPlacement::Equilibrium`], the default), so that every tether,
+//! material, wake and aircraft setting gives the same, well-posed task: the boom tip's nominal
+//! position is `equilibrium + boom.offset_from_equilibrium`. Left unset, that offset is the one the
+//! default configuration's boom has from its own equilibrium, `boom.offset - equilibrium_default`
+//! (about 3 m to starboard and 3.8 m above; [`BoomConfig::nominal`]), so the default task is the
+//! one it always was, to the bit. [`BoomPlacement::Absolute`] puts it at `boom.offset` in the TA
+//! frame whatever the configuration (the first versions' fixed formation).
+//!
 //! Defaults, all assumptions: offset (-, 3, 62) m laterally and vertically, i.e. 3 m to starboard of
-//! and 4 m above the ACCD's open-loop equilibrium in the 8 deg wake (65.8 m); initial spread
+//! and about 4 m above the ACCD's open-loop equilibrium in the 8 deg wake (65.8 m); initial spread
 //! +-(2, 3, 3) m; drift amplitude (1, 2, 2) m over 50 s; perturbations 0.2 m RMS with a 1.5 s time
 //! constant; approach from 10 m behind at 0.5 m/s (20 s to close). Capture: the ACCD's capture
 //! point within 0.5 m of the boom tip at a relative speed under 2 m/s (a lock-in mechanism
@@ -37,7 +46,11 @@ accd_spec::config_struct! {
     #[serde(deny_unknown_fields, default)]
     pub struct BoomConfig {
         pub offset: [f64; 3] = [-241.0, 3.0, 62.0], "m", "[-5000, 5000]",
-            "nominal boom-tip position in the TA frame (x only used with approach_speed = 0)";
+            "nominal boom-tip position in the TA frame with placement \"absolute\"; with \"equilibrium\", its position in the default configuration (x only used with approach_speed = 0)";
+        pub placement: BoomPlacement = BoomPlacement::Equilibrium, "", "",
+            "where the formation is set: \"equilibrium\" (relative to the capture point's open-loop equilibrium of the episode's configuration) or \"absolute\" (at offset)";
+        pub offset_from_equilibrium: Option<[f64; 3]> = None, "m", "[-5000, 5000]",
+            "boom-tip position relative to the capture point's open-loop equilibrium, placement \"equilibrium\" (None: offset minus the default configuration's equilibrium)";
         pub initial_spread: [f64; 3] = [2.0, 3.0, 3.0], "m", "[0, 100]",
             "half-width of the uniform random initial offset per axis";
         pub drift_amplitude: [f64; 3] = [1.0, 2.0, 2.0], "m", "[0, 100]",
@@ -56,6 +69,19 @@ accd_spec::config_struct! {
     }
 }
 
+/// Where the RLV's formation is set (module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BoomPlacement {
+    /// Relative to the capture point's open-loop equilibrium of the episode's configuration.
+    #[default]
+    Equilibrium,
+    /// At `boom.offset` in the TA frame.
+    Absolute,
+}
+
+accd_spec::no_range!(BoomPlacement);
+
 /// Each field's range is all there is to check.
 impl accd_spec::Rules for BoomConfig {}
 
@@ -63,6 +89,22 @@ impl BoomConfig {
     /// Checks every field against its declared range.
     pub fn validate(&self) -> Result<()> {
         Ok(self.check_fields("boom")?)
+    }
+
+    /// The boom tip's nominal position (TA frame, m) for a configuration whose capture point
+    /// settles at `equilibrium`: `offset` with [`BoomPlacement::Absolute`]; otherwise
+    /// `equilibrium + offset_from_equilibrium`, the latter, when unset, `offset - reference()`
+    /// with `reference()` the default configuration's equilibrium (asked only then). For the
+    /// default configuration `equilibrium == reference()`, and `e + (offset - e)` is `offset`
+    /// exactly: the difference of two doubles within a factor of two of each other is exact
+    /// (Sterbenz), and so is then the sum, whose true value is the double `offset`.
+    pub fn nominal(&self, equilibrium: &V3, reference: impl FnOnce() -> Result<V3>) -> Result<V3> {
+        let offset = V3::from(self.offset);
+        Ok(match (self.placement, self.offset_from_equilibrium) {
+            (BoomPlacement::Absolute, _) => offset,
+            (BoomPlacement::Equilibrium, Some(relative)) => equilibrium + V3::from(relative),
+            (BoomPlacement::Equilibrium, None) => equilibrium + (offset - reference()?),
+        })
     }
 }
 
@@ -82,12 +124,12 @@ pub struct Boom {
 
 impl Boom {
     /// The boom of an episode whose RLV stream is drawn from `seed`, at t = 0, with the capture
-    /// point at along-track position `capture_x` (m).
-    pub fn new(config: &BoomConfig, seed: u64, capture_x: f64) -> Self {
+    /// point at along-track position `capture_x` (m) and the formation's nominal tip position
+    /// `nominal` (TA frame, m; [`BoomConfig::nominal`]).
+    pub fn new(config: &BoomConfig, seed: u64, capture_x: f64, nominal: &V3) -> Self {
         let mut stream = Stream::new(seed, RLV_STREAM);
-        let base = V3::from_fn(|i, _| {
-            config.offset[i] + stream.range(-1.0, 1.0) * config.initial_spread[i]
-        });
+        let base =
+            V3::from_fn(|i, _| nominal[i] + stream.range(-1.0, 1.0) * config.initial_spread[i]);
         let phase = V3::from_fn(|_, _| stream.range(0.0, 2.0 * std::f64::consts::PI));
         let perturbation = V3::from_fn(|_, _| config.perturbation_sigma * stream.gaussian());
         let mut boom = Boom {
@@ -251,7 +293,7 @@ mod tests {
             ..BoomConfig::default()
         };
         let run = |seed| {
-            let mut b = Boom::new(&cfg, seed, -240.0);
+            let mut b = Boom::new(&cfg, seed, -240.0, &cfg.offset.into());
             let mut out = vec![];
             for k in 0..7000 {
                 b.advance(k as f64 * 0.01, 0.01, None);
@@ -277,7 +319,7 @@ mod tests {
             perturbation_sigma: 0.0,
             ..BoomConfig::default()
         };
-        let mut b = Boom::new(&cfg, 1, -242.0);
+        let mut b = Boom::new(&cfg, 1, -242.0, &cfg.offset.into());
         assert!((b.tip(0.0).x - (-252.0)).abs() < 1e-12);
         let dt = 0.01;
         for k in 0..2100 {

@@ -248,6 +248,8 @@ pub struct CaptureSim {
     accd: AccdState,
     actuators: Actuators,
     boom: Boom,
+    /// The boom tip's nominal position, TA frame, m ([`crate::BoomConfig::nominal`]).
+    boom_nominal: V3,
     disturbance: Box<dyn AirDisturbance>,
     rk4: Rk4,
     /// Accelerations computed along with the tensions.
@@ -276,6 +278,7 @@ impl Clone for CaptureSim {
             accd: self.accd,
             actuators: self.actuators,
             boom: self.boom.clone(),
+            boom_nominal: self.boom_nominal,
             disturbance: self.disturbance.clone_box(),
             rk4: self.rk4.clone(),
             qdd: self.qdd.clone(),
@@ -326,7 +329,13 @@ impl CaptureSim {
         let mut sim = CaptureSim {
             inertia: config.accd.principal_inertia(),
             capture_offset,
-            boom: Boom::new(&config.boom, seeds.rlv, capture.x),
+            boom: Boom::new(
+                &config.boom,
+                seeds.rlv,
+                capture.x,
+                &config.boom.offset.into(),
+            ),
+            boom_nominal: config.boom.offset.into(),
             config: CaptureConfig::clone(config),
             model,
             aero,
@@ -451,13 +460,33 @@ impl CaptureSim {
         self.actuators = Actuators::default();
         self.refresh()?;
         let x = self.capture_point_state().0.x;
-        self.boom = Boom::new(&self.config.boom, seeds.rlv, x);
+        self.boom = Boom::new(&self.config.boom, seeds.rlv, x, &self.boom_nominal);
         self.disturbance.reset(seeds.wake);
         if self.config.wake.sampling == AirSampling::PerStage {
             // The stages sample where the tether moves: generate the field everywhere.
             self.disturbance.prepare_all();
         }
         Ok(())
+    }
+
+    /// Sets where the boom's formation sits (TA frame, m; [`crate::BoomConfig::nominal`]) from
+    /// the next [`CaptureSim::reset`] on. A new sim places it at `boom.offset` (an episode sets
+    /// it from its equilibrium, [`crate::Equilibrium::boom_nominal`]).
+    pub fn set_boom_nominal(&mut self, nominal: V3) -> Result<()> {
+        if !nominal.iter().all(|v| v.is_finite()) {
+            return Err(SimError::invalid_config(
+                "boom_nominal",
+                format!("{nominal:?}"),
+                "finite values",
+            ));
+        }
+        self.boom_nominal = nominal;
+        Ok(())
+    }
+
+    /// The boom's nominal tip position (TA frame, m) episodes start from.
+    pub fn boom_nominal(&self) -> V3 {
+        self.boom_nominal
     }
 
     /// The episode's dynamic state (tether, ACCD, flaps, boom, air disturbance, clock); the

@@ -3,7 +3,7 @@
 //! Nothing here allocates per step; divergence is an outcome, not a panic or a NaN.
 
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use accd_tether::TetherState;
 use nalgebra::{UnitQuaternion, Vector3};
@@ -17,6 +17,7 @@ use crate::state_format::check_len;
 use crate::task::{observe, tilt, EnvConfig, ObservationInputs, ACT_DIM, OBS_DIM};
 use crate::turbulence::AmbientTurbulence;
 use crate::valid::Valid;
+use crate::wake::AirSampling;
 
 type V3 = Vector3<f64>;
 
@@ -33,13 +34,80 @@ pub struct Equilibrium {
     pub accd: AccdState,
     /// The ACCD's position, m (TA frame).
     pub position: V3,
+    /// The capture point's position, m (TA frame).
+    pub capture_point: V3,
+    /// Where the boom tip's formation sits, m (TA frame; [`crate::BoomConfig::nominal`]).
+    pub boom_nominal: V3,
     /// Why episodes starting around this equilibrium would end at their first step (it breaks
     /// an episode limit), if they would.
     pub outside_limits: Option<String>,
 }
 
+/// The settled state alone (no boom placed): what [`Equilibrium::settle`] and the reference
+/// equilibrium of [`reference_capture_point`] share.
+struct Settled {
+    tether: TetherState,
+    accd: AccdState,
+    snapshot: Snapshot,
+}
+
+fn settle_open_loop(
+    config: &Valid<EnvConfig>,
+    interrupted: &mut dyn FnMut() -> bool,
+) -> Result<Settled> {
+    let mut capture = config.capture().into_inner();
+    capture.turbulence.wake_turbulence = false;
+    capture.turbulence.ambient = AmbientTurbulence::None;
+    // Switching the turbulence off keeps every rule (no rule asks for turbulence).
+    let capture = Valid::trusted(capture);
+    let mut sim = CaptureSim::new(&capture, Seeds::default())?;
+    let steps = (config.initial.settle_time / sim.time_step()).round() as usize;
+    for _ in 0..steps {
+        sim.step([0.0; 4])?;
+        if interrupted() {
+            return Err(SimError::Interrupted {
+                time: sim.time(),
+                what: "settling the open-loop equilibrium".into(),
+            });
+        }
+    }
+    let snapshot = sim.snapshot()?;
+    let mut tether = sim.tether_state().clone();
+    tether.time = 0.0;
+    Ok(Settled {
+        tether,
+        accd: *sim.accd_state(),
+        snapshot,
+    })
+}
+
+/// The capture point's open-loop equilibrium in the default configuration, computed with the
+/// air-sampling scheme `sampling` (the schemes' equilibria differ in the last digits): the
+/// reference [`crate::BoomConfig::nominal`] measures `boom.offset` from. Settled once per
+/// process and scheme (about 4000 physics steps), then cached.
+pub fn reference_capture_point(
+    sampling: AirSampling,
+    interrupted: &mut dyn FnMut() -> bool,
+) -> Result<V3> {
+    static CACHE: Mutex<[Option<V3>; 2]> = Mutex::new([None, None]);
+    let slot = match sampling {
+        AirSampling::PerStep => 0,
+        AirSampling::PerStage => 1,
+    };
+    if let Some(p) = CACHE.lock().unwrap_or_else(|e| e.into_inner())[slot] {
+        return Ok(p);
+    }
+    let mut config = EnvConfig::default();
+    config.physics.wake.sampling = sampling;
+    let settled = settle_open_loop(&config.validated()?, interrupted)?;
+    let p = settled.snapshot.capture_point;
+    CACHE.lock().unwrap_or_else(|e| e.into_inner())[slot] = Some(p);
+    Ok(p)
+}
+
 impl Equilibrium {
-    /// Settles the config's system open loop (turbulence off).
+    /// Settles the config's system open loop (turbulence off) and places the boom's formation
+    /// ([`crate::BoomConfig::nominal`]).
     pub fn settle(config: &Valid<EnvConfig>) -> Result<Equilibrium> {
         Equilibrium::settle_interruptible(config, &mut || false)
     }
@@ -50,31 +118,18 @@ impl Equilibrium {
         config: &Valid<EnvConfig>,
         interrupted: &mut dyn FnMut() -> bool,
     ) -> Result<Equilibrium> {
-        let mut capture = config.capture().into_inner();
-        capture.turbulence.wake_turbulence = false;
-        capture.turbulence.ambient = AmbientTurbulence::None;
-        // Switching the turbulence off keeps every rule (no rule asks for turbulence).
-        let capture = Valid::trusted(capture);
-        let mut sim = CaptureSim::new(&capture, Seeds::default())?;
-        let steps = (config.initial.settle_time / sim.time_step()).round() as usize;
-        for _ in 0..steps {
-            sim.step([0.0; 4])?;
-            if interrupted() {
-                return Err(SimError::Interrupted {
-                    time: sim.time(),
-                    what: "settling the open-loop equilibrium".into(),
-                });
-            }
-        }
-        let snapshot = sim.snapshot()?;
-        let outside_limits = outside_limits(config, &snapshot);
-        let position = snapshot.position;
-        let mut tether = sim.tether_state().clone();
-        tether.time = 0.0;
+        let settled = settle_open_loop(config, interrupted)?;
+        let capture_point = settled.snapshot.capture_point;
+        let boom_nominal = config.physics.boom.nominal(&capture_point, || {
+            reference_capture_point(config.physics.wake.sampling, interrupted)
+        })?;
+        let outside_limits = outside_limits(config, &settled.snapshot, &boom_nominal);
         Ok(Equilibrium {
-            tether,
-            accd: *sim.accd_state(),
-            position,
+            tether: settled.tether,
+            accd: settled.accd,
+            position: settled.snapshot.position,
+            capture_point,
+            boom_nominal,
             outside_limits,
         })
     }
@@ -82,26 +137,26 @@ impl Equilibrium {
 
 /// Why episodes of `config` starting around its open-loop equilibrium `s` would mostly end at
 /// once, if they would: the capture point farther than `limits.max_distance` from the boom tip's
-/// nominal place (the formation offset; along track the approach closes on the capture point),
-/// the ACCD tilted beyond `limits.max_tilt_deg`, or the attachment tension beyond the overload
-/// tension. The message names the limit and the equilibrium's value. (A warning, not an error:
-/// an unsettled start, a short `initial.settle_time`, is a legitimate choice in tests.)
-fn outside_limits(config: &EnvConfig, s: &Snapshot) -> Option<String> {
+/// nominal place `nominal` (along track the approach closes on the capture point), the ACCD
+/// tilted beyond `limits.max_tilt_deg`, or the attachment tension beyond the overload tension.
+/// The message names the limit and the equilibrium's value. (A warning, not an error: an
+/// unsettled start, a short `initial.settle_time`, is a legitimate choice in tests.)
+fn outside_limits(config: &EnvConfig, s: &Snapshot, nominal: &V3) -> Option<String> {
     let boom = &config.physics.boom;
     let limits = &config.limits;
     let along = if boom.approach_speed > 0.0 {
         s.capture_point.x
     } else {
-        boom.offset[0]
+        nominal.x
     };
-    let nominal = Vector3::new(along, boom.offset[1], boom.offset[2]);
+    let nominal = Vector3::new(along, nominal.y, nominal.z);
     let distance = (s.capture_point - nominal).norm();
     let tilt_deg = tilt(&s.attitude).to_degrees();
     let overload = limits.overload_fraction * config.physics.tether.breaking_tension;
     let what = if distance > limits.max_distance {
         format!(
             "puts the capture point {distance:.2} m from the boom tip's nominal position \
-             (boom.offset), beyond limits.max_distance = {} m",
+             (boom.offset, boom.placement), beyond limits.max_distance = {} m",
             limits.max_distance
         )
     } else if tilt_deg > limits.max_tilt_deg {
@@ -182,7 +237,8 @@ impl Episode {
         equilibrium: Arc<Equilibrium>,
         seeds: Seeds,
     ) -> Result<Episode> {
-        let sim = CaptureSim::new(&config.capture(), seeds)?;
+        let mut sim = CaptureSim::new(&config.capture(), seeds)?;
+        sim.set_boom_nominal(equilibrium.boom_nominal)?;
         let mut episode = Episode {
             start: equilibrium.tether.clone(),
             substeps: config.substeps(),

@@ -45,7 +45,7 @@ pub use accd::{AccdConfig, AccdState};
 pub use aero::AeroModel;
 pub use air::{AirDisturbance, AirState};
 pub use aircraft::AircraftConfig;
-pub use boom::{BoomConfig, CaptureStatus};
+pub use boom::{BoomConfig, BoomPlacement, CaptureStatus};
 pub use capture::{CaptureSim, CaptureState, Snapshot};
 pub use config::CaptureConfig;
 pub use episode::{Episode, Equilibrium, Outcome};

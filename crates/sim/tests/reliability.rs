@@ -69,10 +69,14 @@ fn no_gust_channels_keep_no_history() {
 #[test]
 fn an_equilibrium_outside_the_episode_limits_is_reported_naming_the_limit() {
     use accd_sim::Equilibrium;
-    // issue 13: a tangential drag coefficient of 1 hangs the ACCD about 62 m from the boom tip
-    // (the default allows 60 m): every episode ended at its first step, silently.
+    // issue 13: a tangential drag coefficient of 1 hung the ACCD about 62 m from a boom placed
+    // at a fixed position (the default allows 60 m): every episode ended at its first step,
+    // silently. Placed relative to the equilibrium (the default since issue 16) the boom follows.
     let mut c = EnvConfig::default();
     c.physics.tether.tangential_drag_coefficient = 1.0;
+    let eq = Equilibrium::settle(&c.clone().validated().unwrap()).unwrap();
+    assert_eq!(eq.outside_limits, None);
+    c.physics.boom.placement = accd_sim::BoomPlacement::Absolute;
     let eq = Equilibrium::settle(&c.clone().validated().unwrap()).unwrap();
     let why = eq.outside_limits.expect("reported");
     assert!(
@@ -82,6 +86,13 @@ fn an_equilibrium_outside_the_episode_limits_is_reported_naming_the_limit() {
     c.limits.max_distance = 80.0;
     let eq = Equilibrium::settle(&c.validated().unwrap()).unwrap();
     assert_eq!(eq.outside_limits, None);
+    let mut c = EnvConfig::default();
+    c.physics.boom.offset_from_equilibrium = Some([0.0, 0.0, 70.0]);
+    let why = Equilibrium::settle(&c.validated().unwrap())
+        .unwrap()
+        .outside_limits
+        .expect("reported");
+    assert!(why.contains("limits.max_distance = 60"), "{why}");
     let mut c = EnvConfig::default();
     c.limits.overload_fraction = 1e-3; // 550 N: below the default's 2.9 kN
     let eq = Equilibrium::settle(&c.validated().unwrap()).unwrap();
