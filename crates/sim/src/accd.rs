@@ -50,6 +50,13 @@ accd_spec::config_struct! {
         /// configuration that carries its table, for pickles and saved envs.
         pub aero_table: Option<String> = None, "", "",
             "aerodynamic table: a file path or the table as JSON text (None: the default finned body)";
+        /// The table's uncertainty, for robustness studies and randomized physics: every force
+        /// coefficient (base and flap increments) is multiplied by it.
+        pub force_coefficient_scale: f64 = 1.0, "-", "(0, 10]",
+            "factor on the table's force coefficients C_X, C_Y, C_Z";
+        /// Static moments, flap increments (the control effectiveness) and damping derivatives.
+        pub moment_coefficient_scale: f64 = 1.0, "-", "(0, 10]",
+            "factor on the table's moment coefficients C_l, C_m, C_n and damping derivatives";
     }
 }
 
@@ -111,6 +118,11 @@ impl AccdConfig {
                 AeroModel::from_json(text, "accd.aero_table (inline)")?
             }
             Some(path) => AeroModel::from_path(std::path::Path::new(path))?,
+        };
+        let model = if self.force_coefficient_scale == 1.0 && self.moment_coefficient_scale == 1.0 {
+            model
+        } else {
+            model.scaled(self.force_coefficient_scale, self.moment_coefficient_scale)
         };
         let (lo, hi) = model.deflection_range_deg();
         let reach = (-lo).min(hi);

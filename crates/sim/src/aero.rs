@@ -300,6 +300,22 @@ impl AeroModel {
         AeroModel::from_finned_body(&FinnedBody::accd())
     }
 
+    /// The model with every force coefficient (base and flap increments of C_X, C_Y, C_Z) times
+    /// `force` and every moment coefficient (C_l, C_m, C_n, their flap increments and the
+    /// damping derivatives) times `moment`: loads scale by the same factors
+    /// (`tests` check it against [`crate::accd::aero_loads`]).
+    pub fn scaled(mut self, force: f64, moment: f64) -> Self {
+        for c in self.base.iter_mut().chain(self.flaps.iter_mut()) {
+            for (i, v) in c.iter_mut().enumerate() {
+                *v *= if i < 3 { force } else { moment };
+            }
+        }
+        self.damping.clp *= moment;
+        self.damping.cmq *= moment;
+        self.damping.cnr *= moment;
+        self
+    }
+
     /// Builds a model from the file format, validating every axis and array.
     pub fn from_file_data(data: &AeroTableFile, name: &str) -> Result<Self> {
         for (field, v) in [
@@ -489,6 +505,27 @@ impl AeroModel {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn scaled_models_scale_forces_and_moments_by_their_factors() {
+        let model = AeroModel::accd();
+        let (f, m) = (1.15, 0.8);
+        let scaled = model.clone().scaled(f, m);
+        let d = [0.1, -0.05, 0.2, -0.2];
+        for (a, b) in [(0.0, 0.0), (0.12, -0.07), (-0.3, 0.2)] {
+            let (c, s) = (model.coefficients(a, b, &d), scaled.coefficients(a, b, &d));
+            for i in 0..6 {
+                let k = if i < 3 { f } else { m };
+                assert!((s[i] - k * c[i]).abs() <= 1e-14 * (1.0 + c[i].abs()), "{i}");
+            }
+        }
+        let (dc, ds) = (model.damping(), scaled.damping());
+        assert_eq!(
+            [ds.clp, ds.cmq, ds.cnr],
+            [dc.clp * m, dc.cmq * m, dc.cnr * m]
+        );
+        assert_eq!(model.clone().scaled(1.0, 1.0), model);
+    }
 
     #[test]
     fn table_reproduces_the_analytic_body_at_grid_points_and_between() {

@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 use crate::accd::AccdState;
 use crate::capture::{CaptureSim, CaptureState, Snapshot};
 use crate::error::{Result, SimError};
+use crate::randomization::Parameters;
 use crate::rng::{Seeds, Stream};
 use crate::state_format::check_len;
 use crate::task::{observe, tilt, EnvConfig, ObservationInputs, ACT_DIM, OBS_DIM};
@@ -211,8 +212,13 @@ pub struct Outcome {
 /// One episode: the physics, the task's bookkeeping, the latest observation.
 #[derive(Clone)]
 pub struct Episode {
+    /// The env's configuration (what randomized physics draws around).
+    base: Arc<Valid<EnvConfig>>,
+    /// This episode's configuration: `base`, or with randomization the episode's drawn physics.
     config: Arc<Valid<EnvConfig>>,
     equilibrium: Arc<Equilibrium>,
+    /// The drawn physical parameters, with randomization.
+    parameters: Option<Parameters>,
     sim: CaptureSim,
     /// Scratch for the perturbed initial state.
     start: TetherState,
@@ -240,6 +246,8 @@ impl Episode {
         let mut sim = CaptureSim::new(&config.capture(), seeds)?;
         sim.set_boom_nominal(equilibrium.boom_nominal)?;
         let mut episode = Episode {
+            base: Arc::clone(&config),
+            parameters: None,
             start: equilibrium.tether.clone(),
             substeps: config.substeps(),
             total_steps: config.episode_steps(),
@@ -261,9 +269,49 @@ impl Episode {
         Ok(episode)
     }
 
+    /// The physics of the episode with wake seed `wake_seed` when the base config randomizes
+    /// it and the draw differs from the current one: its config, equilibrium and sim, built
+    /// whole (nothing of `self` changes); None when the current physics already fits.
+    fn drawn_physics(&self, seeds: Seeds) -> Result<Option<Physics>> {
+        if !self.base.randomization.enabled {
+            return Ok(None);
+        }
+        let parameters = Parameters::draw(&self.base.randomization, seeds.wake);
+        if self.parameters == Some(parameters) {
+            return Ok(None);
+        }
+        let config = Arc::new(parameters.apply(&self.base)?);
+        let equilibrium = Arc::new(Equilibrium::settle(&config)?);
+        let mut sim = CaptureSim::new(&config.capture(), seeds)?;
+        sim.set_boom_nominal(equilibrium.boom_nominal)?;
+        Ok(Some(Physics {
+            parameters,
+            config,
+            equilibrium,
+            sim,
+        }))
+    }
+
+    /// Makes `physics` the episode's.
+    fn install(&mut self, physics: Physics) {
+        self.flap_limit = physics.config.physics.accd.flap_limit_deg.to_radians();
+        self.overload_tension = physics.config.limits.overload_fraction
+            * physics.config.physics.tether.breaking_tension;
+        self.start = physics.equilibrium.tether.clone();
+        self.parameters = Some(physics.parameters);
+        self.config = physics.config;
+        self.equilibrium = physics.equilibrium;
+        self.sim = physics.sim;
+    }
+
     /// Starts a new episode: the ACCD displaced from the equilibrium and tilted at random (from
     /// the `initial` stream of `seeds.initial`), boom and turbulence from their seeds, t = 0.
+    /// With randomized physics the episode's parameters are drawn from `seeds.wake` first, and
+    /// its equilibrium settled (unless the parameters are the current ones).
     pub fn reset(&mut self, seeds: Seeds) -> Result<()> {
+        if let Some(physics) = self.drawn_physics(seeds)? {
+            self.install(physics);
+        }
         let init = &self.config.initial;
         let mut stream = Stream::new(seeds.initial, INITIAL_STREAM);
         let length = self.config.physics.tether.length;
@@ -497,14 +545,25 @@ impl Episode {
         self.divergence.as_deref()
     }
 
-    /// The configuration.
+    /// The episode's configuration (with randomization, its drawn physics).
     pub fn config(&self) -> &EnvConfig {
         &self.config
     }
 
-    /// The open-loop equilibrium.
+    /// The open-loop equilibrium (the episode's own with randomized physics).
     pub fn equilibrium(&self) -> &Equilibrium {
         &self.equilibrium
+    }
+
+    /// The episode's drawn physical parameters (None without randomization).
+    pub fn parameters(&self) -> Option<&Parameters> {
+        self.parameters.as_ref()
+    }
+
+    /// The env's configuration the episode was built with (with randomization, what the
+    /// parameters are drawn around; [`Episode::config`] is the episode's own).
+    pub fn base_config(&self) -> &EnvConfig {
+        &self.base
     }
 
     /// The physics (for rendering and analysis).
@@ -535,8 +594,16 @@ impl Episode {
     /// whole first: on an error the episode is as it was.
     pub fn set_state(&mut self, state: EpisodeState) -> Result<()> {
         check_len("observation", state.observation.len(), OBS_DIM)?;
-        let mut sim = self.sim.clone();
+        // With randomization the state's seeds name its physics: rebuild them if they differ.
+        let physics = self.drawn_physics(state.seeds)?;
+        let mut sim = match &physics {
+            Some(p) => p.sim.clone(),
+            None => self.sim.clone(),
+        };
         sim.apply_state(state.sim)?;
+        if let Some(p) = physics {
+            self.install(p);
+        }
         self.sim = sim;
         self.steps = state.steps;
         self.seeds = state.seeds;
@@ -547,6 +614,14 @@ impl Episode {
         self.divergence = state.divergence;
         Ok(())
     }
+}
+
+/// An episode's physics with randomized parameters (built whole, then installed).
+struct Physics {
+    parameters: Parameters,
+    config: Arc<Valid<EnvConfig>>,
+    equilibrium: Arc<Equilibrium>,
+    sim: CaptureSim,
 }
 
 /// One RL episode's state ([`crate::Episode`]).

@@ -45,6 +45,7 @@ use serde::{Deserialize, Serialize};
 use crate::capture::Snapshot;
 use crate::config::{parse_named, CaptureConfig};
 use crate::error::Result;
+use crate::randomization::RandomizationConfig;
 use crate::valid::Valid;
 use accd_spec::{join, out_of_range, Fields, OutOfRange, Rules};
 
@@ -385,6 +386,8 @@ accd_spec::config_struct! {
         /// Env `i`'s episode `e` uses entry `(i + e * num_envs) mod len`.
         pub wake_seeds: Option<Vec<u64>> = None, "", "",
             "wake seeds to cycle through (evaluation); overrides wake_seed";
+        pub randomization: RandomizationConfig = RandomizationConfig::default(), "", "",
+            "physical parameters drawn per episode from its wake seed (off by default)";
     }
 }
 
@@ -532,7 +535,7 @@ mod tests {
 
     /// The keys of today's documents, in the order they are written (the state header hashes
     /// this JSON: the order must not change).
-    const KEYS: [&str; 13] = [
+    const KEYS: [&str; 14] = [
         "tether",
         "accd",
         "aircraft",
@@ -546,6 +549,7 @@ mod tests {
         "limits",
         "wake_seed",
         "wake_seeds",
+        "randomization",
     ];
 
     #[test]

@@ -644,6 +644,11 @@ accd_spec::config_struct! {
             "user wake tables, {\"low\": path, \"high\": path} (None: the analytic model)";
         /// `"per_step"` is the default since the fast scheme's measurement (BENCHMARKS.md);
         /// `"per_stage"` is the exact scheme of the first releases.
+        /// Scales the mean wake's velocity perturbation by the factor and its turbulent kinetic
+        /// energy by its square (the wake turbulence's RMS velocities by the factor): a weaker or
+        /// stronger wake of the same shape, for robustness studies and randomized physics.
+        pub strength: f64 = 1.0, "-", "[0, 5]",
+            "factor on the mean wake's velocity perturbation (its turbulent kinetic energy scales with the square)";
         pub sampling: AirSampling = AirSampling::PerStep, "", "",
             "where the tether's segments sample the wake and its turbulence: \"per_step\" or \"per_stage\" (the exact scheme)";
     }
@@ -690,6 +695,8 @@ pub struct Wake {
     /// Interpolation weight of the high table, (alpha - alpha_low) / (alpha_high - alpha_low).
     high_weight: f64,
     airspeed: f64,
+    /// The speed the tables' dimensionless values are scaled by: airspeed times `wake.strength`.
+    perturbation_speed: f64,
     length: f64,
     inv_length: f64,
     attachment_from_nose: Vector3<f64>,
@@ -718,6 +725,7 @@ impl Wake {
             alpha_deg: config.alpha_deg,
             tables: config.enabled.then_some(tables),
             airspeed: airspeed_mps,
+            perturbation_speed: airspeed_mps * config.strength,
             length,
             inv_length: 1.0 / length,
             attachment_from_nose: Vector3::new(a[0], a[1], a[2]),
@@ -801,7 +809,7 @@ impl Wake {
         }
         let h = self.high_weight;
         let mix = |i: usize| acc[i] + h * (acc[i + 4] - acc[i]);
-        let u = self.airspeed;
+        let u = self.perturbation_speed;
         WakeSample {
             velocity: Vector3::new(mix(0), mix(1), mix(2)) * u,
             tke: mix(3).max(0.0) * u * u,

@@ -473,3 +473,32 @@ fn default_table_covers_the_documented_grid() {
         }
     }
 }
+
+#[test]
+fn strength_scales_the_perturbation_linearly_and_the_tke_quadratically() {
+    let base = wake(8.0);
+    for s in [0.0, 0.7, 1.3] {
+        let config = WakeConfig {
+            strength: s,
+            ..WakeConfig::default()
+        };
+        let scaled = Wake::from_config(&config, U).unwrap();
+        let mut checked = 0;
+        for (i, u) in uniforms(300).chunks(3).enumerate() {
+            let p = at(-8.0 + 7.0 * u[0], -0.6 + 1.2 * u[1], -0.2 + 0.8 * u[2]);
+            let (a, b) = (base.sample(&p), scaled.sample(&p));
+            let tol = 1e-12 * (1.0 + a.velocity.norm());
+            assert!((b.velocity - a.velocity * s).norm() <= tol, "{s} at {i}");
+            assert!(
+                (b.tke - a.tke * s * s).abs() <= 1e-12 * (1.0 + a.tke),
+                "{s} at {i}"
+            );
+            checked += (a.velocity.norm() > 0.1) as usize;
+        }
+        assert!(checked > 20, "the points must lie in the wake: {checked}");
+    }
+    // Strength 1 is the wake bit for bit.
+    let one = Wake::from_config(&WakeConfig::default(), U).unwrap();
+    let p = at(-4.5, 0.1, 0.1);
+    assert_eq!(one.sample(&p), base.sample(&p));
+}

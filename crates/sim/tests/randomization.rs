@@ -1,0 +1,157 @@
+//! Randomized physics (crates/sim/src/randomization.rs): each episode's parameters come from its
+//! wake seed's own stream, the episode runs the physics they name (its own equilibrium, its boom
+//! placed relative to it), nothing else of the episode moves, and saved states carry their physics.
+
+use std::sync::Arc;
+
+use accd_sim::{EnvConfig, Episode, Equilibrium, Parameters, Seeds};
+use accd_tether::Material;
+
+fn seeds(k: u64) -> Seeds {
+    Seeds {
+        initial: k,
+        wake: 1000 + k,
+        rlv: 2000 + k,
+    }
+}
+
+fn episode(config: EnvConfig, s: Seeds) -> Episode {
+    let config = Arc::new(config.validated().unwrap());
+    let eq = Arc::new(Equilibrium::settle(&config).unwrap());
+    Episode::new(config, eq, s).unwrap()
+}
+
+fn quick() -> EnvConfig {
+    let mut c = EnvConfig {
+        capture_window: 5.0,
+        ..EnvConfig::default()
+    };
+    c.initial.settle_time = 30.0;
+    c.physics.boom.capture_radius = 1e-6;
+    c
+}
+
+fn randomized() -> EnvConfig {
+    let mut c = quick();
+    c.randomization.enabled = true;
+    c
+}
+
+fn action(k: usize) -> [f32; 4] {
+    let t = k as f32 * 0.1;
+    [
+        0.6 * t.sin(),
+        0.6 * t.sin(),
+        0.4 * (0.7 * t).cos(),
+        0.4 * (0.7 * t).cos(),
+    ]
+}
+
+/// Observations and rewards of `steps` agent steps, as bits.
+fn run(e: &mut Episode, steps: usize) -> Vec<u32> {
+    let mut out: Vec<u32> = e.observation().iter().map(|v| v.to_bits()).collect();
+    for k in 0..steps {
+        let o = e.step(&action(k)).unwrap();
+        out.extend(e.observation().iter().map(|v| v.to_bits()));
+        out.push((o.reward as f32).to_bits());
+        if o.terminated || o.truncated {
+            break;
+        }
+    }
+    out
+}
+
+#[test]
+fn each_episode_runs_the_physics_its_wake_seed_draws() {
+    let base = randomized();
+    let mut e = episode(base.clone(), seeds(1));
+    let p = *e.parameters().expect("drawn");
+    assert_eq!(p, Parameters::draw(&base.randomization, seeds(1).wake));
+    let c = e.config().clone();
+    assert_eq!(c.physics.tether.length, p.tether_length);
+    assert_eq!(c.physics.aircraft.airspeed, p.airspeed);
+    assert_eq!(c.physics.wake.alpha_deg, p.wake_alpha_deg);
+    let rope = Material::Uhmwpe;
+    assert_eq!(
+        c.physics.tether.breaking_tension,
+        rope.max_tension(p.tether_diameter)
+    );
+    // Its own equilibrium: the one of its config, settled alone.
+    let own = Equilibrium::settle(&p.apply(&base).unwrap()).unwrap();
+    assert_eq!(e.equilibrium(), &own);
+    // Another wake seed, other physics, another equilibrium; the same seed again, the same run.
+    let first = run(&mut e, 20);
+    e.reset(seeds(2)).unwrap();
+    let q = *e.parameters().unwrap();
+    assert_ne!(p, q);
+    assert!((e.equilibrium().position - own.position).norm() > 0.1);
+    e.reset(seeds(1)).unwrap();
+    assert_eq!(run(&mut e, 20), first);
+    assert_eq!(run(&mut episode(base, seeds(1)), 20), first);
+}
+
+#[test]
+fn randomization_moves_no_other_stream() {
+    // A base whose tether is the rope model's 250 m, 24 mm UHMWPE and whose ranges all sit at
+    // the base's values: the drawn physics is the base's, so the episode must be the same bit for
+    // bit as without randomization: the draw takes nothing from the initial, RLV or wake streams.
+    let mut base = quick();
+    let rope = Material::Uhmwpe;
+    let (length, d) = (250.0, 0.024);
+    base.physics.tether.mass_per_length = rope.mass_per_length(d);
+    base.physics.tether.axial_stiffness = rope.axial_rigidity(d) / length;
+    base.physics.tether.flexural_rigidity = rope.flexural_rigidity(d);
+    base.physics.tether.breaking_tension = rope.max_tension(d);
+    let mut fixed = base.clone();
+    let r = &mut fixed.randomization;
+    r.enabled = true;
+    r.tether_length = [length; 2];
+    r.tether_diameter = [d; 2];
+    r.accd_mass = [base.physics.accd.mass; 2];
+    r.force_coefficient_scale = [1.0; 2];
+    r.moment_coefficient_scale = [1.0; 2];
+    r.wake_alpha_deg = [base.physics.wake.alpha_deg; 2];
+    r.wake_strength = [1.0; 2];
+    r.airspeed = [base.physics.aircraft.airspeed; 2];
+    r.ambient_sigma_mps = [0.0; 2];
+    for k in 0..3 {
+        let plain = run(&mut episode(base.clone(), seeds(k)), 50);
+        let drawn = run(&mut episode(fixed.clone(), seeds(k)), 50);
+        assert_eq!(plain, drawn, "seeds({k})");
+    }
+}
+
+#[test]
+fn a_saved_state_carries_its_physics_into_an_episode_of_other_parameters() {
+    let base = randomized();
+    let mut a = episode(base.clone(), seeds(3));
+    for k in 0..7 {
+        a.step(&action(k)).unwrap();
+    }
+    let saved = a.state();
+    let mut b = episode(base, seeds(4));
+    assert_ne!(a.parameters(), b.parameters());
+    b.set_state(saved).unwrap();
+    assert_eq!(a.parameters(), b.parameters());
+    assert_eq!(run(&mut a, 20), run(&mut b, 20));
+}
+
+#[test]
+fn drawn_episodes_start_well_posed() {
+    // Over many draws, every episode's equilibrium is inside the episode limits (the boom is
+    // placed relative to it) and the episode steps: randomization never poses an impossible task.
+    let base = randomized();
+    let mut e = episode(base, seeds(0));
+    for k in 0..12 {
+        e.reset(seeds(10 + k)).unwrap();
+        assert_eq!(e.equilibrium().outside_limits, None, "{:?}", e.parameters());
+        for j in 0..5 {
+            let o = e.step(&action(j)).unwrap();
+            assert!(
+                !o.diverged && !o.envelope_exit,
+                "{:?}: {o:?}",
+                e.parameters()
+            );
+        }
+    }
+}
