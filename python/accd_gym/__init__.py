@@ -48,7 +48,7 @@ from accd_gym._core import (
 from accd_gym._core import reward_bounds as _core_reward_bounds
 from accd_gym.errors import AccdError, ConfigError, SimulationError, StateError
 from accd_gym.config import EXACT_AIR_SCHEME, default_config, env_config
-from accd_gym.task import HELD_OUT_WAKE_SEEDS, TRAINING_WAKE_SEEDS
+from accd_gym.task import HELD_OUT_WAKE_SEEDS, PARAMETER_NAMES, TRAINING_WAKE_SEEDS
 from accd_gym.env import InAirCaptureEnv
 from accd_gym.vector import InAirCaptureVectorEnv
 from accd_gym.recording import Recording, RecordEpisode, record_episodes
@@ -99,6 +99,7 @@ __all__ = [
     "ENV_ID",
     "EXACT_AIR_SCHEME",
     "HELD_OUT_WAKE_SEEDS",
+    "PARAMETER_NAMES",
     "InAirCaptureEnv",
     "InAirCaptureVectorEnv",
     "TRAINING_WAKE_SEEDS",

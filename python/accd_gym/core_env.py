@@ -33,6 +33,21 @@ class CoreEnvMixin:
         """Threads stepping the envs."""
         return self._core.num_threads
 
+    def episode_parameters(self, i: int = 0) -> Optional[dict[str, float]]:
+        """The physical parameters env ``i``'s current episode drew (randomized physics,
+        ``randomization={"enabled": True}``), keyed by :data:`accd_gym.PARAMETER_NAMES`
+        (``tether_length`` m, ``tether_diameter`` m, ``accd_mass`` kg,
+        ``force_coefficient_scale``, ``moment_coefficient_scale``, ``wake_alpha_deg``,
+        ``wake_strength``, ``airspeed`` m/s, ``ambient_sigma_mps``); None without randomization.
+        They are a function of the episode's wake seed alone."""
+        return self._core.episode_parameters(int(i))
+
+    def episode_setup(self, i: int = 0) -> dict[str, np.ndarray]:
+        """Where env ``i``'s current episode starts from (TA frame, m): ``equilibrium`` (the
+        ACCD's open-loop equilibrium), ``capture_point`` (the capture point's) and
+        ``boom_nominal`` (the boom tip's nominal formation position: ``boom.placement``)."""
+        return self._core.episode_setup(int(i))
+
     def _reset_core(
         self,
         seed: Optional[Union[int, Sequence[int]]],

@@ -172,7 +172,8 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
     def reset(
         self, *, seed: Optional[int] = None, options: Optional[dict[str, Any]] = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
-        """Starts a new episode; returns ``(observation, info)`` (info: ``wake_seed``).
+        """Starts a new episode; returns ``(observation, info)`` (info: ``wake_seed``, and with
+        randomized physics ``parameters``, the episode's drawn parameters).
 
         ``seed``: a Python or numpy integer in [0, 2^64), or None (the next episode of the seeded
         sequence); bools, floats and strings raise ConfigError.
@@ -181,7 +182,10 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
             seed = check_seed(seed)
         super().reset(seed=seed)
         obs, wake = self._reset_core(seed, options)
-        info = {"wake_seed": int(wake[0])}
+        info: dict[str, Any] = {"wake_seed": int(wake[0])}
+        parameters = self._core.episode_parameters(0)
+        if parameters is not None:
+            info["parameters"] = parameters
         if self.render_mode == "human":
             self.render()
         return obs[0].copy(), info

@@ -22,6 +22,9 @@ OBS_BOUND: float = float(_core.OBS_BOUND)
 OBSERVATION_TABLE: list[tuple[str, str, float, str]] = list(_core.observation_table())
 #: Names of the per-step info values.
 INFO_NAMES: tuple[str, ...] = tuple(_core.INFO_NAMES)
+#: Names of the physical parameters randomized physics draws per episode (drawing order; see
+#: ``randomization`` in docs/environment.md).
+PARAMETER_NAMES: tuple[str, ...] = tuple(_core.PARAMETER_NAMES)
 #: Wake seeds training draws from: ``range(*TRAINING_WAKE_SEEDS)``.
 TRAINING_WAKE_SEEDS: range = range(*_core.TRAINING_WAKE_SEEDS)
 #: Wake seeds held out for evaluation (training never draws them): ``range(10**9, 10**9 + 1000)``.

@@ -419,6 +419,37 @@ impl PyBatchEnv {
         Ok(d)
     }
 
+    /// Physical parameters of env ``i``'s current episode with randomized physics (the keys of
+    /// ``accd_gym.PARAMETER_NAMES``: tether length m, diameter m, ACCD mass kg, force and moment
+    /// coefficient factors, wake angle deg, wake strength, airspeed m/s, ambient RMS m/s), or
+    /// None without randomization.
+    fn episode_parameters<'py>(
+        &self,
+        py: Python<'py>,
+        i: usize,
+    ) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(p) = self.inner.episode(i).py_err()?.parameters() else {
+            return Ok(None);
+        };
+        let d = PyDict::new(py);
+        for (name, value) in accd_sim::Parameters::NAMES.iter().zip(p.values()) {
+            d.set_item(*name, value)?;
+        }
+        Ok(Some(d))
+    }
+
+    /// Where env ``i``'s episode starts from (TA frame, m): ``equilibrium`` (the ACCD's open-loop
+    /// equilibrium), ``capture_point`` (the capture point's) and ``boom_nominal`` (the boom tip's
+    /// nominal formation position, ``boom.placement``).
+    fn episode_setup<'py>(&self, py: Python<'py>, i: usize) -> PyResult<Bound<'py, PyDict>> {
+        let eq = self.inner.episode(i).py_err()?.equilibrium();
+        let d = PyDict::new(py);
+        d.set_item("equilibrium", vector_to_py(py, &eq.position))?;
+        d.set_item("capture_point", vector_to_py(py, &eq.capture_point))?;
+        d.set_item("boom_nominal", vector_to_py(py, &eq.boom_nominal))?;
+        Ok(d)
+    }
+
     /// Why env ``i``'s episode diverged, or None.
     fn divergence(&self, i: usize) -> PyResult<Option<String>> {
         Ok(self
@@ -537,6 +568,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("ACT_DIM", ACT_DIM)?;
     m.add("OBS_BOUND", OBS_BOUND)?;
     m.add("INFO_NAMES", info::NAMES.to_vec())?;
+    m.add("PARAMETER_NAMES", accd_sim::Parameters::NAMES.to_vec())?;
     m.add(
         "TRAINING_WAKE_SEEDS",
         (TRAINING_WAKE_SEEDS.start, TRAINING_WAKE_SEEDS.end),
