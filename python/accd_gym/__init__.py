@@ -52,20 +52,15 @@ from accd_gym.task import HELD_OUT_WAKE_SEEDS, PARAMETER_NAMES, TRAINING_WAKE_SE
 from accd_gym.env import InAirCaptureEnv
 from accd_gym.vector import InAirCaptureVectorEnv
 from accd_gym.recording import Recording, RecordEpisode, record_episodes
+from accd_gym.tiers import TIERS
+from accd_gym.tiers import register_tiers as _register_tiers
 
-import gymnasium as _gym
 
-from accd_gym.task import episode_steps as _episode_steps
 
-#: The registered id of the env (``gymnasium.make(ENV_ID)``, ``gymnasium.make_vec(ENV_ID, n)``).
+#: The registered id of the nominal env (``gymnasium.make(ENV_ID)``, ``gymnasium.make_vec(ENV_ID, n)``);
+#: the benchmark tiers' ids are in :data:`accd_gym.tiers.TIERS`.
 ENV_ID = "accd_gym/InAirCapture-v0"
-if ENV_ID not in _gym.registry:
-    _gym.register(
-        id=ENV_ID,
-        entry_point="accd_gym.env:InAirCaptureEnv",
-        vector_entry_point="accd_gym.vector:InAirCaptureVectorEnv",
-        max_episode_steps=_episode_steps(default_config()),
-    )
+_register_tiers()
 
 
 def reward_bounds(config: Optional[dict[str, Any]] = None, **overrides: Any) -> tuple[float, float]:
@@ -102,6 +97,7 @@ __all__ = [
     "PARAMETER_NAMES",
     "InAirCaptureEnv",
     "InAirCaptureVectorEnv",
+    "TIERS",
     "TRAINING_WAKE_SEEDS",
     "default_config",
     "env_config",

@@ -45,8 +45,8 @@ def _train(args: argparse.Namespace) -> int:
     from accd_gym import training
 
     if args.resume:
-        if args.config is not None or args.timesteps is not None or args.seed is not None:
-            raise _usage("--resume continues a run with its own config; drop --config, --timesteps and --seed")
+        if args.config is not None or args.timesteps is not None or args.seed is not None or args.tier:
+            raise _usage("--resume continues a run with its own config; drop --config, --timesteps, --seed and --tier")
         out = Path(args.resume)
         from accd_gym.rllib import is_rllib_run
 
@@ -65,6 +65,8 @@ def _train(args: argparse.Namespace) -> int:
                                progress=not args.quiet)
         else:
             cfg = training.load_config(args.config or "training/ppo.json", seed=args.seed)
+            if args.tier:
+                cfg = training.validate_config({**cfg, "env": {"tier": args.tier, **cfg["env"]}})
             meta = training.train(cfg, out, timesteps=args.timesteps, progress=not args.quiet)
     if meta["status"] == "interrupted":
         print(f"accd-gym: training interrupted ({meta['interrupted_by']}) at {meta['timesteps']} of "
@@ -90,6 +92,20 @@ def _is_rllib_config(path: Optional[str]) -> bool:
         return path is not None and is_rllib_config(json.loads(Path(path).read_text()))
     except (OSError, ValueError):
         return False
+
+
+def _benchmark(args: argparse.Namespace) -> int:
+    from accd_gym import benchmark
+
+    cfg = benchmark.load_config(args.config, quick=args.quick)
+    docs = Path(args.docs) if args.docs else None
+    command = "accd-gym benchmark" + (" --quick" if args.quick else "") + (f" --ray {args.ray}" if args.ray else "")
+    progress = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True))
+    doc = benchmark.run(cfg, args.out, ray_address=args.ray, docs=docs, command=command, progress=progress)
+    print((Path(args.out) / "benchmark.md").read_text())
+    print(f"wrote {Path(args.out) / 'benchmark.json'}, benchmark.md, performance_profile.png, episodes.json"
+          + (f"; {docs / 'benchmark.md'}" if docs else "") + f" (wall time {doc['wall_time_s']:.0f} s)")
+    return 0
 
 
 def _sweep(args: argparse.Namespace) -> int:
@@ -174,6 +190,14 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
 
 
+def _env_of(args: argparse.Namespace) -> dict:
+    """The environment config overrides of --env, over the tier of --tier (if given)."""
+    env = _env_overrides(args.env)
+    if getattr(args, "tier", None):
+        env = {"tier": args.tier, **env}
+    return env
+
+
 def _env_overrides(text: Optional[str]) -> dict:
     """The --env JSON object (environment config overrides)."""
     from accd_gym.errors import ConfigError
@@ -196,7 +220,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         raise _usage("--ray-chunk sets the episodes per Ray task; it needs --ray")
 
     results = evaluation.evaluate(args.policy, args.episodes, args.out, num_envs=args.num_envs, num_threads=args.num_threads,
-                                  config=_env_overrides(args.env), progress=not args.quiet,
+                                  config=_env_of(args), progress=not args.quiet,
                                   allow_unnormalized=args.allow_unnormalized, replay=args.replay,
                                   ray_address=args.ray, ray_chunk=args.ray_chunk)
     for spec, doc in results["policies"].items():
@@ -213,7 +237,7 @@ def _evaluate(args: argparse.Namespace) -> int:
 def _replay(args: argparse.Namespace) -> int:
     from accd_gym import replay
 
-    written = replay.run_replay(args.policy, args.episodes, args.out, seed=args.seed, config=_env_overrides(args.env),
+    written = replay.run_replay(args.policy, args.episodes, args.out, seed=args.seed, config=_env_of(args),
                                 num_envs=args.num_envs, num_threads=args.num_threads, video=args.video,
                                 screenshot=args.screenshot, max_frames=args.max_frames,
                                 allow_unnormalized=args.allow_unnormalized, progress=not args.quiet, only=args.only)
@@ -230,7 +254,7 @@ def _rollout(args: argparse.Namespace) -> int:
     if getattr(policy, "note", None):
         print(f"note: {policy.note}", file=sys.stderr)
     eps = evaluation.run_episodes(policy, args.episodes, seed=args.seed, num_envs=args.num_envs, num_threads=args.num_threads,
-                                  config=_env_overrides(args.env), progress=not args.quiet, desc=args.policy)
+                                  config=_env_of(args), progress=not args.quiet, desc=args.policy)
     s = evaluation.summarize(eps)
     lo, hi = s["capture_rate_ci95"]
     print(f"{args.policy}: {s['captures']}/{s['episodes']} captured ({s['capture_rate']:.1%}, 95% CI {lo:.1%}-{hi:.1%}); "
@@ -243,6 +267,8 @@ def _rollout(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``accd-gym`` and its subcommands."""
+    from accd_gym.tiers import TIERS
+
     parser = _Parser(prog="accd-gym", description="accd-gym: In-Air Capturing simulation tools.")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("settle", help="simulate a towed tether settling behind the aircraft and plot it")
@@ -271,6 +297,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="continue the interrupted run in folder RUN from its latest checkpoint to its total")
     p.add_argument("--timesteps", type=_positive("--timesteps"), help="override the config's total_timesteps")
     p.add_argument("--seed", type=_seed, help="override the config's seed")
+    p.add_argument("--tier", choices=list(TIERS), help="a benchmark tier (accd_gym.tiers): trained on with the config's env overrides on top")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_train)
     p = sub.add_parser("evaluate", help="evaluate policies on held-out wake seeds: JSON, plots, markdown")
@@ -282,6 +309,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--num-threads", type=_nonnegative("--num-threads"), default=0,
                    help="threads stepping the envs (default 0: one per core)")
     p.add_argument("--env", help="environment config overrides as JSON, e.g. '{\"capture_window\": 30}'")
+    p.add_argument("--tier", choices=list(TIERS), help="a benchmark tier (accd_gym.tiers): its config, under --env")
     p.add_argument("--allow-unnormalized", action="store_true",
                    help="evaluate a model without its vecnormalize.pkl (observations passed raw)")
     p.add_argument("--replay", type=_nonnegative("--replay"), default=0, metavar="K",
@@ -303,6 +331,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--num-threads", type=_nonnegative("--num-threads"), default=0,
                    help="threads stepping the envs (default 0: one per core)")
     p.add_argument("--env", help="environment config overrides as JSON")
+    p.add_argument("--tier", choices=list(TIERS), help="a benchmark tier (accd_gym.tiers): its config, under --env")
     p.add_argument("--only", type=_nonnegative("--only"), action="append", metavar="K",
                    help="write only episode K of the --episodes run (repeatable; the others run unrecorded)")
     p.add_argument("--video", action="store_true", help="also write an MP4 per episode (imageio-ffmpeg)")
@@ -319,6 +348,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="runs/sweep", help="output folder (default: runs/sweep)")
     p.add_argument("--quiet", action="store_true", help="less output from Tune")
     p.set_defaults(func=_sweep)
+    p = sub.add_parser("benchmark", help="the benchmark suite: PPO (and SAC) seeds on every tier, every baseline, one report")
+    p.add_argument("--config", default="training/benchmark.json", help="benchmark config, JSON (default: training/benchmark.json)")
+    p.add_argument("--out", default="runs/benchmark", help="output folder (default: runs/benchmark)")
+    p.add_argument("--quick", action="store_true", help="the config's quick overrides: a few minutes, for CI")
+    p.add_argument("--docs", metavar="FOLDER", help="also write FOLDER/benchmark.md and FOLDER/figures/benchmark_profile.png")
+    p.add_argument("--ray", nargs="?", const="local", metavar="ADDRESS",
+                   help="run the training jobs as Ray tasks: 'local' (default), 'auto' or HOST:PORT (needs the ray extra)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.set_defaults(func=_benchmark)
     p = sub.add_parser("rollout", help="run a policy for a few episodes headless and print a summary")
     p.add_argument("--policy", required=True, help="a baseline (zero, random, guidance) or a trained model")
     p.add_argument("--episodes", type=_positive("--episodes"), default=8, help="episodes (default 8)")
@@ -327,6 +365,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--num-threads", type=_nonnegative("--num-threads"), default=0,
                    help="threads stepping the envs (default 0: one per core)")
     p.add_argument("--env", help="environment config overrides as JSON")
+    p.add_argument("--tier", choices=list(TIERS), help="a benchmark tier (accd_gym.tiers): its config, under --env")
     p.add_argument("--allow-unnormalized", action="store_true",
                    help="run a model without its vecnormalize.pkl (observations passed raw)")
     p.add_argument("--json", action="store_true", help="also print every episode's metrics as JSON")

@@ -53,7 +53,8 @@ def default_config() -> dict[str, Any]:
 def env_config(config: Optional[Mapping[str, Any]] = None, **overrides: Any) -> dict[str, Any]:
     """A complete, validated environment configuration from ``config`` and keyword overrides.
 
-    A string ``tether`` is taken as a tether preset. Raises :class:`~accd_gym.ConfigError`
+    A string ``tether`` is taken as a tether preset; ``tier`` names a benchmark tier
+    (:mod:`accd_gym.tiers`) whose overrides the others are merged into. Raises :class:`~accd_gym.ConfigError`
     naming the field, the value and the allowed range (unknown keys included).
     """
     return json.loads(valid_config(config, self_contained_tables=False, **overrides).to_json())
@@ -63,7 +64,8 @@ def valid_config(
     config: Optional[Mapping[str, Any]] = None, *, self_contained_tables: bool = True, **overrides: Any
 ) -> _core.EnvConfig:
     """The validated configuration object the envs are built from (``accd_gym._core.EnvConfig``):
-    ``config`` and keyword overrides merged, a string ``tether`` taken as a preset, a user
+    ``config`` and keyword overrides merged (over the overrides of a benchmark tier named by the
+    key ``tier``, :mod:`accd_gym.tiers`, section by section), a string ``tether`` taken as a preset, a user
     aerodynamic table given by path replaced by its contents (with ``self_contained_tables``, so
     that pickles and saved states need no file), then sent to the core as one JSON document and
     validated there once. The envs take it as it is; ``.to_json()`` gives it back. Picklable.
@@ -71,6 +73,11 @@ def valid_config(
     """
     merged: dict[str, Any] = dict(config or {})
     merged.update(overrides)
+    if "tier" in merged:
+        from accd_gym.tiers import merge, tier
+
+        name = merged.pop("tier")
+        merged = merge(tier(name).overrides, merged)
     tether = merged.get("tether")
     if isinstance(tether, str):
         merged["tether"] = _core.tether_config(tether)

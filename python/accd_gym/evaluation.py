@@ -212,6 +212,8 @@ class Episode:
     mean_abs_delta_action: float
     episode_return: float
     trajectory: np.ndarray
+    #: The episode's drawn physical parameters under randomized physics (None otherwise).
+    parameters: Optional[dict[str, float]] = None
 
     def metrics(self) -> dict[str, Any]:
         """The episode's numbers as plain JSON values (no trajectory)."""
@@ -286,6 +288,7 @@ def run_episode_range(
         return None if wake_seeds is None else int(wake_seeds[k])
 
     env.reset(seed=[seed + start] * batch)
+    params_of: list[Optional[dict[str, float]]] = [None] * batch
     obs = None
     started = np.zeros(batch, dtype=bool)
     for i in range(batch):
@@ -293,6 +296,7 @@ def run_episode_range(
         ep_of[i] = -1 if k is None else k
         last[i] = start if k is None else k
         obs = env.start_episode(i, seed + int(last[i]), wake_of(int(last[i])))
+        params_of[i] = env.episode_parameters(i)
     started[:] = True
     _policy_starts(policy, started, ep_of, last)
     traj: list[list[np.ndarray]] = [[-obs[i, _BOOM_REL] / _POS_SCALE] for i in range(batch)]
@@ -340,6 +344,7 @@ def run_episode_range(
                     mean_abs_delta_action=float(np.abs(da).mean()),
                     episode_return=float(ret[i]),
                     trajectory=np.asarray(traj[i], dtype=np.float32),
+                    parameters=params_of[i],
                 )
                 if bar is not None:
                     bar.update(1)
@@ -351,6 +356,7 @@ def run_episode_range(
                 if k is not None:
                     last[i] = k
                 obs = env.start_episode(int(i), seed + int(last[i]), wake_of(int(last[i])))
+                params_of[i] = env.episode_parameters(int(i))
             for i in np.flatnonzero(dones):
                 traj[i] = [-obs[i, _BOOM_REL] / _POS_SCALE]
                 acts[i] = []

@@ -1,0 +1,99 @@
+"""accd-gym benchmark: its statistics against closed forms and scipy, its config checks, and the
+whole pipeline in its --quick mode (every tier, PPO and SAC, every baseline, the report)."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from accd_gym import ConfigError, benchmark
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_iqm_is_scipys_trimmed_mean():
+    from scipy.stats import trim_mean
+
+    rng = np.random.default_rng(1)
+    for n in (1, 2, 3, 4, 5, 8, 13):
+        x = rng.uniform(size=n)
+        assert benchmark.iqm(x) == pytest.approx(trim_mean(x, 0.25), abs=1e-15)
+
+
+def test_stratified_bootstrap_covers_the_rate_and_narrows_with_episodes():
+    # Five seeds of the same true rate: the interval holds it, and shrinks like 1/sqrt(n).
+    widths = []
+    for n in (100, 1600):
+        rng = np.random.default_rng(n)
+        caps = [rng.uniform(size=n) < 0.6 for _ in range(5)]
+        lo, hi = benchmark.stratified_bootstrap(caps, resamples=4000)
+        assert lo < 0.6 < hi
+        widths.append(hi - lo)
+    assert 2.5 < widths[0] / widths[1] < 6.0  # 4x fewer... sqrt(16) = 4
+    # Seeds that disagree widen it beyond the episode noise alone.
+    caps = [np.arange(400) < k for k in (80, 160, 240, 320, 390)]
+    lo, hi = benchmark.stratified_bootstrap(caps, resamples=4000)
+    assert hi - lo > 0.3
+    # Deterministic: a fixed generator seed.
+    assert benchmark.stratified_bootstrap(caps) == benchmark.stratified_bootstrap(caps)
+
+
+@pytest.mark.parametrize(
+    "raw, field",
+    [({"tiers": ["nope"]}, "tiers"), ({"episodes": 0}, "episodes"), ({"episodes": 5000}, "episodes"),
+     ({"baselines": ["pid"]}, "baselines"), ({"learners": {"a2c": {}}}, "learners.a2c"),
+     ({"learners": {"ppo": {"train_config": "training/ppo.json", "seeds": [], "timesteps": 10}}}, "learners.ppo.seeds"),
+     ({"learners": {"ppo": {"train_config": "training/ppo.json", "seeds": [1, 1], "timesteps": 10}}}, "learners.ppo.seeds"),
+     ({"learners": {"ppo": {"train_config": "nope.json", "seeds": [1], "timesteps": 10}}}, "learners.ppo.train_config"),
+     ({"cpus": 2}, "cpus")],
+)
+def test_bad_configs_are_refused_naming_the_key(raw, field):
+    with pytest.raises(ConfigError, match=rf"`?{field}"):
+        benchmark.validate_config(raw, root=ROOT)
+
+
+def test_jobs_follow_the_config():
+    cfg = benchmark.load_config(ROOT / "training" / "benchmark.json")
+    jobs = benchmark.jobs(cfg)
+    ppo = [j for j in jobs if j.algo == "ppo"]
+    sac = [j for j in jobs if j.algo == "sac"]
+    assert len(ppo) == 5 * len(cfg["tiers"]) and {j.seed for j in ppo} == {0, 1, 2, 3, 4}
+    assert len(sac) == 3 and {j.tier for j in sac} == {"precision"}
+    assert cfg["episodes"] == 500
+    quick = benchmark.load_config(ROOT / "training" / "benchmark.json", quick=True)
+    assert quick["episodes"] == 16 and quick["learners"]["ppo"]["timesteps"] == 4096
+    assert quick["learners"]["sac"]["tiers"] == ["nominal"]
+
+
+def test_quick_benchmark_runs_the_whole_pipeline(tmp_path):
+    pytest.importorskip("stable_baselines3")
+    from accd_gym.cli import main
+
+    out, docs = tmp_path / "bench", tmp_path / "docs"
+    assert main(["benchmark", "--quick", "--out", str(out), "--docs", str(docs), "--quiet"]) == 0
+    doc = json.loads((out / "benchmark.json").read_text())
+    cfg = doc["config"]
+    report = (docs / "benchmark.md").read_text()
+    assert (docs / "figures" / "benchmark_profile.png").stat().st_size > 1000
+    for tier in cfg["tiers"]:
+        rows = doc["tiers"][tier]["policies"]
+        assert "ppo" in rows and len(rows["ppo"]["rates"]) == 2
+        assert {"zero", "random", "guidance"} <= set(rows)
+        lo, hi = rows["ppo"]["ci95"]
+        assert 0.0 <= lo <= hi <= 1.0
+        assert f"## {tier} " in report
+        m = doc["tiers"][tier]["mcnemar"]
+        assert m["both"] + m["only_learned"] + m["only_classical"] + m["neither"] == cfg["episodes"]
+    assert "sac" in doc["tiers"]["nominal"]["policies"]
+    # The report's numbers are the episodes' own: recompute one rate from the per-episode record.
+    eps = json.loads((out / "episodes.json").read_text())
+    zero = eps["baselines"]["nominal"]["zero"]["captured"]
+    assert doc["tiers"]["nominal"]["policies"]["zero"]["rate"] == sum(zero) / len(zero)
+    # Every policy of a tier met the same episodes: the baselines' outcomes per episode are those
+    # a fresh evaluation gives.
+    from accd_gym.baselines import ZeroPolicy
+
+    again = benchmark.evaluate_policy(ZeroPolicy(), "nominal", cfg["episodes"], cfg["num_envs"])
+    assert again["captured"] == zero
+    assert "wall time" in report and doc["wall_time_s"] > 0
