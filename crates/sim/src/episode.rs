@@ -13,8 +13,11 @@ use crate::accd::AccdState;
 use crate::capture::{CaptureSim, CaptureState, Snapshot};
 use crate::error::{Result, SimError};
 use crate::rng::{Seeds, Stream};
-use crate::state_format::check_len;
-use crate::task::{observe, tilt, EnvConfig, ObservationInputs, ACT_DIM, OBS_DIM};
+use crate::sensors::{SensorState, Sensors};
+use crate::state_format::{check_len, StateError};
+use crate::task::{
+    observe, observe_sensed, tilt, EnvConfig, ObservationInputs, ACT_DIM, OBS_DIM, SENSED_LAYOUT,
+};
 use crate::turbulence::AmbientTurbulence;
 use crate::valid::Valid;
 
@@ -172,6 +175,8 @@ pub struct Episode {
     distance: f64,
     done: bool,
     divergence: Option<String>,
+    /// The sensor model of the observation (`sensors.enabled`), or none: the true state.
+    sensors: Option<Sensors>,
 }
 
 impl Episode {
@@ -183,6 +188,13 @@ impl Episode {
         seeds: Seeds,
     ) -> Result<Episode> {
         let sim = CaptureSim::new(&config.capture(), seeds)?;
+        let sensors = config.sensors.enabled.then(|| {
+            Sensors::new(
+                &config.sensors,
+                config.physics.tether.time_step,
+                SENSED_LAYOUT,
+            )
+        });
         let mut episode = Episode {
             start: equilibrium.tether.clone(),
             substeps: config.substeps(),
@@ -200,6 +212,7 @@ impl Episode {
             distance: 0.0,
             done: false,
             divergence: None,
+            sensors,
         };
         episode.reset(seeds)?;
         Ok(episode)
@@ -235,6 +248,9 @@ impl Episode {
         self.previous_action = [0.0; ACT_DIM];
         self.done = false;
         self.divergence = None;
+        if let Some(sensors) = &mut self.sensors {
+            sensors.reset(seeds.initial, &self.sim.boom_relative());
+        }
         let snapshot = self.sim.snapshot()?;
         if !self.observe(&snapshot) {
             return Err(SimError::Diverged {
@@ -254,7 +270,10 @@ impl Episode {
             flap_limit: self.flap_limit,
             capture_window: self.config.capture_window,
         };
-        observe(&inputs, &mut self.obs)
+        match &mut self.sensors {
+            Some(sensors) => observe_sensed(&inputs, sensors, &mut self.obs),
+            None => observe(&inputs, &mut self.obs),
+        }
     }
 
     /// One agent step with `action` (four flap commands in [-1, 1], clipped). A non-finite
@@ -316,6 +335,9 @@ impl Episode {
                 self.diverge(e);
                 out.diverged = true;
                 break;
+            }
+            if let Some(sensors) = &mut self.sensors {
+                sensors.physics_step(&self.sim.boom_relative());
             }
             let tension = self.sim.attachment_tension();
             out.peak_tension = out.peak_tension.max(tension);
@@ -461,7 +483,13 @@ impl Episode {
         &mut self.sim
     }
 
-    /// The episode's dynamic state (physics, counters, seeds, last action and observation).
+    /// The sensor model, when `sensors.enabled`.
+    pub fn sensors(&self) -> Option<&Sensors> {
+        self.sensors.as_ref()
+    }
+
+    /// The episode's dynamic state (physics, counters, seeds, last action and observation,
+    /// sensors).
     pub fn state(&self) -> EpisodeState {
         EpisodeState {
             sim: self.sim.state(),
@@ -472,6 +500,7 @@ impl Episode {
             distance: self.distance,
             done: self.done,
             divergence: self.divergence.clone(),
+            sensors: self.sensors.as_ref().map(Sensors::state),
         }
     }
 
@@ -479,9 +508,27 @@ impl Episode {
     /// whole first: on an error the episode is as it was.
     pub fn set_state(&mut self, state: EpisodeState) -> Result<()> {
         check_len("observation", state.observation.len(), OBS_DIM)?;
+        let mut sensors = self.sensors.clone();
+        match (&mut sensors, &state.sensors) {
+            (Some(s), Some(saved)) => s.set_state(saved)?,
+            (None, None) => {}
+            (mine, _) => {
+                return Err(StateError::invalid(
+                    "sensors",
+                    if mine.is_some() {
+                        "none"
+                    } else {
+                        "a sensor state"
+                    },
+                    "a sensor state exactly when sensors.enabled",
+                )
+                .into())
+            }
+        }
         let mut sim = self.sim.clone();
         sim.apply_state(state.sim)?;
         self.sim = sim;
+        self.sensors = sensors;
         self.steps = state.steps;
         self.seeds = state.seeds;
         self.previous_action = state.previous_action;
@@ -514,4 +561,6 @@ pub struct EpisodeState {
     pub done: bool,
     /// Why it diverged, if it did.
     pub divergence: Option<String>,
+    /// The sensor model's state, when `sensors.enabled`.
+    pub sensors: Option<SensorState>,
 }
