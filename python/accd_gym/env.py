@@ -68,6 +68,18 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
     | 23 | ``tension`` | N | 1e-4 | tension at the attachment |
     | 24 | ``time_left`` | - | 1 | time left in the capture window / ``capture_window`` |
 
+    **Sensors** (``sensors={"enabled": True, ...}``; off by default, and then the observation is
+    the true state). The same layout then holds what an onboard sensor suite measures: the boom
+    position from a vision sensor (noise growing with range, ``sensors.vision.update_rate`` with
+    the last value held between updates, ``latency``, Markov dropouts that hold the last received
+    value), its rate as the finite difference of the last two received measurements, attitude and
+    body rates with per-episode biases and white noise, position/velocity and tension with white
+    noise, and the whole vector ``sensors.delay_steps`` agent steps old. The reward, the episode
+    end and ``info`` use the true state; the physics is bitwise that of the same seeds without
+    sensors (the sensors draw from their own stream). ``accd_gym.config.SENSORS_TIER`` is the
+    recommended benchmark setting. Models, assumptions and sources: ``docs/environment.md``,
+    "Sensors", and the keys ``sensors.*`` below.
+
     ## Rewards
 
     Per agent step, with ``d`` the distance from the capture point to the boom tip (m) at the end

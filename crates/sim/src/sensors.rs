@@ -120,7 +120,7 @@ accd_spec::config_struct! {
     pub struct VisionConfig {
         /// At most one measurement per physics step: not above 1 / `tether.time_step`.
         pub update_rate: f64 = 20.0, "Hz", "(0, 1000]",
-            "measurements per second; between them the observation holds the last received one";
+            "measurements per second (at most 1 / tether.time_step); between them the observation holds the last received one";
         pub latency: f64 = 0.05, "s", "[0, 1]",
             "age of the state a measurement shows (rounded to whole physics steps)";
         pub noise_floor: f64 = 0.02, "m", "[0, 10]",
