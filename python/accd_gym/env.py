@@ -151,12 +151,13 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
     included); the env pickles. A state is bytes: a header (magic, format version, the kind of
     env, the number of envs, the configuration's SHA-256, a CRC-32) and the encoded state.
     ``set_state`` raises ``StateError`` naming what is wrong for anything but a state of this
-    class, configuration and size (a corrupted or truncated state, random bytes, a state of the
-    old format written before format version 3), and then changes nothing.
+    class, configuration and size (a corrupted or truncated state, random bytes, a state of a
+    format version other than this build's, 4), and then changes nothing.
 
     ## Version History
 
-    * v0: first release.
+    * v0: first release. Later, same id and the same episodes for every existing configuration:
+      the opt-in ``sensors`` section (state format 4).
     """
 
     _state_kind = "single"
