@@ -79,6 +79,11 @@ def test_tether_configs_are_refused_by_name_or_step(data):
     assert all(math.isfinite(v) for v in tether.energy().values())
 
 
+#: Every key with its default, the sensors section (left out of the default configuration while
+#: off) included, switched on.
+_DEFAULTS = {**accd_gym.default_config(), "sensors": accd_gym.env_config(sensors={"enabled": True})["sensors"]}
+
+
 def _env_leaf_paths() -> list[tuple[str, ...]]:
     """Dotted paths of every numeric leaf of the env config."""
     out: list[tuple[str, ...]] = []
@@ -90,7 +95,7 @@ def _env_leaf_paths() -> list[tuple[str, ...]]:
             elif isinstance(v, (int, float)) and not isinstance(v, bool):
                 out.append(path + (k,))
 
-    walk(accd_gym.default_config(), ())
+    walk(_DEFAULTS, ())
     return out
 
 
@@ -118,7 +123,7 @@ def test_junk_env_config_values_are_refused_naming_the_field(path, value):
 @examples(12)
 @given(path=st.sampled_from(ENV_PATHS), scale=st.floats(0.2, 3.0))
 def test_env_configs_that_validate_build_and_step(path, scale):
-    default = accd_gym.default_config()
+    default = _DEFAULTS
     for key in path:
         default = default[key]
     value = type(default)(default * scale) if default else scale
@@ -128,6 +133,8 @@ def test_env_configs_that_validate_build_and_step(path, scale):
             overrides[k].update(v)
         else:
             overrides[k] = v
+    if path[0] == "sensors":
+        overrides["sensors"]["enabled"] = True
     try:
         env = accd_gym.InAirCaptureEnv(**overrides)
     except ConfigError:

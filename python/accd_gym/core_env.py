@@ -79,8 +79,8 @@ class CoreEnvMixin:
 
         Raises :class:`~accd_gym.StateError` (a ``ValueError``) naming what is wrong for anything
         else (a corrupted or truncated state, another env class, configuration or number of
-        envs, random bytes, a state of the old format written before format version 3), and then
-        changes nothing."""
+        envs, random bytes, a state of another format version, e.g. one written before version 4),
+        and then changes nothing."""
         if not isinstance(state, (bytes, bytearray, memoryview)):
             raise StateError(f"a state is bytes from {type(self).__name__}.get_state(), got {type(state).__name__}")
         self._needs_reset, self._seeded = self._core.set_state(bytes(state), self._state_kind)

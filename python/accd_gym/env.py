@@ -68,6 +68,18 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
     | 23 | ``tension`` | N | 1e-4 | tension at the attachment |
     | 24 | ``time_left`` | - | 1 | time left in the capture window / ``capture_window`` |
 
+    **Sensors** (``sensors={"enabled": True, ...}``; off by default, and then the observation is
+    the true state). The same layout then holds what an onboard sensor suite measures: the boom
+    position from a vision sensor (noise growing with range, ``sensors.vision.update_rate`` with
+    the last value held between updates, ``latency``, Markov dropouts that hold the last received
+    value), its rate as the finite difference of the last two received measurements, attitude and
+    body rates with per-episode biases and white noise, position/velocity and tension with white
+    noise, and the whole vector ``sensors.delay_steps`` agent steps old. The reward, the episode
+    end and ``info`` use the true state; the physics is bitwise that of the same seeds without
+    sensors (the sensors draw from their own stream). ``accd_gym.config.SENSORS_TIER`` is the
+    recommended benchmark setting. Models, assumptions and sources: ``docs/environment.md``,
+    "Sensors", and the keys ``sensors.*`` below.
+
     ## Rewards
 
     Per agent step, with ``d`` the distance from the capture point to the boom tip (m) at the end
@@ -139,12 +151,13 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
     included); the env pickles. A state is bytes: a header (magic, format version, the kind of
     env, the number of envs, the configuration's SHA-256, a CRC-32) and the encoded state.
     ``set_state`` raises ``StateError`` naming what is wrong for anything but a state of this
-    class, configuration and size (a corrupted or truncated state, random bytes, a state of the
-    old format written before format version 3), and then changes nothing.
+    class, configuration and size (a corrupted or truncated state, random bytes, a state of a
+    format version other than this build's, 4), and then changes nothing.
 
     ## Version History
 
-    * v0: first release.
+    * v0: first release. Later, same id and the same episodes for every existing configuration:
+      the opt-in ``sensors`` section (state format 4).
     """
 
     _state_kind = "single"

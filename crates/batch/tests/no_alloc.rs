@@ -30,11 +30,21 @@ static GLOBAL: Counting = Counting;
 
 #[test]
 fn batch_steps_allocate_nothing() {
-    for mode in [Autoreset::SameStep, Autoreset::NextStep] {
+    // The sensor model (ring buffers and delay line allocated at construction) in the second.
+    for (mode, sensors) in [
+        (Autoreset::SameStep, false),
+        (Autoreset::NextStep, false),
+        (Autoreset::SameStep, true),
+    ] {
         let config = EnvConfig {
             capture_window: 0.5,
             initial: accd_sim::task::InitialConfig {
                 settle_time: 10.0,
+                ..Default::default()
+            },
+            sensors: accd_sim::SensorsConfig {
+                enabled: sensors,
+                delay_steps: 2 * sensors as usize,
                 ..Default::default()
             },
             ..EnvConfig::default()
@@ -61,7 +71,7 @@ fn batch_steps_allocate_nothing() {
         assert_eq!(
             after - before,
             0,
-            "{mode:?}: {} allocations",
+            "{mode:?}, sensors {sensors}: {} allocations",
             after - before
         );
     }

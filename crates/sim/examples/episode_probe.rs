@@ -1,5 +1,5 @@
 //! Times agent steps of one episode under several air models (for profiling the task's hot path):
-//! `cargo run --release -p accd-sim --example episode_probe [steps]`.
+//! `cargo run --release -p accd-sim --example episode_probe [steps] [default|sensors|fast|...]`.
 use std::sync::Arc;
 
 use accd_sim::{AirSampling, EnvConfig, Episode, Equilibrium, LaneStreams, NormalSampler, Seeds};
@@ -50,6 +50,15 @@ fn main() {
     }
     if only == "default" {
         return time("mean wake + turbulence", EnvConfig::default(), steps);
+    }
+    if only == "sensors" {
+        // The default task under Python's `accd_gym.config.SENSORS_TIER`.
+        let mut sensed = EnvConfig::default();
+        sensed.sensors.enabled = true;
+        sensed.sensors.vision.latency = 0.06;
+        sensed.sensors.vision.dropout = 0.1;
+        sensed.sensors.vision.dropout_burst = 5.0;
+        return time("default + sensors tier", sensed, steps);
     }
     if only == "legacy" {
         // The three runs of the probe at a3be75f (before the capture-layer rebuild), each under

@@ -737,6 +737,12 @@ impl CaptureSim {
         ))
     }
 
+    /// The boom tip minus the capture point at the current state, m (TA frame; a
+    /// [`Snapshot`]'s `boom_tip - capture_point`, without the aerodynamics).
+    pub fn boom_relative(&self) -> V3 {
+        self.boom.tip(self.tether.time) - self.capture_point_state().0
+    }
+
     /// Everything observable about the current state.
     pub fn snapshot(&mut self) -> Result<Snapshot> {
         let t = self.tether.time;

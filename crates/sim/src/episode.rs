@@ -14,8 +14,11 @@ use crate::capture::{CaptureSim, CaptureState, Snapshot};
 use crate::error::{Result, SimError};
 use crate::randomization::Parameters;
 use crate::rng::{Seeds, Stream};
-use crate::state_format::check_len;
-use crate::task::{observe, tilt, EnvConfig, ObservationInputs, ACT_DIM, OBS_DIM};
+use crate::sensors::{SensorState, Sensors};
+use crate::state_format::{check_len, StateError};
+use crate::task::{
+    observe, observe_sensed, tilt, EnvConfig, ObservationInputs, ACT_DIM, OBS_DIM, SENSED_LAYOUT,
+};
 use crate::turbulence::AmbientTurbulence;
 use crate::valid::Valid;
 use crate::wake::AirSampling;
@@ -233,6 +236,8 @@ pub struct Episode {
     distance: f64,
     done: bool,
     divergence: Option<String>,
+    /// The sensor model of the observation (`sensors.enabled`), or none: the true state.
+    sensors: Option<Sensors>,
 }
 
 impl Episode {
@@ -245,6 +250,13 @@ impl Episode {
     ) -> Result<Episode> {
         let mut sim = CaptureSim::new(&config.capture(), seeds)?;
         sim.set_boom_nominal(equilibrium.boom_nominal)?;
+        let sensors = config.sensors.enabled.then(|| {
+            Sensors::new(
+                &config.sensors,
+                config.physics.tether.time_step,
+                SENSED_LAYOUT,
+            )
+        });
         let mut episode = Episode {
             base: Arc::clone(&config),
             parameters: None,
@@ -264,6 +276,7 @@ impl Episode {
             distance: 0.0,
             done: false,
             divergence: None,
+            sensors,
         };
         episode.reset(seeds)?;
         Ok(episode)
@@ -339,6 +352,9 @@ impl Episode {
         self.previous_action = [0.0; ACT_DIM];
         self.done = false;
         self.divergence = None;
+        if let Some(sensors) = &mut self.sensors {
+            sensors.reset(seeds.initial, &self.sim.boom_relative());
+        }
         let snapshot = self.sim.snapshot()?;
         if !self.observe(&snapshot) {
             return Err(SimError::Diverged {
@@ -358,7 +374,10 @@ impl Episode {
             flap_limit: self.flap_limit,
             capture_window: self.config.capture_window,
         };
-        observe(&inputs, &mut self.obs)
+        match &mut self.sensors {
+            Some(sensors) => observe_sensed(&inputs, sensors, &mut self.obs),
+            None => observe(&inputs, &mut self.obs),
+        }
     }
 
     /// One agent step with `action` (four flap commands in [-1, 1], clipped). A non-finite
@@ -420,6 +439,9 @@ impl Episode {
                 self.diverge(e);
                 out.diverged = true;
                 break;
+            }
+            if let Some(sensors) = &mut self.sensors {
+                sensors.physics_step(&self.sim.boom_relative());
             }
             let tension = self.sim.attachment_tension();
             out.peak_tension = out.peak_tension.max(tension);
@@ -576,7 +598,13 @@ impl Episode {
         &mut self.sim
     }
 
-    /// The episode's dynamic state (physics, counters, seeds, last action and observation).
+    /// The sensor model, when `sensors.enabled`.
+    pub fn sensors(&self) -> Option<&Sensors> {
+        self.sensors.as_ref()
+    }
+
+    /// The episode's dynamic state (physics, counters, seeds, last action and observation,
+    /// sensors).
     pub fn state(&self) -> EpisodeState {
         EpisodeState {
             sim: self.sim.state(),
@@ -587,6 +615,7 @@ impl Episode {
             distance: self.distance,
             done: self.done,
             divergence: self.divergence.clone(),
+            sensors: self.sensors.as_ref().map(Sensors::state),
         }
     }
 
@@ -596,15 +625,34 @@ impl Episode {
         check_len("observation", state.observation.len(), OBS_DIM)?;
         // With randomization the state's seeds name its physics: rebuild them if they differ.
         let physics = self.drawn_physics(state.seeds)?;
-        let mut sim = match &physics {
+        let sim_base = match &physics {
             Some(p) => p.sim.clone(),
             None => self.sim.clone(),
         };
+        let mut sensors = self.sensors.clone();
+        match (&mut sensors, &state.sensors) {
+            (Some(s), Some(saved)) => s.set_state(saved)?,
+            (None, None) => {}
+            (mine, _) => {
+                return Err(StateError::invalid(
+                    "sensors",
+                    if mine.is_some() {
+                        "none"
+                    } else {
+                        "a sensor state"
+                    },
+                    "a sensor state exactly when sensors.enabled",
+                )
+                .into())
+            }
+        }
+        let mut sim = sim_base;
         sim.apply_state(state.sim)?;
         if let Some(p) = physics {
             self.install(p);
         }
         self.sim = sim;
+        self.sensors = sensors;
         self.steps = state.steps;
         self.seeds = state.seeds;
         self.previous_action = state.previous_action;
@@ -645,4 +693,6 @@ pub struct EpisodeState {
     pub done: bool,
     /// Why it diverged, if it did.
     pub divergence: Option<String>,
+    /// The sensor model's state, when `sensors.enabled`.
+    pub sensors: Option<SensorState>,
 }

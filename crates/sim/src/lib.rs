@@ -19,7 +19,7 @@
 //!   (named, seeded streams), [`state_format`] (the snapshot format; each state type lives
 //!   beside its owner);
 //! * the task: [`task`] (task configuration, observation table, reward, episode end),
-//!   [`episode`] (one RL episode).
+//!   [`sensors`] (the opt-in sensor model of the observation), [`episode`] (one RL episode).
 
 #![warn(missing_docs)]
 
@@ -35,6 +35,7 @@ pub mod error;
 pub mod interp;
 pub mod randomization;
 pub mod rng;
+pub mod sensors;
 pub mod state_format;
 pub mod task;
 pub mod turbulence;
@@ -53,6 +54,7 @@ pub use episode::{Episode, Equilibrium, Outcome};
 pub use error::SimError;
 pub use randomization::{Parameters, RandomizationConfig};
 pub use rng::{NormalSampler, Seeds};
+pub use sensors::{SensorState, Sensors, SensorsConfig};
 pub use state_format::StateError;
 pub use task::{
     observation_index, EnvConfig, ObservationField, ObservationInputs, ACT_DIM, OBSERVATION,

@@ -4,7 +4,8 @@
 //! * **Streams** ([`stream_rng`]): ChaCha8 ([`rand_chacha::ChaCha8Rng`], a fixed algorithm) whose
 //!   256-bit key is four successive SplitMix64 outputs started at the seed (little-endian), and
 //!   whose ChaCha stream (nonce) is a fixed label per use ([`WAKE_LANES_STREAM`],
-//!   [`AMBIENT_STREAM`], [`RLV_STREAM`]). SplitMix64's output function is a bijective avalanche
+//!   [`AMBIENT_STREAM`], [`RLV_STREAM`], [`SENSOR_STREAM`]; the initial conditions' label is
+//!   `crate::episode::INITIAL_STREAM`). SplitMix64's output function is a bijective avalanche
 //!   mix, so neighbouring seeds give unrelated keys; distinct labels give independent streams.
 //! * **Gaussians** ([`Stream::gaussian`]), by one of two samplers ([`NormalSampler`]):
 //!   - **Box-Muller**, written here, on two uniforms from the top 53 bits of one `u64` each,
@@ -32,6 +33,11 @@ pub const AMBIENT_STREAM: u64 = u64::from_be_bytes(*b"AMBIENT ");
 
 /// ChaCha stream label of the RLV's motion ("RLV BOOM" in ASCII).
 pub const RLV_STREAM: u64 = u64::from_be_bytes(*b"RLV BOOM");
+
+/// ChaCha stream label of the sensor model's noise, biases and dropouts ("SENSORS " in ASCII;
+/// keyed by the episode's initial-conditions seed, [`crate::sensors`]). No physics stream reads
+/// it, so switching the sensors on changes no physics.
+pub const SENSOR_STREAM: u64 = u64::from_be_bytes(*b"SENSORS ");
 
 /// SplitMix64's output function (Steele, Lea & Flood 2014): a bijective avalanche mix of `z`.
 pub fn splitmix64_mix(mut z: u64) -> u64 {
@@ -183,6 +189,22 @@ pub struct StreamState {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every use has its own label: the streams of one seed are independent.
+    #[test]
+    fn stream_labels_are_distinct() {
+        let labels = [
+            WAKE_LANES_STREAM,
+            AMBIENT_STREAM,
+            RLV_STREAM,
+            SENSOR_STREAM,
+            crate::episode::INITIAL_STREAM,
+        ];
+        for (i, a) in labels.iter().enumerate() {
+            assert!(labels[i + 1..].iter().all(|b| a != b), "{a:x}");
+        }
+        assert_eq!(SENSOR_STREAM.to_be_bytes(), *b"SENSORS ");
+    }
 
     #[test]
     fn saved_stream_continues_exactly() {

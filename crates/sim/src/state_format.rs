@@ -45,9 +45,10 @@ use thiserror::Error;
 
 /// The first 8 bytes of every state.
 pub const MAGIC: [u8; 8] = *b"ACCDSNAP";
-/// The format version written and the only one read. Version 2 was the hand-written codec
-/// (magic `ACCDST02`), version 1 its predecessor.
-pub const FORMAT_VERSION: u32 = 3;
+/// The format version written and the only one read. Version 4 added the sensor model's state
+/// to the episode's; version 2 was the hand-written codec (magic `ACCDST02`), version 1 its
+/// predecessor.
+pub const FORMAT_VERSION: u32 = 4;
 /// Bytes before the payload.
 pub const HEADER_LEN: usize = 68;
 /// The magic of format version 2 (the hand-written codec of `accd_sim::codec`).
@@ -442,6 +443,7 @@ mod tests {
     use crate::capture::CaptureState;
     use crate::episode::EpisodeState;
     use crate::rng::{ChaChaState, Seeds, StreamState};
+    use crate::sensors::SensorState;
     use crate::task::ACT_DIM;
     use crate::turbulence::{LaneState, TurbulenceState};
     use serde::Deserialize;
@@ -652,15 +654,34 @@ mod tests {
             distance: 2.5,
             done: false,
             divergence: Some("x".into()),
+            sensors: Some(SensorState {
+                stream,
+                rate_bias: [0.01; 3],
+                attitude_bias: [0.02; 3],
+                history: vec![[1.5; 3]; 2],
+                head: 1,
+                steps: 7,
+                next_update: 3,
+                lost: true,
+                last: [0.75; 3],
+                last_time: 0.5,
+                previous: [0.25; 3],
+                previous_time: 0.45,
+                received: 2,
+                dropped: 1,
+                delayed: vec![0.5f32; 2],
+                delayed_head: 0,
+                delayed_filled: true,
+            }),
         };
         let bytes = postcard::to_allocvec(&state).unwrap();
         let digest = hex(&Sha256::digest(&bytes));
         assert_eq!(
             (FORMAT_VERSION, bytes.len(), digest.as_str()),
             (
-                3,
-                662,
-                "5472b754ae91b148d6367446b2333b4a547df6887b99620d790f06b896d74a88"
+                4,
+                884,
+                "9c15706b1b25987c94235fa8da6d8109f96ced915da4ed2faedda9a3bdd3f7ab"
             ),
             "the state types' encoding changed: bump FORMAT_VERSION, then pin the new digest"
         );

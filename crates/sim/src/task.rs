@@ -12,6 +12,10 @@
 //! [-`OBS_BOUND`, `OBS_BOUND`]. Vectors are in the TA frame (x forward, y starboard, z down)
 //! unless stated. See [`OBSERVATION`] for the table (index, name, unit, scale).
 //!
+//! With `sensors.enabled` the observation is what the sensor model ([`crate::sensors`]) measures
+//! of these quantities (same layout, names and scales); the reward and the episode end below
+//! always use the true state.
+//!
 //! # Reward (per agent step)
 //! With `d` the distance from the capture point to the boom tip at the end of the step (m),
 //! `a` the action, `a'` the previous action (zero at the start):
@@ -46,6 +50,7 @@ use crate::capture::Snapshot;
 use crate::config::{parse_named, CaptureConfig};
 use crate::error::Result;
 use crate::randomization::RandomizationConfig;
+use crate::sensors::{SensedLayout, Sensors, SensorsConfig};
 use crate::valid::Valid;
 use accd_spec::{join, out_of_range, Fields, OutOfRange, Rules};
 
@@ -282,20 +287,83 @@ pub fn observation_index(name: &str) -> Option<usize> {
     OBSERVATION.iter().position(|f| f.name == name)
 }
 
+/// The index of the observation entry `name`, at compile time (a name not in the table is a
+/// compile error).
+const fn index_of(name: &str) -> usize {
+    let mut i = 0;
+    while i < OBS_DIM {
+        let a = OBSERVATION[i].name.as_bytes();
+        let b = name.as_bytes();
+        if a.len() == b.len() {
+            let mut k = 0;
+            while k < a.len() && a[k] == b[k] {
+                k += 1;
+            }
+            if k == a.len() {
+                return i;
+            }
+        }
+        i += 1;
+    }
+    panic!("not an observation entry")
+}
+
+/// Where the sensor model ([`crate::sensors`]) finds the quantities it senses in the
+/// observation; each group is contiguous in the table (`sensed_layout_matches_the_table`).
+pub const SENSED_LAYOUT: SensedLayout = SensedLayout {
+    dim: OBS_DIM,
+    boom_rel: index_of("boom_rel_x"),
+    boom_rel_rate: index_of("boom_rel_vx"),
+    position: index_of("accd_dx"),
+    velocity: index_of("accd_vx"),
+    attitude: index_of("quat_w"),
+    body_rates: index_of("rate_p"),
+    tension: index_of("tension"),
+};
+
+/// The physical quantities of the observation of `inputs` (in their units, before scaling)
+/// into `raw`; false if one is not finite.
+pub fn raw_observation(inputs: &ObservationInputs<'_>, raw: &mut [f64; OBS_DIM]) -> bool {
+    for (v, field) in raw.iter_mut().zip(&OBSERVATION) {
+        *v = (field.value)(inputs);
+    }
+    raw.iter().all(|v| v.is_finite())
+}
+
+/// Each quantity of `raw` times its scale, clipped to [-[`OBS_BOUND`], [`OBS_BOUND`]], into `out`.
+pub fn scale_observation(raw: &[f64; OBS_DIM], out: &mut [f32; OBS_DIM]) {
+    for (o, (v, field)) in out.iter_mut().zip(raw.iter().zip(&OBSERVATION)) {
+        *o = ((v * field.scale) as f32).clamp(-OBS_BOUND, OBS_BOUND);
+    }
+}
+
 /// The observation of `inputs` into `out` (each quantity times its scale, clipped to
 /// [-[`OBS_BOUND`], [`OBS_BOUND`]]) if every quantity is finite; false (and `out` unchanged)
 /// otherwise.
 pub fn observe(inputs: &ObservationInputs<'_>, out: &mut [f32; OBS_DIM]) -> bool {
     let mut raw = [0.0; OBS_DIM];
-    for (v, field) in raw.iter_mut().zip(&OBSERVATION) {
-        *v = (field.value)(inputs);
-    }
-    if !raw.iter().all(|v| v.is_finite()) {
+    if !raw_observation(inputs, &mut raw) {
         return false;
     }
-    for (o, (v, field)) in out.iter_mut().zip(raw.iter().zip(&OBSERVATION)) {
-        *o = ((v * field.scale) as f32).clamp(-OBS_BOUND, OBS_BOUND);
+    scale_observation(&raw, out);
+    true
+}
+
+/// [`observe`] through `sensors`: the true quantities checked finite (false and `out` unchanged
+/// otherwise), then measured ([`Sensors::sense`]), scaled and clipped, then delayed
+/// ([`Sensors::delay`]).
+pub fn observe_sensed(
+    inputs: &ObservationInputs<'_>,
+    sensors: &mut Sensors,
+    out: &mut [f32; OBS_DIM],
+) -> bool {
+    let mut raw = [0.0; OBS_DIM];
+    if !raw_observation(inputs, &mut raw) {
+        return false;
     }
+    sensors.sense(&mut raw);
+    scale_observation(&raw, out);
+    sensors.delay(out);
     true
 }
 
@@ -388,6 +456,10 @@ accd_spec::config_struct! {
             "wake seeds to cycle through (evaluation); overrides wake_seed";
         pub randomization: RandomizationConfig = RandomizationConfig::default(), "", "",
             "physical parameters drawn per episode from its wake seed (off by default)";
+        /// Last, and left out of written documents while off, so that documents and config
+        /// hashes of configurations without sensors are as they were.
+        pub sensors: SensorsConfig = SensorsConfig::default(), "", "",
+            "sensor model of the observation (noise, rates, latency, dropouts, delay); off by default";
     }
 }
 
@@ -426,6 +498,14 @@ impl Rules for EnvConfig {
                 "a whole multiple of agent_step",
             ));
         }
+        let rate = self.sensors.vision.update_rate;
+        if self.sensors.enabled && rate * dt > 1.0 + 1e-9 {
+            return Err(out_of_range(
+                &join(prefix, "sensors.vision.update_rate"),
+                rate,
+                format!("(0, 1 / tether.time_step = {}] Hz", 1.0 / dt),
+            ));
+        }
         if let Some(list) = &self.wake_seeds {
             if list.is_empty() {
                 return Err(out_of_range(
@@ -456,7 +536,8 @@ impl EnvConfig {
 
     /// Estimated heap bytes of one env (episode) of this configuration: the turbulence's gust
     /// history (the dominant part at low airspeed or a long history), the tether's state, model
-    /// and integrator buffers, and a fixed allowance for the rest. Shared parts (the wake and
+    /// and integrator buffers, the sensors' history and delay line, and a fixed allowance for
+    /// the rest. Shared parts (the wake and
     /// aerodynamic tables) are not counted.
     pub fn bytes_per_env(&self) -> usize {
         let dofs = self.physics.tether.dofs();
@@ -467,8 +548,12 @@ impl EnvConfig {
             .physics
             .turbulence
             .history_bytes(self.physics.aircraft.airspeed);
+        let sensors = self.sensors.bytes(self.physics.tether.time_step, OBS_DIM);
         const FIXED: usize = 16 << 10;
-        turbulence.saturating_add(tether).saturating_add(FIXED)
+        turbulence
+            .saturating_add(tether)
+            .saturating_add(sensors)
+            .saturating_add(FIXED)
     }
 
     /// Physics steps per agent step.
@@ -636,7 +721,9 @@ mod tests {
     /// the configuration in turn) is refused, naming the dotted field.
     #[test]
     fn every_declared_range_is_enforced() {
-        let default = serde_json::to_value(EnvConfig::default()).unwrap();
+        let mut default = serde_json::to_value(EnvConfig::default()).unwrap();
+        // The sensors section is left out at its default: write it in.
+        default["sensors"] = serde_json::to_value(SensorsConfig::default()).unwrap();
         let mut checked = 0;
         for (key, f) in accd_spec::walk(EnvConfig::FIELDS) {
             if f.range.is_empty() {
@@ -699,6 +786,64 @@ mod tests {
             slot = &slot[part];
         }
         slot.is_u64() && v < 0.0
+    }
+
+    /// The sensors' groups are contiguous runs of the table, in the order the layout says.
+    #[test]
+    fn sensed_layout_matches_the_table() {
+        let l = SENSED_LAYOUT;
+        let runs: [(usize, &[&str]); 7] = [
+            (l.boom_rel, &["boom_rel_x", "boom_rel_y", "boom_rel_z"]),
+            (
+                l.boom_rel_rate,
+                &["boom_rel_vx", "boom_rel_vy", "boom_rel_vz"],
+            ),
+            (l.position, &["accd_dx", "accd_dy", "accd_dz"]),
+            (l.velocity, &["accd_vx", "accd_vy", "accd_vz"]),
+            (l.attitude, &["quat_w", "quat_x", "quat_y", "quat_z"]),
+            (l.body_rates, &["rate_p", "rate_q", "rate_r"]),
+            (l.tension, &["tension"]),
+        ];
+        for (start, names) in runs {
+            for (k, name) in names.iter().enumerate() {
+                assert_eq!(OBSERVATION[start + k].name, *name);
+            }
+        }
+        assert_eq!(l.dim, OBS_DIM);
+    }
+
+    /// The sensors section is written only when it differs from its default (so the default
+    /// document, and its hash, are as before), last, and reads back.
+    #[test]
+    fn the_sensors_section_is_written_last_and_only_when_set() {
+        let text = serde_json::to_string(&EnvConfig::default()).unwrap();
+        assert!(!text.contains("sensors"), "{text}");
+        let mut c = EnvConfig::default();
+        c.sensors.enabled = true;
+        c.sensors.vision.latency = 0.1;
+        let text = serde_json::to_string(&c).unwrap();
+        let at = text.find("\"sensors\":").unwrap();
+        assert!(text.find("\"wake_seeds\":").unwrap() < at, "{text}");
+        let back = EnvConfig::from_json(&text).unwrap();
+        assert_eq!(*back, c);
+        let e = EnvConfig::from_json(
+            r#"{"tether": {"time_step": 0.1}, "agent_step": 0.1, "sensors": {"enabled": true}}"#,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("`sensors.vision.update_rate`") && e.contains("20"),
+            "{e}"
+        );
+        // Off, the rule does not apply.
+        EnvConfig::from_json(r#"{"tether": {"time_step": 0.1}, "agent_step": 0.1}"#).unwrap();
+        let e = EnvConfig::from_json(r#"{"sensors": {"vision": {"dropout": 0.7}}}"#)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("`sensors.vision.dropout`") && e.contains("[0, 0.5]"),
+            "{e}"
+        );
     }
 
     #[test]

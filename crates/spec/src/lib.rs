@@ -265,6 +265,13 @@ pub trait Field {
 
     /// Checks the value at `path` against `spec` (for a section: its own fields).
     fn check_field(&self, path: &str, spec: &FieldSpec) -> Result<(), OutOfRange>;
+
+    /// Whether the value is left out when a struct composed flat writes its entries
+    /// ([`Fields::write_entries`]): a section says so through [`Rules::omitted`]; a value never
+    /// is. A missing key reads as its default, so omission must only hold at the default.
+    fn omitted(&self) -> bool {
+        false
+    }
 }
 
 impl Field for f64 {
@@ -350,6 +357,15 @@ pub trait Rules {
     fn check_rules(&self, _prefix: &str) -> Result<(), OutOfRange> {
         Ok(())
     }
+
+    /// True when this section, as a field of a struct composed flat, is left out of the
+    /// documents that struct writes (an opt-in section at its default, so that the documents,
+    /// and the config hashes of saved states, of configurations without it stay as they were).
+    /// Must only be true at the default (a missing key reads as the default). False unless a
+    /// struct says otherwise.
+    fn omitted(&self) -> bool {
+        false
+    }
 }
 
 /// A configuration struct declared with [`config_struct!`].
@@ -383,7 +399,8 @@ pub trait Fields: Sized {
         map: &mut A,
     ) -> Result<bool, A::Error>;
 
-    /// Writes every field as an entry of `map`, in declaration order.
+    /// Writes every field as an entry of `map`, in declaration order (a section whose
+    /// [`Rules::omitted`] is true left out).
     fn write_entries<S: serde::ser::SerializeMap>(&self, map: &mut S) -> Result<(), S::Error>;
 }
 
@@ -509,7 +526,9 @@ macro_rules! config_struct {
                 map: &mut S,
             ) -> ::std::result::Result<(), S::Error> {
                 $($crate::Fields::write_entries(&self.$flat, map)?;)?
-                $(map.serialize_entry(stringify!($field), &self.$field)?;)*
+                $(if !$crate::Field::omitted(&self.$field) {
+                    map.serialize_entry(stringify!($field), &self.$field)?;
+                })*
                 Ok(())
             }
         }
@@ -520,6 +539,10 @@ macro_rules! config_struct {
 
             fn check_field(&self, path: &str, _spec: &$crate::FieldSpec) -> ::std::result::Result<(), $crate::OutOfRange> {
                 $crate::Fields::check_fields(self, path)
+            }
+
+            fn omitted(&self) -> bool {
+                $crate::Rules::omitted(self)
             }
         }
 
