@@ -619,7 +619,8 @@ mod tests {
     }
 
     /// The keys of today's documents, in the order they are written (the state header hashes
-    /// this JSON: the order must not change).
+    /// this JSON: the order must not change). `sensors` follows them, written only when it is
+    /// not at its default (`the_sensors_section_is_written_last_and_only_when_set`).
     const KEYS: [&str; 14] = [
         "tether",
         "accd",
