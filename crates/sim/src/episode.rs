@@ -293,7 +293,7 @@ impl Episode {
         if self.parameters == Some(parameters) {
             return Ok(None);
         }
-        let config = Arc::new(parameters.apply(&self.base)?);
+        let config = Arc::new(drawn_config(&self.base, &parameters)?);
         let equilibrium = Arc::new(Equilibrium::settle(&config)?);
         let mut sim = CaptureSim::new(&config.capture(), seeds)?;
         sim.set_boom_nominal(equilibrium.boom_nominal)?;
@@ -662,6 +662,16 @@ impl Episode {
         self.divergence = state.divergence;
         Ok(())
     }
+}
+
+/// The configuration of an episode of `base` whose randomized physics drew `parameters`
+/// ([`Parameters::apply_to`] on its physics), validated whole, with randomization off (it is one
+/// episode's fixed physics).
+pub fn drawn_config(base: &EnvConfig, parameters: &Parameters) -> Result<Valid<EnvConfig>> {
+    let mut c = base.clone();
+    parameters.apply_to(&mut c.physics);
+    c.randomization.enabled = false;
+    c.validated()
 }
 
 /// An episode's physics with randomized parameters (built whole, then installed).

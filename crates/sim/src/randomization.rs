@@ -33,11 +33,9 @@ use accd_spec::{join, out_of_range, OutOfRange, Rules};
 use accd_tether::{Material, TetherConfig};
 use serde::{Deserialize, Serialize};
 
-use crate::error::Result;
+use crate::config::CaptureConfig;
 use crate::rng::Stream;
-use crate::task::EnvConfig;
 use crate::turbulence::AmbientTurbulence;
-use crate::valid::Valid;
 
 /// ChaCha stream label of the parameter draw ("PARAMS  " in ASCII), on the wake seed.
 pub const PARAMETERS_STREAM: u64 = u64::from_be_bytes(*b"PARAMS  ");
@@ -179,31 +177,30 @@ impl Parameters {
         ]
     }
 
-    /// `base` with these parameters: the tether a UHMWPE rope of the drawn length and diameter
-    /// (mass, breaking tension, EA and EI from Table 2's rope model; segments, damping, drag and
-    /// step from `base`), the ACCD's mass and coefficient factors, the wake's angle and
-    /// strength, the airspeed, and the ambient turbulence (none at 0 m/s). Validated whole; the
-    /// result has randomization off (it is one episode's fixed physics).
-    pub fn apply(&self, base: &EnvConfig) -> Result<Valid<EnvConfig>> {
-        let mut c = base.clone();
+    /// Writes these parameters into `physics`: the tether a UHMWPE rope of the drawn length and
+    /// diameter (mass, breaking tension, EA and EI from Table 2's rope model; segments, damping,
+    /// drag and step as they were), the ACCD's mass and coefficient factors, the wake's angle and
+    /// strength, the airspeed, and the ambient turbulence (none at 0 m/s). The episode's whole
+    /// configuration is [`crate::episode::drawn_config`].
+    pub fn apply_to(&self, physics: &mut CaptureConfig) {
         let rope = Material::Uhmwpe;
         let d = self.tether_diameter;
-        c.physics.tether = TetherConfig {
+        physics.tether = TetherConfig {
             length: self.tether_length,
             diameter: d,
             mass_per_length: rope.mass_per_length(d),
             axial_stiffness: rope.axial_rigidity(d) / self.tether_length,
             flexural_rigidity: rope.flexural_rigidity(d),
             breaking_tension: rope.max_tension(d),
-            ..base.physics.tether.clone()
+            ..physics.tether.clone()
         };
-        c.physics.accd.mass = self.accd_mass;
-        c.physics.accd.force_coefficient_scale = self.force_coefficient_scale;
-        c.physics.accd.moment_coefficient_scale = self.moment_coefficient_scale;
-        c.physics.wake.alpha_deg = self.wake_alpha_deg;
-        c.physics.wake.strength = self.wake_strength;
-        c.physics.aircraft.airspeed = self.airspeed;
-        c.physics.turbulence.ambient = if self.ambient_sigma_mps > 0.0 {
+        physics.accd.mass = self.accd_mass;
+        physics.accd.force_coefficient_scale = self.force_coefficient_scale;
+        physics.accd.moment_coefficient_scale = self.moment_coefficient_scale;
+        physics.wake.alpha_deg = self.wake_alpha_deg;
+        physics.wake.strength = self.wake_strength;
+        physics.aircraft.airspeed = self.airspeed;
+        physics.turbulence.ambient = if self.ambient_sigma_mps > 0.0 {
             AmbientTurbulence::Custom {
                 sigma_mps: self.ambient_sigma_mps,
                 length_scale_m: AMBIENT_LENGTH_SCALE_M,
@@ -211,8 +208,6 @@ impl Parameters {
         } else {
             AmbientTurbulence::None
         };
-        c.randomization.enabled = false;
-        c.validated()
     }
 }
 
@@ -269,7 +264,8 @@ mod tests {
             tether_diameter: 0.024,
             ..Parameters::draw(&RandomizationConfig::default(), 1)
         };
-        let c = p.apply(&EnvConfig::default()).unwrap();
+        let mut c = crate::EnvConfig::default();
+        p.apply_to(&mut c.physics);
         let t3 = TetherConfig::table3();
         // 250 m of 24 mm UHMWPE is Table 3's tether.
         for (a, b) in [
@@ -281,12 +277,11 @@ mod tests {
             assert!((a - b).abs() <= 1e-9 * b.abs(), "{a} vs {b}");
         }
         assert_eq!(c.physics.aircraft.airspeed, p.airspeed);
-        assert!(!c.randomization.enabled);
     }
 
     #[test]
     fn an_inverted_range_is_refused_by_name() {
-        let mut c = EnvConfig::default();
+        let mut c = crate::EnvConfig::default();
         c.randomization.airspeed = [200.0, 170.0];
         let e = c.validate().unwrap_err().to_string();
         assert!(e.contains("randomization.airspeed"), "{e}");
