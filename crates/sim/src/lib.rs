@@ -33,6 +33,7 @@ pub mod config;
 pub mod episode;
 pub mod error;
 pub mod interp;
+pub mod linearize;
 pub mod rng;
 pub mod state_format;
 pub mod task;
@@ -50,6 +51,7 @@ pub use capture::{CaptureSim, CaptureState, Snapshot};
 pub use config::CaptureConfig;
 pub use episode::{Episode, Equilibrium, Outcome};
 pub use error::SimError;
+pub use linearize::{linearize, Linearization, Linearized};
 pub use rng::{NormalSampler, Seeds};
 pub use state_format::StateError;
 pub use task::{
