@@ -52,6 +52,7 @@ from accd_gym.task import HELD_OUT_WAKE_SEEDS, TRAINING_WAKE_SEEDS
 from accd_gym.env import InAirCaptureEnv
 from accd_gym.vector import InAirCaptureVectorEnv
 from accd_gym.recording import Recording, RecordEpisode, record_episodes
+from accd_gym.lqr import LqrPolicy, linearize
 
 import gymnasium as _gym
 
@@ -101,6 +102,7 @@ __all__ = [
     "HELD_OUT_WAKE_SEEDS",
     "InAirCaptureEnv",
     "InAirCaptureVectorEnv",
+    "LqrPolicy",
     "TRAINING_WAKE_SEEDS",
     "default_config",
     "env_config",
@@ -113,6 +115,7 @@ __all__ = [
     "__version__",
     "default_aero_table_json",
     "isa",
+    "linearize",
     "mix_flaps",
     "record_episodes",
     "Recording",

@@ -333,4 +333,30 @@ class LqrPolicy:
         return u.astype(np.float32)
 
 
-__all__ = ["LqrDesign", "LqrPolicy", "LqrTuning", "default_tuning", "design", "linearize"]
+def is_lqr_tuning(path: str) -> bool:
+    """Whether the JSON file ``path`` is an LQR tuning result (``"policy": "lqr"``)."""
+    from pathlib import Path
+
+    try:
+        doc = json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return False
+    return isinstance(doc, dict) and doc.get("policy") == "lqr"
+
+
+def lqr_from_tuning(path: str, config: Any = None) -> LqrPolicy:
+    """The LQR designed for ``config`` with the winning tuning of a ``scripts/tune_lqr.py``
+    result file (ConfigError if it is not one)."""
+    from pathlib import Path
+
+    try:
+        best = json.loads(Path(path).read_text())["best"]["tuning"]
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise ConfigError(f"invalid config: policy {path!r} is not an LQR tuning file ({e})") from None
+    policy = LqrPolicy.for_config(config, tuning=best)
+    policy.name = f"lqr ({Path(path).stem})"
+    return policy
+
+
+__all__ = ["LqrDesign", "LqrPolicy", "LqrTuning", "default_tuning", "design", "is_lqr_tuning", "linearize",
+           "lqr_from_tuning"]
