@@ -306,8 +306,12 @@ class LqrPolicy:
             return
         if mask is None:
             self._fresh[:] = True
+            return
+        mask = np.asarray(mask, dtype=bool)
+        if mask.shape != self._fresh.shape:
+            self._z = None  # another batch: every estimate starts afresh at the next predict
         else:
-            self._fresh[np.asarray(mask, dtype=bool)] = True
+            self._fresh[mask] = True
 
     def predict(self, obs: Any) -> np.ndarray:
         """Flap commands (N, 4) in [-1, 1] for observations (N, 25); advances the estimates."""
