@@ -101,13 +101,13 @@ class LqrTuning:
     ``model_noise`` (-), ``meas_noise`` (-): the Kalman filter's noise model.
     """
 
-    q_position: float = 1.0
-    q_velocity: float = 0.3
+    q_position: float = 3.0
+    q_velocity: float = 0.1
     q_attitude: float = 10.0
     q_rate: float = 0.1
-    r_flap: float = 1.0
-    wind_white: float = 1.0
-    wind_walk: float = 0.1
+    r_flap: float = 0.1
+    wind_white: float = 3.0
+    wind_walk: float = 0.03
     boom_accel: float = 0.02
     model_noise: float = 1.0
     meas_noise: float = 1.0
