@@ -494,10 +494,13 @@ fn linearize_with_plant(
             .solve(&g, cut)
             .map_err(|e| SimError::invalid_config("linearize", e, "a solvable trim"))?;
         let mut next: Vec<f64> = x.iter().zip(dx.iter()).map(|(x, d)| x - d).collect();
+        let previous_attitude = plant.trim_attitude;
         plant.retrim(&mut next);
         let r = max_abs_diff(&plant.step(&next, &zero, &NO_WIND)?, &next);
         newton_iterations += 1;
-        if !(r < residual) {
+        if r.is_nan() || r >= residual {
+            // No progress (rounding): keep the last iterate, in its own attitude frame.
+            plant.trim_attitude = previous_attitude;
             break;
         }
         x = next;
