@@ -202,3 +202,12 @@ def test_the_policy_pickles_with_its_estimates(policy):
     policy.predict(obs)
     copy = pickle.loads(pickle.dumps(policy))
     assert np.array_equal(copy.predict(obs), policy.predict(obs))
+
+
+def test_evaluate_names_an_lqr_tuning_file_as_lqr(tmp_path):
+    from accd_gym.evaluation import evaluate
+
+    results = evaluate(["training/lqr_tuning.json"], 2, tmp_path, num_envs=2, num_threads=1,
+                       config={"capture_window": 1.0}, progress=False)
+    assert "lqr (lqr_tuning)" in (tmp_path / "summary.md").read_text()
+    assert list(results["policies"]) == ["training/lqr_tuning.json"]

@@ -537,7 +537,9 @@ def _label(spec: str) -> str:
     if spec in BASELINES or not p.exists():
         return spec
     if p.suffix == ".json":
-        return f"guidance ({p.stem})"
+        from accd_gym.lqr import is_lqr_tuning
+
+        return f"{'lqr' if is_lqr_tuning(spec) else 'guidance'} ({p.stem})"
     return p.name if p.is_dir() else f"{p.parent.name}/{p.stem}"
 
 
