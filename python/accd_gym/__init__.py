@@ -54,6 +54,7 @@ from accd_gym.vector import InAirCaptureVectorEnv
 from accd_gym.recording import Recording, RecordEpisode, record_episodes
 from accd_gym.tiers import TIERS
 from accd_gym.tiers import register_tiers as _register_tiers
+from accd_gym.lqr import LqrPolicy, linearize
 
 
 
@@ -98,6 +99,7 @@ __all__ = [
     "InAirCaptureEnv",
     "InAirCaptureVectorEnv",
     "TIERS",
+    "LqrPolicy",
     "TRAINING_WAKE_SEEDS",
     "default_config",
     "env_config",
@@ -110,6 +112,7 @@ __all__ = [
     "__version__",
     "default_aero_table_json",
     "isa",
+    "linearize",
     "mix_flaps",
     "record_episodes",
     "Recording",

@@ -1,4 +1,5 @@
-"""Built-in baseline policies: zero flaps, random flaps and a classical guidance controller.
+"""Built-in baseline policies: zero flaps, random flaps, a classical guidance controller and an
+LQR with a disturbance observer (:class:`accd_gym.lqr.LqrPolicy`, designed for the env's config).
 
 Every policy here (and :class:`accd_gym.evaluation.SB3Policy`) has the same interface:
 ``predict(obs_batch) -> actions`` with ``obs_batch`` of shape (N, 25) (the observation of
@@ -213,11 +214,20 @@ class GuidancePolicy:
         return np.clip(flaps, -1.0, 1.0).astype(np.float32)
 
 
-#: Built-in baselines by name: factories taking a seed.
-BASELINES: dict[str, Callable[[int], Any]] = {
-    "zero": lambda seed: ZeroPolicy(),
-    "random": lambda seed: RandomPolicy(seed),
-    "guidance": lambda seed: GuidancePolicy(),
+def _lqr(config: Any) -> Any:
+    """The LQR baseline designed for ``config`` (:meth:`accd_gym.lqr.LqrPolicy.for_config`)."""
+    from accd_gym.lqr import LqrPolicy
+
+    return LqrPolicy.for_config(config)
+
+
+#: Built-in baselines by name: factories taking a seed and the env configuration (overrides,
+#: an ``accd_gym._core.EnvConfig`` or None for the defaults) the policy will run on.
+BASELINES: dict[str, Callable[[int, Any], Any]] = {
+    "zero": lambda seed, config: ZeroPolicy(),
+    "random": lambda seed, config: RandomPolicy(seed),
+    "guidance": lambda seed, config: GuidancePolicy(),
+    "lqr": lambda seed, config: _lqr(config),
 }
 
 
@@ -235,11 +245,13 @@ def guidance_from_tuning(path: str) -> GuidancePolicy:
     return policy
 
 
-def make_baseline(name: str, seed: int = 0) -> Any:
-    """The built-in baseline ``name`` (one of :data:`BASELINES`); ConfigError for other names."""
+def make_baseline(name: str, seed: int = 0, config: Any = None) -> Any:
+    """The built-in baseline ``name`` (one of :data:`BASELINES`) for the env configuration
+    ``config`` (only ``lqr`` depends on it: it is designed for that configuration's physics);
+    ConfigError for other names."""
     if name not in BASELINES:
         raise ConfigError(f"invalid config: policy {name!r} is neither a built-in baseline {sorted(BASELINES)} nor a model path")
-    return BASELINES[name](seed)
+    return BASELINES[name](seed, config)
 
 
 __all__ = [

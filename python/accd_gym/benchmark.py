@@ -10,8 +10,8 @@ trained with several seeds, every baseline, the same held-out episodes, one repo
    tier meets the same episodes). Jobs run one after the other in this process, or, with
    ``--ray ADDRESS`` (``"local"``, ``"auto"``, ``HOST:PORT``), as Ray tasks of ``cpus_per_job``
    CPUs each, placed wherever the cluster has room (the same machinery as ``evaluate --ray``).
-2. **Baselines** (``zero``, ``random``, ``guidance``, ``lqr`` when available) on the same
-   episodes of every tier.
+2. **Baselines** (``zero``, ``random``, ``guidance``, ``lqr``) on the same episodes of every
+   tier; the LQR is designed for each tier's configuration.
 3. **Report** (``OUT/benchmark.json``, ``OUT/benchmark.md``, ``OUT/performance_profile.png``):
    per tier and policy the capture rate (learned: the interquartile mean over seeds with a 95 %
    stratified bootstrap interval, and every seed's rate; baselines: the rate with its Wilson
@@ -37,7 +37,7 @@ tiers            tier names (default: all)
 learners         ``{"ppo": {"train_config", "seeds", "timesteps", "tiers"}, "sac": {...}}``;
                  ``tiers`` limits an algorithm to some tiers (default: all)
 baselines        baseline names (default ``["zero", "random", "guidance", "lqr"]``; unknown ones
-                 are refused, ``lqr`` is skipped with a note when it is not installed)
+                 are refused)
 episodes         held-out episodes per tier (default 500)
 num_envs         evaluation batch (default 16)
 cpus_per_job     CPUs a Ray job reserves, also the threads stepping its envs (default 1)
@@ -244,16 +244,12 @@ def _run_jobs(todo: list[Job], cfg: dict[str, Any], out: Path, ray_address: Opti
     return [done[i] for i in range(len(todo))]
 
 
-def _baseline_policy(name: str, tier: str) -> tuple[Optional[Any], Optional[str]]:
-    """The baseline ``name`` for a tier, or None and why it is not available."""
+def _baseline_policy(name: str, tier: str) -> Any:
+    """The baseline ``name`` built for the tier's configuration (the LQR is designed on the
+    tier's physics: its base configuration, the nominal draw of a randomized tier)."""
     from accd_gym.baselines import make_baseline
 
-    try:
-        return make_baseline(name, 0), None
-    except ConfigError as e:
-        if name == "lqr":
-            return None, f"lqr not available: {e}"
-        raise
+    return make_baseline(name, 0, {"tier": tier})
 
 
 def iqm(values: Sequence[float]) -> float:
@@ -432,11 +428,7 @@ def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] =
     for tier in config["tiers"]:
         baselines[tier] = {}
         for name in config["baselines"]:
-            policy, why = _baseline_policy(name, tier)
-            if policy is None:
-                notes.setdefault(tier, []).append(f"({why})")
-                baselines[tier][name] = None
-                continue
+            policy = _baseline_policy(name, tier)
             progress(f"baseline {name} on {tier}")
             baselines[tier][name] = evaluate_policy(policy, tier, config["episodes"], config["num_envs"])
     baseline_s = time.perf_counter() - t1

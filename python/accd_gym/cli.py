@@ -250,11 +250,12 @@ def _replay(args: argparse.Namespace) -> int:
 def _rollout(args: argparse.Namespace) -> int:
     from accd_gym import evaluation
 
-    policy = evaluation.load_policy(args.policy, seed=args.seed, allow_unnormalized=args.allow_unnormalized)
+    config = _env_of(args)
+    policy = evaluation.load_policy(args.policy, seed=args.seed, allow_unnormalized=args.allow_unnormalized, config=config)
     if getattr(policy, "note", None):
         print(f"note: {policy.note}", file=sys.stderr)
     eps = evaluation.run_episodes(policy, args.episodes, seed=args.seed, num_envs=args.num_envs, num_threads=args.num_threads,
-                                  config=_env_of(args), progress=not args.quiet, desc=args.policy)
+                                  config=config, progress=not args.quiet, desc=args.policy)
     s = evaluation.summarize(eps)
     lo, hi = s["capture_rate_ci95"]
     print(f"{args.policy}: {s['captures']}/{s['episodes']} captured ({s['capture_rate']:.1%}, 95% CI {lo:.1%}-{hi:.1%}); "
@@ -302,7 +303,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_train)
     p = sub.add_parser("evaluate", help="evaluate policies on held-out wake seeds: JSON, plots, markdown")
     p.add_argument("--policy", action="append", required=True,
-                   help="a baseline (zero, random, guidance) or a trained model (run folder or .zip); repeatable")
+                   help="a baseline (zero, random, guidance, lqr) or a trained model (run folder or .zip); repeatable")
     p.add_argument("--episodes", type=_positive("--episodes"), default=100, help="episodes per policy (default 100)")
     p.add_argument("--out", default="runs/eval", help="output folder (default: runs/eval)")
     p.add_argument("--num-envs", type=_positive("--num-envs"), default=16, help="parallel episodes (default 16)")
@@ -321,7 +322,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_evaluate)
     p = sub.add_parser("replay", help="record episodes of a policy: .npz, a self-contained 3D replay page each, MP4")
-    p.add_argument("--policy", required=True, help="a baseline (zero, random, guidance) or a trained model")
+    p.add_argument("--policy", required=True, help="a baseline (zero, random, guidance, lqr) or a trained model")
     p.add_argument("--episodes", type=_positive("--episodes"), default=1, help="episodes (default 1)")
     p.add_argument("--out", default="runs/replay", help="output folder (default: runs/replay)")
     p.add_argument("--seed", type=_seed, default=None,
@@ -358,7 +359,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=_benchmark)
     p = sub.add_parser("rollout", help="run a policy for a few episodes headless and print a summary")
-    p.add_argument("--policy", required=True, help="a baseline (zero, random, guidance) or a trained model")
+    p.add_argument("--policy", required=True, help="a baseline (zero, random, guidance, lqr) or a trained model")
     p.add_argument("--episodes", type=_positive("--episodes"), default=8, help="episodes (default 8)")
     p.add_argument("--seed", type=_seed, default=0, help="base seed (training wake seeds are drawn from it)")
     p.add_argument("--num-envs", type=_positive("--num-envs"), default=8, help="parallel episodes (default 8)")

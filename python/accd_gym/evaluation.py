@@ -174,16 +174,22 @@ def _algo_of(model_path: Path) -> str:
     raise ConfigError(f"invalid config: cannot tell the algorithm of {str(model_path)!r} (allowed: PPO, SAC)")
 
 
-def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False) -> Any:
-    """A policy from a baseline name (``zero``, ``random``, ``guidance``), a guidance tuning file
-    (``training/guidance_tuning*.json``: the controller with its winning gains) or a model path
-    (see :class:`SB3Policy` for ``allow_unnormalized``; an RLlib run or checkpoint folder gives an
-    :class:`accd_gym.rllib.RLlibPolicy`)."""
+def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False, config: Optional[Any] = None) -> Any:
+    """A policy from a baseline name (``zero``, ``random``, ``guidance``, ``lqr``), a tuning file
+    (``training/guidance_tuning*.json``: the guidance controller with its winning gains;
+    ``training/lqr_tuning.json``: the LQR with its winning tuning) or a model path (see
+    :class:`SB3Policy` for ``allow_unnormalized``; an RLlib run or checkpoint folder gives an
+    :class:`accd_gym.rllib.RLlibPolicy`). ``config``: the env configuration (overrides) the
+    policy will run on; the LQR is designed for it."""
     from accd_gym.baselines import BASELINES, guidance_from_tuning, make_baseline
 
     if spec in BASELINES:
-        return make_baseline(spec, seed)
+        return make_baseline(spec, seed, config)
     if spec.endswith(".json") and Path(spec).is_file():
+        from accd_gym.lqr import is_lqr_tuning, lqr_from_tuning
+
+        if is_lqr_tuning(spec):
+            return lqr_from_tuning(spec, config)
         return guidance_from_tuning(spec)
     if Path(spec).exists():
         from accd_gym.rllib import RLlibPolicy, is_rllib_run
@@ -191,7 +197,7 @@ def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False) -
         if is_rllib_run(spec):
             return RLlibPolicy(spec)
         return SB3Policy(spec, allow_unnormalized=allow_unnormalized)
-    return make_baseline(spec, seed)  # raises ConfigError naming the allowed names
+    return make_baseline(spec, seed, config)  # raises ConfigError naming the allowed names
 
 
 @dataclass
@@ -480,7 +486,7 @@ def evaluate(
             f"invalid config: `episodes` = {episodes} is outside the allowed range 1..{len(HELD_OUT_WAKE_SEEDS)} (held-out wake seeds)"
         )
     seeds = list(wake_seeds) if wake_seeds is not None else list(HELD_OUT_WAKE_SEEDS[:episodes])
-    loaded = [(spec, load_policy(spec, allow_unnormalized=allow_unnormalized)) for spec in policies]  # fail early
+    loaded = [(spec, load_policy(spec, allow_unnormalized=allow_unnormalized, config=config)) for spec in policies]  # fail early
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     results: dict[str, Any] = {
@@ -537,7 +543,9 @@ def _label(spec: str) -> str:
     if spec in BASELINES or not p.exists():
         return spec
     if p.suffix == ".json":
-        return f"guidance ({p.stem})"
+        from accd_gym.lqr import is_lqr_tuning
+
+        return f"{'lqr' if is_lqr_tuning(spec) else 'guidance'} ({p.stem})"
     return p.name if p.is_dir() else f"{p.parent.name}/{p.stem}"
 
 

@@ -284,7 +284,7 @@ def iter_recordings(
         raise ConfigError(f"invalid config: `keep` has episode {bad[0]}, outside the allowed range [0, {episodes})")
     label = _policy_label(policy)
     if isinstance(policy, str):
-        policy = load_policy(policy, seed=policy_seed)
+        policy = load_policy(policy, seed=policy_seed, config=config)
     from accd_gym.evaluation import _policy_starts
     from accd_gym.vector import InAirCaptureVectorEnv
 

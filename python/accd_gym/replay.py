@@ -508,7 +508,7 @@ def write_evaluation_replays(spec: str, label: str, episodes: Any, count: int, o
     from accd_gym.recording import record_episodes
 
     picks = pick_episodes(episodes, count)
-    policy = load_policy(spec, allow_unnormalized=allow_unnormalized)
+    policy = load_policy(spec, allow_unnormalized=allow_unnormalized, config=config)
     recs = record_episodes(policy, len(episodes), config=config, seed=seed, wake_seeds=wake_seeds,
                            num_envs=num_envs, num_threads=num_threads, keep={k for _, k in picks})
     by_index = {int(r.meta["episode"]): r for r in recs}
@@ -541,7 +541,7 @@ def run_replay(policy: str, episodes: int, out: str | Path, *, seed: Optional[in
     from accd_gym.evaluation import load_policy
     from accd_gym.recording import iter_recordings
 
-    loaded = load_policy(policy, seed=0, allow_unnormalized=allow_unnormalized)
+    loaded = load_policy(policy, seed=0, allow_unnormalized=allow_unnormalized, config=config)
     if getattr(loaded, "note", None):
         import sys
 

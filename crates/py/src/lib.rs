@@ -23,6 +23,7 @@ mod batch;
 mod capture;
 mod config;
 mod errors;
+mod linearize;
 mod signals;
 mod tether;
 
@@ -38,6 +39,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(config::validation_passes, m)?)?;
     m.add_function(wrap_pyfunction!(config::config_fields, m)?)?;
     batch::register(m)?;
+    m.add_class::<linearize::PyLinearization>()?;
+    m.add_function(wrap_pyfunction!(linearize::linearize, m)?)?;
     m.add_function(wrap_pyfunction!(capture::mix_flaps, m)?)?;
     m.add_function(wrap_pyfunction!(capture::default_aero_table_json, m)?)?;
     m.add_function(wrap_pyfunction!(tether::tether_config, m)?)?;
