@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from accd_gym import ENV_ID
+from accd_gym.tiers import TIERS
 
 #: ``accd-gym train``'s recipes, as (algo -> training config fields) for rl-zoo3.
 RECIPES: dict[str, dict[str, Any]] = {
@@ -74,7 +74,7 @@ def zoo_hyperparams(algo: str) -> dict[str, dict[str, Any]]:
         **recipe["algo_kwargs"],
         "policy_kwargs": policy_kwargs,
     }
-    return {ENV_ID: entry}
+    return {t.id: dict(entry) for t in TIERS.values()}
 
 
 __all__ = ["RECIPES", "zoo_hyperparams"]
