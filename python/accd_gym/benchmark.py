@@ -88,10 +88,10 @@ def validate_config(raw: Any, *, quick: bool = False, root: Optional[Path] = Non
 
     if not isinstance(raw, dict):
         raise ConfigError(f"invalid config: a benchmark config must be a JSON object, not {type(raw).__name__}")
-    unknown = sorted(set(raw) - set(DEFAULTS) - {"description"})
+    unknown = sorted(set(raw) - set(DEFAULTS) - {"description", "source"})
     if unknown:
         raise ConfigError(f"invalid config: benchmark key(s) {unknown} outside the allowed set {sorted(DEFAULTS)}")
-    cfg = merge(DEFAULTS, {k: v for k, v in raw.items() if k != "description"})
+    cfg = merge(DEFAULTS, {k: v for k, v in raw.items() if k not in ("description", "source")})
     if "learners" in raw:  # the learners named replace the default set, not extend it
         cfg["learners"] = copy.deepcopy(raw["learners"])
     if quick:
@@ -148,7 +148,9 @@ def load_config(path: str | Path, *, quick: bool = False) -> dict[str, Any]:
     from accd_gym.config import read_json_object
 
     p = Path(path).resolve()
-    return validate_config(read_json_object(p, "benchmark config"), quick=quick, root=p.parent.parent)
+    cfg = validate_config(read_json_object(p, "benchmark config"), quick=quick, root=p.parent.parent)
+    cfg["source"] = str(p)
+    return cfg
 
 
 @dataclass(frozen=True)
@@ -371,6 +373,10 @@ def report_markdown(doc: dict[str, Any]) -> str:
     cfg = doc["config"]
     learners = ", ".join(f"{a.upper()} {len(s['seeds'])} seeds x {s['timesteps']:,} steps"
                          + (f" (tiers {', '.join(s['tiers'])})" if s["tiers"] else "") for a, s in cfg["learners"].items())
+    learned = (f"Learned: {learners}, trained on training wake seeds only. Capture rate of a learned algorithm: the IQM "
+               "over seeds with a 95 % two-level stratified bootstrap interval (seeds, then episodes); of a baseline: "
+               if learners else f"No learned policies in this run (`{Path(cfg.get('source', '')).name or 'config'}`: baselines "
+               "only). Capture rate of a baseline: ")
     lines = [
         "# accd-gym benchmark",
         "",
@@ -378,10 +384,8 @@ def report_markdown(doc: dict[str, Any]) -> str:
         f"(training {doc['train_wall_s'] / 60:.1f} min, baselines {doc['baseline_wall_s'] / 60:.1f} min).",
         "",
         f"Every policy of a tier meets the same {cfg['episodes']} held-out episodes (episode k: seed 20240607 + k, "
-        f"held-out wake seed k). Learned: {learners}, trained on training wake seeds only. Capture rate of a learned "
-        "algorithm: the IQM over seeds with a 95 % two-level stratified bootstrap interval (seeds, then episodes); of a "
-        "baseline: the rate with its Wilson 95 % interval. Miss distance: the smallest capture-point-to-boom distance "
-        "of the episode; time to capture over captured episodes only.",
+        f"held-out wake seed k). {learned}the rate with its Wilson 95 % interval. Miss distance: the smallest "
+        "capture-point-to-boom distance of the episode; time to capture over captured episodes only.",
     ]
     for tier, t in doc["tiers"].items():
         lines += ["", f"## {tier} (`{TIERS[tier].id}`)", "", TIERS[tier].summary + ".", "",

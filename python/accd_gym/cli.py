@@ -99,7 +99,8 @@ def _benchmark(args: argparse.Namespace) -> int:
 
     cfg = benchmark.load_config(args.config, quick=args.quick)
     docs = Path(args.docs) if args.docs else None
-    command = "accd-gym benchmark" + (" --quick" if args.quick else "") + (f" --ray {args.ray}" if args.ray else "")
+    command = ("accd-gym benchmark" + (f" --config {args.config}" if args.config != "training/benchmark.json" else "")
+               + (" --quick" if args.quick else "") + (f" --ray {args.ray}" if args.ray else ""))
     progress = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True))
     doc = benchmark.run(cfg, args.out, ray_address=args.ray, docs=docs, command=command, progress=progress)
     print((Path(args.out) / "benchmark.md").read_text())
