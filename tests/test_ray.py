@@ -268,3 +268,22 @@ def test_two_nodes_on_one_machine_run_the_tasks_and_give_the_same_report(tmp_pat
         left = _processes_under(temp)
         shutil.rmtree(temp, ignore_errors=True)
     assert not left, f"Ray processes left running: {left}"
+
+
+def test_benchmark_training_jobs_as_ray_tasks_equal_the_local_run(cluster, tmp_path):
+    """`accd-gym benchmark --ray`: the jobs run as Ray tasks (one CPU each) and give the local
+    run's results episode for episode (training seeds, thread counts and placement change nothing)."""
+    from accd_gym import benchmark
+
+    cfg = benchmark.validate_config(
+        {"tiers": ["precision"], "learners": {"ppo": {"train_config": "training/ppo.json", "seeds": [0, 1], "timesteps": 512}},
+         "baselines": ["zero"], "episodes": 4, "num_envs": 4}, root=ROOT)
+    quiet = lambda message: None  # noqa: E731
+    local = benchmark.run(cfg, tmp_path / "local", progress=quiet)
+    remote = benchmark.run(cfg, tmp_path / "ray", ray_address="local", progress=quiet)
+    eps = {k: json.loads((tmp_path / k / "episodes.json").read_text()) for k in ("local", "ray")}
+    assert eps["local"]["runs"] == eps["ray"]["runs"] and len(eps["local"]["runs"]) == 2
+    timing = ("train_wall_s", "steps_per_s")
+    rows = [{name: {k: v for k, v in row.items() if k not in timing} for name, row in doc["tiers"]["precision"]["policies"].items()}
+            for doc in (local, remote)]
+    assert rows[0] == rows[1] and set(rows[0]) == {"ppo", "zero"}

@@ -400,8 +400,6 @@ def report_markdown(doc: dict[str, Any]) -> str:
                              f"| {seeds} | {row['miss_median_m']:.2f} | {ttc} |")
             else:
                 lines.append(f"| {name} | {_pct(row['rate'])} | {_pct(lo)} - {_pct(hi)} | - | {row['miss_median_m']:.2f} | {ttc} |")
-        for note in doc["notes"].get(tier, []):
-            lines.append(f"\n{note}")
         m = t["mcnemar"]
         if m:
             lines += ["", f"Best learned run `{m['learned']}` ({_pct(m['learned_rate'])}) vs best classical `{m['classical']}` "
@@ -428,7 +426,6 @@ def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] =
     train_s = time.perf_counter() - t0
     t1 = time.perf_counter()
     baselines: dict[str, dict[str, Any]] = {}
-    notes: dict[str, list[str]] = {}
     for tier in config["tiers"]:
         baselines[tier] = {}
         for name in config["baselines"]:
@@ -447,7 +444,6 @@ def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] =
         "train_wall_s": train_s,
         "baseline_wall_s": baseline_s,
         "tiers": summarize(config, results, baselines),
-        "notes": notes,
         "runs": [{k: v for k, v in r.items() if k != "episodes"} | {"capture_rate": float(np.mean(r["episodes"]["captured"]))}
                  for r in results],
         "profile": {"tau": taus.tolist(), **profile},
