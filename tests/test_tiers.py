@@ -132,3 +132,19 @@ def test_randomized_episodes_equal_in_every_env_class_and_thread_count():
     single = accd_gym.InAirCaptureEnv(tier="randomized")
     _, info = single.reset(seed=8)  # env 1 of a batch seeded 7 is the single env seeded 8
     assert info["parameters"] == runs[0][0][1]
+
+
+def test_evaluation_metrics_are_the_true_geometry_under_sensors():
+    # Zero flaps ignore the observation, and sensors never change the physics: with sensors on and
+    # off the evaluated episodes (trajectories, miss distances) must be identical, because the
+    # metrics come from the true state, not from the sensed observation.
+    from accd_gym.baselines import ZeroPolicy
+    from accd_gym.evaluation import run_episodes
+
+    wake = list(accd_gym.HELD_OUT_WAKE_SEEDS[:3])
+    runs = [run_episodes(ZeroPolicy(), 3, wake_seeds=wake, num_envs=3,
+                         config={"tier": "sensors", "capture_window": 3.0, **extra})
+            for extra in ({}, {"sensors": {"enabled": False}})]
+    for sensed, true in zip(*runs):
+        assert sensed.metrics() == true.metrics()
+        assert np.array_equal(sensed.trajectory, true.trajectory)

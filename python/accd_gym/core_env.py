@@ -42,6 +42,12 @@ class CoreEnvMixin:
         They are a function of the episode's wake seed alone."""
         return self._core.episode_parameters(int(i))
 
+    def true_boom_relative(self) -> np.ndarray:
+        """The boom tip minus the capture point of every env at its current state, (num_envs, 3) m,
+        TA frame, from the physics: what ``boom_rel_x/y/z`` of the observation shows without
+        sensors (with sensors the observation is the sensed value; evaluation metrics use this)."""
+        return self._core.boom_relative()
+
     def episode_setup(self, i: int = 0) -> dict[str, np.ndarray]:
         """Where env ``i``'s current episode starts from (TA frame, m): ``equilibrium`` (the
         ACCD's open-loop equilibrium), ``capture_point`` (the capture point's) and

@@ -27,12 +27,10 @@ from typing import Any, Optional, Sequence
 import numpy as np
 
 from accd_gym.errors import ConfigError
-from accd_gym.task import EVENT_NAMES, HELD_OUT_WAKE_SEEDS, INFO_NAMES, OBSERVATION_SCALE, observation_indices
+from accd_gym.task import EVENT_NAMES, HELD_OUT_WAKE_SEEDS, INFO_NAMES
 
 #: Base seed of evaluation episodes (initial conditions and RLV motion); fixed so runs compare.
 EVAL_BASE_SEED: int = 20_240_607
-_POS_SCALE = OBSERVATION_SCALE["boom_rel_x"]  # observation scale of the boom-relative position, 1/m
-_BOOM_REL = observation_indices("boom_rel_x", "boom_rel_y", "boom_rel_z")  # boom tip minus capture point
 
 
 def wilson_interval(successes: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
@@ -305,9 +303,11 @@ def run_episode_range(
         params_of[i] = env.episode_parameters(i)
     started[:] = True
     _policy_starts(policy, started, ep_of, last)
-    traj: list[list[np.ndarray]] = [[-obs[i, _BOOM_REL] / _POS_SCALE] for i in range(batch)]
+    # The true boom-relative position (with sensors the observation shows the sensed one).
+    rel = env.true_boom_relative()
+    traj: list[list[np.ndarray]] = [[-rel[i].astype(np.float32)] for i in range(batch)]
     acts: list[list[np.ndarray]] = [[] for _ in range(batch)]
-    mind = np.linalg.norm(obs[:, _BOOM_REL], axis=1) / _POS_SCALE
+    mind = np.linalg.norm(rel, axis=1)
     peak = np.zeros(batch)
     ret = np.zeros(batch)
     done_eps: dict[int, Episode] = {}
@@ -320,11 +320,12 @@ def run_episode_range(
         while len(done_eps) < stop - start:
             actions = np.asarray(policy.predict(obs), dtype=np.float32)
             obs, reward, terminated, truncated, infos = env.step(actions)
+            rel = env.true_boom_relative()
             reward = reward.astype(np.float32)  # as stable-baselines3 reports it (returns unchanged)
             dones = terminated | truncated
             for i in range(batch):
                 info = {k: infos[k][i] for k in (*INFO_NAMES, "wake_seed")}
-                traj[i].append(-obs[i, _BOOM_REL] / _POS_SCALE)
+                traj[i].append(-rel[i].astype(np.float32))
                 acts[i].append(np.clip(actions[i], -1, 1))
                 mind[i] = min(mind[i], info["distance"])
                 peak[i] = max(peak[i], info["peak_tension"])
@@ -363,10 +364,11 @@ def run_episode_range(
                     last[i] = k
                 obs = env.start_episode(int(i), seed + int(last[i]), wake_of(int(last[i])))
                 params_of[i] = env.episode_parameters(int(i))
+            rel = env.true_boom_relative()
             for i in np.flatnonzero(dones):
-                traj[i] = [-obs[i, _BOOM_REL] / _POS_SCALE]
+                traj[i] = [-rel[i].astype(np.float32)]
                 acts[i] = []
-                mind[i] = np.linalg.norm(obs[i, _BOOM_REL]) / _POS_SCALE
+                mind[i] = np.linalg.norm(rel[i])
                 peak[i] = 0.0
                 ret[i] = 0.0
             _policy_starts(policy, dones, ep_of, last)

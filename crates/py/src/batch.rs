@@ -403,6 +403,18 @@ impl PyBatchEnv {
         .py_err()
     }
 
+    /// The true boom tip minus capture point of every env at its current state, (N, 3) m, TA
+    /// frame (a new array): what the observation's ``boom_rel_*`` shows without sensors.
+    fn boom_relative<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let n = self.inner.num_envs();
+        let mut rows = Vec::with_capacity(n);
+        for i in 0..n {
+            let r = self.inner.episode(i).py_err()?.sim().boom_relative();
+            rows.push(vec![r.x, r.y, r.z]);
+        }
+        Ok(PyArray2::from_vec2(py, &rows)?)
+    }
+
     /// The current observation of env ``i`` (a new array).
     fn observation<'py>(&self, py: Python<'py>, i: usize) -> PyResult<Bound<'py, PyArray1<f32>>> {
         let e = self.inner.episode(i).py_err()?;
