@@ -248,6 +248,9 @@ impl Episode {
         equilibrium: Arc<Equilibrium>,
         seeds: Seeds,
     ) -> Result<Episode> {
+        if config.randomization.enabled {
+            check_drawable(&config)?;
+        }
         let mut sim = CaptureSim::new(&config.capture(), seeds)?;
         sim.set_boom_nominal(equilibrium.boom_nominal)?;
         let sensors = config.sensors.enabled.then(|| {
@@ -672,6 +675,26 @@ pub fn drawn_config(base: &EnvConfig, parameters: &Parameters) -> Result<Valid<E
     parameters.apply_to(&mut c.physics);
     c.randomization.enabled = false;
     c.validated()
+}
+
+/// Refuses a randomization whose draws cannot all be built, before any episode runs (otherwise
+/// every such draw would end its episode at reset as a divergence): the physics at both corners of
+/// the ranges must validate and construct (the wake tables' angles, the aerodynamic table, the
+/// tether's stability step). The error names `randomization` and the corner, then the field.
+fn check_drawable(base: &EnvConfig) -> Result<()> {
+    for (upper, end) in [(false, "low"), (true, "high")] {
+        let corner = Parameters::corner(&base.randomization, upper);
+        let built = drawn_config(base, &corner)
+            .and_then(|c| CaptureSim::new(&c.capture(), Seeds::default()).map(|_| ()));
+        if let Err(e) = built {
+            return Err(SimError::invalid_config(
+                "randomization",
+                format!("{corner:?}"),
+                &format!("ranges whose every draw builds; at their {end} ends: {e}"),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// An episode's physics with randomized parameters (built whole, then installed).

@@ -149,6 +149,21 @@ impl Parameters {
             let u = stream.uniform();
             *out = if lo == hi { lo } else { lo + (hi - lo) * u };
         }
+        Parameters::from_values(v)
+    }
+
+    /// Every parameter at the low (`upper` false) or the high end of its range: with both
+    /// corners buildable, so is every draw of the box between them (each parameter's checks
+    /// are intervals).
+    pub fn corner(config: &RandomizationConfig, upper: bool) -> Parameters {
+        Parameters::from_values(
+            config
+                .ranges()
+                .map(|(_, [lo, hi])| if upper { hi } else { lo }),
+        )
+    }
+
+    fn from_values(v: [f64; 9]) -> Parameters {
         Parameters {
             tether_length: v[0],
             tether_diameter: v[1],

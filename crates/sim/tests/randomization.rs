@@ -155,3 +155,21 @@ fn drawn_episodes_start_well_posed() {
         }
     }
 }
+
+#[test]
+fn ranges_whose_draws_cannot_be_built_are_refused_at_construction() {
+    // The default wake tables cover 0-8 deg: a range up to 20 deg validates field by field but
+    // half its draws could not build. Refused before any episode, naming the field.
+    let mut base = randomized();
+    base.randomization.wake_alpha_deg = [0.0, 20.0];
+    let config = Arc::new(base.validated().unwrap());
+    let eq = Arc::new(Equilibrium::settle(&config).unwrap());
+    let e = Episode::new(config, eq, seeds(0))
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(
+        e.contains("randomization") && e.contains("high ends") && e.contains("wake.alpha_deg"),
+        "{e}"
+    );
+}

@@ -263,8 +263,7 @@ impl Rk4 {
                 found,
             });
         }
-        let evaluated = evaluate_first;
-        if evaluated {
+        if evaluate_first {
             system.derivatives(time, q, qd, x, &mut self.a_k[0], &mut self.xd_k[0])?;
         }
         let substeps = substeps(system, q, qd)?.max(1);
@@ -277,7 +276,7 @@ impl Rk4 {
             x_stage: &mut self.x_stage,
             xd_k: &mut self.xd_k,
         };
-        stages.step(system, time, h, q, qd, x, first_slot, evaluated)?;
+        stages.step(system, time, h, q, qd, x, first_slot, evaluate_first)?;
         let (mut done, mut spare) = (first_slot, second_slot);
         for j in 1..substeps {
             let t = time + j as f64 * h;
