@@ -749,11 +749,14 @@ fn restart(slot: &mut Slot, env: u64, n: u64, schedule: &WakeSchedule) -> Option
     let seeds = episode_seeds(slot.base, slot.index, env, n, schedule);
     match slot.episode.reset(seeds) {
         Ok(()) => None,
-        Err(_) => Some(Outcome {
-            terminated: true,
-            diverged: true,
-            ..Outcome::default()
-        }),
+        Err(e) => {
+            slot.episode.fail_reset(seeds, e);
+            Some(Outcome {
+                terminated: true,
+                diverged: true,
+                ..Outcome::default()
+            })
+        }
     }
 }
 

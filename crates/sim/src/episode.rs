@@ -518,6 +518,15 @@ impl Episode {
         s.velocity.norm() <= 2.0 * self.config.physics.aircraft.airspeed && s.omega.norm() <= 1e3
     }
 
+    /// Marks the episode of `seeds` ended by a reset that failed with `e` (its physics could not
+    /// be built or settled): done, with the reason as its divergence, so that a batch's
+    /// automatic reset reports why instead of a bare flag.
+    pub fn fail_reset(&mut self, seeds: Seeds, e: SimError) {
+        self.seeds = seeds;
+        self.done = true;
+        self.divergence = Some(format!("reset failed: {e}"));
+    }
+
     fn diverge(&mut self, e: SimError) {
         self.divergence = Some(e.to_string());
     }

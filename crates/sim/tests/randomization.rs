@@ -173,3 +173,19 @@ fn ranges_whose_draws_cannot_be_built_are_refused_at_construction() {
         "{e}"
     );
 }
+
+#[test]
+fn a_failed_reset_says_why() {
+    let mut e = episode(quick(), seeds(0));
+    e.fail_reset(
+        seeds(5),
+        accd_sim::SimError::invalid_config("wake.alpha_deg", 20.0, "[0, 8] deg"),
+    );
+    assert!(e.done());
+    assert_eq!(e.seeds(), seeds(5));
+    let why = e.divergence().expect("a reason");
+    assert!(
+        why.starts_with("reset failed:") && why.contains("wake.alpha_deg"),
+        "{why}"
+    );
+}
