@@ -66,7 +66,7 @@ def test_jobs_follow_the_config():
     assert quick["learners"]["sac"]["tiers"] == ["nominal"]
 
 
-def test_quick_benchmark_runs_the_whole_pipeline(tmp_path):
+def test_quick_benchmark_runs_the_whole_pipeline(tmp_path, monkeypatch):
     pytest.importorskip("stable_baselines3")
     from accd_gym.cli import main
 
@@ -97,3 +97,20 @@ def test_quick_benchmark_runs_the_whole_pipeline(tmp_path):
     again = benchmark.evaluate_policy(ZeroPolicy(), "nominal", cfg["episodes"], cfg["num_envs"])
     assert again["captured"] == zero
     assert "wall time" in report and doc["wall_time_s"] > 0
+    assert not any(r["reused"] for r in doc["runs"])
+
+    # Resumable: a rerun into the same folder reuses every finished job (training is not called)
+    # and reports the same episodes; a job whose key differs (other episodes) is run afresh.
+    from accd_gym import training
+
+    def no_training(*_a, **_k):
+        raise AssertionError("a finished job was trained again")
+
+    monkeypatch.setattr(training, "train", no_training)
+    again_doc = benchmark.run(cfg, out, progress=lambda _m: None)
+    assert all(r["reused"] for r in again_doc["runs"])
+    assert json.loads((out / "episodes.json").read_text())["runs"] == eps["runs"]
+    assert "reused" in benchmark.report_markdown(again_doc)
+    job = benchmark.jobs(cfg)[0]
+    with pytest.raises(AssertionError, match="trained again"):
+        benchmark.run_job(job, str(out), cfg["episodes"] + 1, cfg["num_envs"])

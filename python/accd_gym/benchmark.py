@@ -200,26 +200,89 @@ def evaluate_policy(policy: Any, tier: str, episodes: int, num_envs: int, num_th
     return _episode_record(eps)
 
 
+#: A finished job's result in its run folder: what a rerun of the benchmark into the same
+#: ``--out`` reuses when the job's key (:func:`job_key`) is unchanged.
+RESULT_FILE = "result.json"
+
+
+def job_key(job: Job, episodes: int, num_envs: int) -> dict[str, Any]:
+    """What a job's result depends on: the job, the training config's bytes (SHA-256), the tier's
+    configuration, the package version, the evaluation's episodes and batch size. A stored result
+    with another key is not reused."""
+    import hashlib
+
+    from accd_gym import __version__
+    from accd_gym.tiers import tier as _tier
+
+    return {"job": dict(job.__dict__), "train_config_sha256": hashlib.sha256(Path(job.train_config).read_bytes()).hexdigest(),
+            "tier_config": _tier(job.tier).config(), "version": __version__, "episodes": episodes, "num_envs": num_envs}
+
+
+def _stored_result(run: Path, key: dict[str, Any]) -> Optional[dict[str, Any]]:
+    """The result stored in ``run`` when its key equals ``key`` (None otherwise or unreadable)."""
+    try:
+        stored = json.loads((run / RESULT_FILE).read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(stored, dict) or stored.get("key") != json.loads(json.dumps(key)):
+        return None
+    return stored
+
+
 def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int = 0) -> dict[str, Any]:
-    """Trains ``job`` into ``out/runs/<name>`` and evaluates it: its metrics and episode record."""
+    """Trains ``job`` into ``out/runs/<name>`` and evaluates it: its metrics and episode record
+    (also ``out/runs/<name>/result.json``).
+
+    Resumable: a job whose run folder holds a result of the same :func:`job_key` is not run again
+    (``"reused": true``); a run interrupted while training (Ctrl+C, a killed process) continues
+    from its latest checkpoint (:func:`accd_gym.training.resume`) to the same total; anything
+    else starts the run afresh."""
     from accd_gym import training
     from accd_gym.config import read_json_object
     from accd_gym.evaluation import load_policy
 
+    run = Path(out) / "runs" / job.name
+    key = job_key(job, episodes, num_envs)
+    stored = _stored_result(run, key)
+    if stored is not None:
+        return stored["result"] | {"reused": True}
     raw = read_json_object(job.train_config, "train_config (training config)")
     raw["env"] = {"tier": job.tier}
     raw["seed"] = job.seed
     raw["total_timesteps"] = job.timesteps
     raw["num_threads"] = num_threads
-    run = Path(out) / "runs" / job.name
+    cfg = training.validate_config(raw)
     t0 = time.perf_counter()
-    meta = training.train(training.validate_config(raw), run, progress=False)
+    meta = _resumable(run, cfg)
+    if meta is None:
+        meta = training.train(cfg, run, progress=False)
+    else:
+        meta = training.resume(run, progress=False)
     train_s = time.perf_counter() - t0
     t1 = time.perf_counter()
     record = evaluate_policy(load_policy(str(run)), job.tier, episodes, num_envs, num_threads)
-    return {"job": job.__dict__, "name": job.name, "status": meta["status"], "timesteps": meta["timesteps"],
-            "train_wall_s": round(train_s, 2), "eval_wall_s": round(time.perf_counter() - t1, 2),
-            "steps_per_s": meta.get("steps_per_s"), "run": str(run), "episodes": record}
+    result = {"job": job.__dict__, "name": job.name, "status": meta["status"], "timesteps": meta["timesteps"],
+              "train_wall_s": round(train_s, 2), "eval_wall_s": round(time.perf_counter() - t1, 2),
+              "steps_per_s": meta.get("steps_per_s"), "run": str(run), "episodes": record}
+    if meta["status"] == "done":
+        tmp = run / (RESULT_FILE + ".tmp")
+        tmp.write_text(json.dumps({"key": key, "result": result}))
+        tmp.replace(run / RESULT_FILE)
+    return result | {"reused": False}
+
+
+def _resumable(run: Path, cfg: dict[str, Any]) -> Optional[dict[str, Any]]:
+    """The summary of an unfinished run of the same training config in ``run`` that has a
+    checkpoint to continue from; None when the job must start afresh."""
+    from accd_gym import training
+
+    try:
+        meta = json.loads((run / "run.json").read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(meta, dict) or meta.get("status") == "done" or training.latest_checkpoint(run) is None:
+        return None
+    return meta if meta.get("config") == json.loads(json.dumps(cfg)) else None
 
 
 def _run_jobs(todo: list[Job], cfg: dict[str, Any], out: Path, ray_address: Optional[str],
@@ -235,9 +298,13 @@ def _run_jobs(todo: list[Job], cfg: dict[str, Any], out: Path, ray_address: Opti
 
     ray = distributed.connect(ray_address)
     task = ray.remote(num_cpus=cfg["cpus_per_job"], max_retries=1)(run_job)
-    refs = [task.remote(job, str(out), cfg["episodes"], cfg["num_envs"], cfg["cpus_per_job"]) for job in todo]
+    # Longest first, so that the long jobs do not start last: an off-policy learner's job (SAC:
+    # measured at 330 steps/s with one thread, a gradient step every 4 env steps) costs several
+    # times a PPO job of more steps (3,800 steps/s).
+    order = sorted(range(len(todo)), key=lambda i: (todo[i].algo == "ppo", -todo[i].timesteps, i))
+    refs = [task.remote(todo[i], str(out), cfg["episodes"], cfg["num_envs"], cfg["cpus_per_job"]) for i in order]
     done: dict[int, dict[str, Any]] = {}
-    pending = dict(zip(refs, range(len(refs))))
+    pending = dict(zip(refs, order))
     while pending:
         ready, _ = ray.wait(list(pending), num_returns=1)
         i = pending.pop(ready[0])
@@ -366,6 +433,16 @@ def _pct(x: float) -> str:
     return f"{100 * x:.1f} %"
 
 
+def _reuse_note(doc: dict[str, Any]) -> str:
+    """The header's account of jobs reused from an earlier invocation into the same folder."""
+    reused = [r for r in doc["runs"] if r.get("reused")]
+    if not reused:
+        return ""
+    minutes = sum(r["train_wall_s"] + r["eval_wall_s"] for r in reused) / 60
+    return (f"; {len(reused)} of {len(doc['runs'])} jobs were finished by an earlier invocation into the same folder "
+            f"and reused (their training and evaluation took {minutes:.1f} min then)")
+
+
 def report_markdown(doc: dict[str, Any]) -> str:
     """The benchmark report (docs/benchmark.md)."""
     from accd_gym.tiers import TIERS
@@ -381,7 +458,8 @@ def report_markdown(doc: dict[str, Any]) -> str:
         "# accd-gym benchmark",
         "",
         f"Generated by `{doc['command']}` on {doc['date']} ({doc['machine']}); wall time {doc['wall_time_s'] / 60:.1f} min "
-        f"(training {doc['train_wall_s'] / 60:.1f} min, baselines {doc['baseline_wall_s'] / 60:.1f} min).",
+        f"(training {doc['train_wall_s'] / 60:.1f} min, baselines {doc['baseline_wall_s'] / 60:.1f} min)"
+        + _reuse_note(doc) + ".",
         "",
         f"Every policy of a tier meets the same {cfg['episodes']} held-out episodes (episode k: seed 20240607 + k, "
         f"held-out wake seed k). {learned}the rate with its Wilson 95 % interval. Miss distance: the smallest "
