@@ -192,7 +192,7 @@ fn lane_count(range: [f64; 2], spacing: f64) -> usize {
     ((range[1] - range[0]) / spacing - 1e-9).ceil().max(0.0) as usize + 1
 }
 
-/// The lane extents in order, at most [`MAX_LANES`] lanes, a custom ambient turbulence's
+/// The lane extents in order, at most `MAX_LANES` (4096) lanes, a custom ambient turbulence's
 /// intensity and length scale within their ranges.
 impl Rules for TurbulenceConfig {
     fn check_rules(&self, prefix: &str) -> std::result::Result<(), OutOfRange> {
