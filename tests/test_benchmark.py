@@ -114,3 +114,40 @@ def test_quick_benchmark_runs_the_whole_pipeline(tmp_path, monkeypatch):
     job = benchmark.jobs(cfg)[0]
     with pytest.raises(AssertionError, match="trained again"):
         benchmark.run_job(job, str(out), cfg["episodes"] + 1, cfg["num_envs"])
+
+
+def test_an_interrupted_job_continues_from_its_checkpoint(tmp_path, monkeypatch):
+    # No training runs here: training.train and training.resume are replaced by probes that
+    # record which one run_job chose.
+    from accd_gym import training
+
+    class Chosen(Exception):
+        pass
+
+    def probe(name):
+        def f(*args, **_k):
+            if name == "train":
+                seen.append(args[0])
+            raise Chosen(name)
+        return f
+
+    seen: list[dict] = []
+    monkeypatch.setattr(training, "train", probe("train"))
+    monkeypatch.setattr(training, "resume", probe("resume"))
+    cfg = benchmark.load_config(ROOT / "training" / "benchmark.json", quick=True)
+    job = benchmark.jobs(cfg)[0]
+    with pytest.raises(Chosen):  # nothing there: a fresh start
+        benchmark.run_job(job, str(tmp_path), cfg["episodes"], cfg["num_envs"])
+    run = tmp_path / "runs" / job.name
+    (run / "checkpoints").mkdir(parents=True)
+    (run / "checkpoints" / "model_2048_steps.zip").write_bytes(b"")
+    for status, config, expected in (("interrupted", seen[0], "resume"), ("training", seen[0], "resume"),
+                                     ("done", seen[0], "train"), ("interrupted", {**seen[0], "seed": 99}, "train")):
+        (run / "run.json").write_text(json.dumps({"status": status, "config": config}))
+        with pytest.raises(Chosen, match=expected):
+            benchmark.run_job(job, str(tmp_path), cfg["episodes"], cfg["num_envs"])
+    # Without a checkpoint an interrupted run starts afresh.
+    (run / "checkpoints" / "model_2048_steps.zip").unlink()
+    (run / "run.json").write_text(json.dumps({"status": "interrupted", "config": seen[0]}))
+    with pytest.raises(Chosen, match="train"):
+        benchmark.run_job(job, str(tmp_path), cfg["episodes"], cfg["num_envs"])
