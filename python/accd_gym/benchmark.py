@@ -9,7 +9,11 @@ trained with several seeds, every baseline, the same held-out episodes, one repo
    held-out episodes (episode k: seed 20240607 + k, held-out wake seed k, so every policy of a
    tier meets the same episodes). Jobs run one after the other in this process, or, with
    ``--ray ADDRESS`` (``"local"``, ``"auto"``, ``HOST:PORT``), as Ray tasks of ``cpus_per_job``
-   CPUs each, placed wherever the cluster has room (the same machinery as ``evaluate --ray``).
+   CPUs each, placed wherever the cluster has room (the same machinery as ``evaluate --ray``),
+   the longest first. Resumable: a finished job's result stays in ``OUT/runs/<job>/result.json``
+   and a rerun into the same ``OUT`` reuses it while its key (:func:`job_key`: job, training
+   config, tier, build, evaluation) is unchanged; an interrupted training continues from its
+   checkpoint (:func:`run_job`).
 2. **Baselines** (``zero``, ``random``, ``guidance``, ``lqr``) on the same episodes of every
    tier; the LQR is designed for each tier's configuration.
 3. **Report** (``OUT/benchmark.json``, ``OUT/benchmark.md``, ``OUT/performance_profile.png``):
@@ -48,6 +52,7 @@ quick            overrides for ``--quick``
 from __future__ import annotations
 
 import copy
+import functools
 import json
 import platform
 import time
@@ -205,17 +210,31 @@ def evaluate_policy(policy: Any, tier: str, episodes: int, num_envs: int, num_th
 RESULT_FILE = "result.json"
 
 
-def job_key(job: Job, episodes: int, num_envs: int) -> dict[str, Any]:
-    """What a job's result depends on: the job, the training config's bytes (SHA-256), the tier's
-    configuration, the package version, the evaluation's episodes and batch size. A stored result
-    with another key is not reused."""
+@functools.lru_cache(maxsize=1)
+def build_digest() -> str:
+    """SHA-256 of the code a result comes from: the native extension's bytes and the package's
+    Python sources (the version number alone does not change with a rebuild)."""
     import hashlib
 
-    from accd_gym import __version__
+    from accd_gym import _core
+
+    h = hashlib.sha256(Path(_core.__file__).read_bytes())
+    for src in sorted(Path(__file__).parent.rglob("*.py")):
+        h.update(src.relative_to(Path(__file__).parent).as_posix().encode())
+        h.update(src.read_bytes())
+    return h.hexdigest()
+
+
+def job_key(job: Job, episodes: int, num_envs: int) -> dict[str, Any]:
+    """What a job's result depends on: the job, the training config's bytes (SHA-256), the tier's
+    configuration, the code (:func:`build_digest`), the evaluation's episodes and batch size. A
+    stored result with another key is not reused."""
+    import hashlib
+
     from accd_gym.tiers import tier as _tier
 
     return {"job": dict(job.__dict__), "train_config_sha256": hashlib.sha256(Path(job.train_config).read_bytes()).hexdigest(),
-            "tier_config": _tier(job.tier).config(), "version": __version__, "episodes": episodes, "num_envs": num_envs}
+            "tier_config": _tier(job.tier).config(), "build": build_digest(), "episodes": episodes, "num_envs": num_envs}
 
 
 def _stored_result(run: Path, key: dict[str, Any]) -> Optional[dict[str, Any]]:
@@ -253,11 +272,10 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
     raw["num_threads"] = num_threads
     cfg = training.validate_config(raw)
     t0 = time.perf_counter()
-    meta = _resumable(run, cfg)
-    if meta is None:
-        meta = training.train(cfg, run, progress=False)
-    else:
+    if _continues(run, cfg):
         meta = training.resume(run, progress=False)
+    else:
+        meta = training.train(cfg, run, progress=False)
     train_s = time.perf_counter() - t0
     t1 = time.perf_counter()
     record = evaluate_policy(load_policy(str(run)), job.tier, episodes, num_envs, num_threads)
@@ -271,18 +289,18 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
     return result | {"reused": False}
 
 
-def _resumable(run: Path, cfg: dict[str, Any]) -> Optional[dict[str, Any]]:
-    """The summary of an unfinished run of the same training config in ``run`` that has a
-    checkpoint to continue from; None when the job must start afresh."""
+def _continues(run: Path, cfg: dict[str, Any]) -> bool:
+    """``run`` holds an unfinished run of the training config ``cfg`` with a checkpoint, which
+    :func:`accd_gym.training.resume` continues (it refuses finished runs and runs without a
+    checkpoint; the config check is the benchmark's: another recipe starts afresh)."""
     from accd_gym import training
 
     try:
         meta = json.loads((run / "run.json").read_text())
     except (OSError, ValueError):
-        return None
-    if not isinstance(meta, dict) or meta.get("status") == "done" or training.latest_checkpoint(run) is None:
-        return None
-    return meta if meta.get("config") == json.loads(json.dumps(cfg)) else None
+        return False
+    return (isinstance(meta, dict) and meta.get("status") != "done" and training.latest_checkpoint(run) is not None
+            and meta.get("config") == json.loads(json.dumps(cfg)))
 
 
 def _run_jobs(todo: list[Job], cfg: dict[str, Any], out: Path, ray_address: Optional[str],
