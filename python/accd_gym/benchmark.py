@@ -562,5 +562,5 @@ def _cpus() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
-__all__ = ["DEFAULTS", "Job", "jobs", "load_config", "validate_config", "run", "run_job", "evaluate_policy",
+__all__ = ["DEFAULTS", "RESULT_FILE", "Job", "build_digest", "job_key", "jobs", "load_config", "validate_config", "run", "run_job", "evaluate_policy",
            "stratified_bootstrap", "summarize", "performance_profile", "report_markdown", "iqm"]
