@@ -85,6 +85,11 @@ impl Surroundings for Stage<'_> {
             None => self.air_velocity(time, position),
         }
     }
+    #[inline(always)]
+    fn held_segment_air(&self, time: f64) -> Option<(V3, &[V3])> {
+        self.held
+            .map(|(held, _)| (-self.aircraft.velocity(time), held))
+    }
     fn air_density(&self, _time: f64, position: &V3) -> f64 {
         self.air.density + self.air.density_per_depth * position.z
     }

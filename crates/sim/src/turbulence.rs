@@ -798,11 +798,11 @@ impl Turbulence {
         }
     }
 
-    #[inline]
-    fn read(&self, ts: &TimeStencil, channel: usize) -> f64 {
-        let g0 = self.ring[ts.slot0 * self.channels + channel] as f64;
-        let g1 = self.ring[ts.slot1 * self.channels + channel] as f64;
-        g0 + ts.f * (g1 - g0)
+    /// A stored channel value between two grid times, at fraction `f` from `g0`'s.
+    #[inline(always)]
+    fn lerp(f: f64, g0: f32, g1: f32) -> f64 {
+        let (g0, g1) = (g0 as f64, g1 as f64);
+        g0 + f * (g1 - g0)
     }
 
     /// Variance of the time interpolation of a process with lag-one correlation `a`.
@@ -819,7 +819,12 @@ impl Turbulence {
         if self.lanes == 0 {
             return Vector3::zeros();
         }
-        let ts = self.time_stencil(p.x);
+        self.wake_unit_at(&self.time_stencil(p.x), p)
+    }
+
+    /// [`Turbulence::wake_unit`] with the time stencil of `p.x` given (wake turbulence on).
+    #[inline(always)]
+    fn wake_unit_at(&self, ts: &TimeStencil, p: &Vector3<f64>) -> Vector3<f64> {
         let (iy0, iy1, fy) = self.lanes_y.locate(p.y);
         let (iz0, iz1, fz) = self.lanes_z.locate(p.z);
         let nz = self.lanes_z.count;
@@ -829,6 +834,9 @@ impl Turbulence {
             (iy1 * nz + iz0, fy * (1.0 - fz)),
             (iy1 * nz + iz1, fy * fz),
         ];
+        // The two ring rows of the stencil's grid times.
+        let row0 = &self.ring[ts.slot0 * self.channels..][..self.channels];
+        let row1 = &self.ring[ts.slot1 * self.channels..][..self.channels];
         let mut sum = Vector3::zeros();
         let mut weights2 = 0.0;
         for (lane, w) in corners {
@@ -840,8 +848,9 @@ impl Turbulence {
                 "wake lane {lane} sampled before it was generated"
             );
             weights2 += w * w;
+            let (g0, g1) = (&row0[3 * lane..][..3], &row1[3 * lane..][..3]);
             for c in 0..3 {
-                sum[c] += w * self.read(&ts, 3 * lane + c);
+                sum[c] += w * Self::lerp(ts.f, g0[c], g1[c]);
             }
         }
         sum / (weights2 * Self::time_variance(ts.f, self.a_wake)).sqrt()
@@ -854,13 +863,20 @@ impl Turbulence {
         if !self.ambient {
             return Vector3::zeros();
         }
-        let ts = self.time_stencil(p.x);
+        self.ambient_unit_at(&self.time_stencil(p.x))
+    }
+
+    /// [`Turbulence::ambient_unit`] with the time stencil given (ambient turbulence on).
+    #[inline(always)]
+    fn ambient_unit_at(&self, ts: &TimeStencil) -> Vector3<f64> {
         let base = 3 * self.lanes;
+        let g0 = &self.ring[ts.slot0 * self.channels + base..][..3];
+        let g1 = &self.ring[ts.slot1 * self.channels + base..][..3];
         let scale = 1.0 / Self::time_variance(ts.f, self.a_ambient).sqrt();
         Vector3::new(
-            self.read(&ts, base),
-            self.read(&ts, base + 1),
-            self.read(&ts, base + 2),
+            Self::lerp(ts.f, g0[0], g1[0]),
+            Self::lerp(ts.f, g0[1], g1[1]),
+            Self::lerp(ts.f, g0[2], g1[2]),
         ) * scale
     }
 
@@ -886,11 +902,17 @@ impl Turbulence {
     #[inline]
     pub fn sample(&self, p: &Vector3<f64>, tke: f64) -> Vector3<f64> {
         let mut v = Vector3::zeros();
-        if tke > 0.0 {
-            v += self.wake_unit(p) * Self::wake_rms(tke);
+        let wake = tke > 0.0 && self.lanes > 0;
+        if !(wake || self.ambient) {
+            return v;
+        }
+        // One time stencil for both parts: they are read at the same grid times.
+        let ts = self.time_stencil(p.x);
+        if wake {
+            v += self.wake_unit_at(&ts, p) * Self::wake_rms(tke);
         }
         if self.ambient {
-            v += self.ambient_unit(p) * self.sigma_ambient;
+            v += self.ambient_unit_at(&ts) * self.sigma_ambient;
         }
         v
     }

@@ -799,12 +799,14 @@ impl Wake {
         let Some(s) = pair.low.grid.stencil(self.table_coordinates(p), Edge::Zero) else {
             return WakeSample::default();
         };
+        // The corners come in pairs adjacent along z (offsets 2k and 2k + 1 differ by one).
         let mut acc = [0.0; 8];
-        for c in 0..8 {
-            let node = &pair.nodes[s.base + s.offsets[c]];
-            let wgt = s.weights[c];
-            for (a, v) in acc.iter_mut().zip(node) {
-                *a += wgt * v;
+        for k in 0..4 {
+            let pair_nodes = &pair.nodes[s.base + s.offsets[2 * k]..][..2];
+            for (node, wgt) in pair_nodes.iter().zip(&s.weights[2 * k..2 * k + 2]) {
+                for (a, v) in acc.iter_mut().zip(node) {
+                    *a += wgt * v;
+                }
             }
         }
         let h = self.high_weight;

@@ -505,28 +505,41 @@ fn segment_loads<M: Madd, S: Surroundings + ?Sized>(
     let (xx, xy, xz) = (&mut xx[..n], &mut xy[..n], &mut xz[..n]);
     let (rx, ry, rz) = (&mut rx[..n], &mut ry[..n], &mut rz[..n]);
     let (half_inv_l, inv_l2, m4) = (0.5 / c.l, 1.0 / (c.l * c.l), 0.25 * c.m);
-    for k in 0..n {
-        let e = V3::new(ex[k], ey[k], ez[k]);
-        let com = V3::new(cx[k], cy[k], cz[k]);
-        let rho = surroundings.air_density(time, &com);
-        // x * 1.0 == x exactly: the default (relative) drag is bit for bit the plain difference.
-        let rel = surroundings.segment_air_velocity(time, k, &com)
-            - V3::new(vx[k], vy[k], vz[k]) * c.segment_velocity_weight;
-        let vt = dot::<M>(&rel, &e);
-        let vn = axpy::<M>(&e, -vt, &rel);
-        let vn_abs = dot::<M>(&vn, &vn).sqrt();
-        let force = axpy::<M>(&e, rho * c.tangential_drag * vt * vt.abs(), &weight);
-        let force = axpy::<M>(&vn, rho * c.normal_drag * vn_abs, &force);
-        let joints = V3::new(
-            tox[k] + tix[k + 1],
-            toy[k] + tiy[k + 1],
-            toz[k] + tiz[k + 1],
-        );
-        let w = V3::new(wx[k], wy[k], wz[k]);
-        let extra = axpy::<M>(&w, -c.rod_inertia, &joints);
-        let r = axpy::<M>(&force, half_inv_l, &axpy::<M>(&extra, inv_l2, &(w * m4)));
-        (fx[k], fy[k], fz[k]) = (force.x, force.y, force.z);
-        (xx[k], xy[k], xz[k]) = (extra.x, extra.y, extra.z);
-        (rx[k], ry[k], rz[k]) = (r.x, r.y, r.z);
+    // The pass over the segments, for the held samples (vectorized) or for a field asked
+    // segment by segment; `$air(k, com)` is segment k's air exactly as `segment_air_velocity`
+    // gives it. A macro, not a closure: the body must inline into the target-feature caller.
+    macro_rules! segments {
+        ($air:expr) => {
+            for k in 0..n {
+                let e = V3::new(ex[k], ey[k], ez[k]);
+                let com = V3::new(cx[k], cy[k], cz[k]);
+                let rho = surroundings.air_density(time, &com);
+                // x * 1.0 == x exactly: the default (relative) drag is bit for bit the plain difference.
+                let rel = ($air)(k, &com) - V3::new(vx[k], vy[k], vz[k]) * c.segment_velocity_weight;
+                let vt = dot::<M>(&rel, &e);
+                let vn = axpy::<M>(&e, -vt, &rel);
+                let vn_abs = dot::<M>(&vn, &vn).sqrt();
+                let force = axpy::<M>(&e, rho * c.tangential_drag * vt * vt.abs(), &weight);
+                let force = axpy::<M>(&vn, rho * c.normal_drag * vn_abs, &force);
+                let joints = V3::new(
+                    tox[k] + tix[k + 1],
+                    toy[k] + tiy[k + 1],
+                    toz[k] + tiz[k + 1],
+                );
+                let w = V3::new(wx[k], wy[k], wz[k]);
+                let extra = axpy::<M>(&w, -c.rod_inertia, &joints);
+                let r = axpy::<M>(&force, half_inv_l, &axpy::<M>(&extra, inv_l2, &(w * m4)));
+                (fx[k], fy[k], fz[k]) = (force.x, force.y, force.z);
+                (xx[k], xy[k], xz[k]) = (extra.x, extra.y, extra.z);
+                (rx[k], ry[k], rz[k]) = (r.x, r.y, r.z);
+            }
+        };
+    }
+    match surroundings.held_segment_air(time) {
+        Some((uniform, held)) => {
+            let held = &held[..n];
+            segments!(|k: usize, _: &V3| uniform + held[k]);
+        }
+        None => segments!(|k: usize, com: &V3| surroundings.segment_air_velocity(time, k, com)),
     }
 }

@@ -33,6 +33,17 @@ pub trait Surroundings {
         self.air_velocity(time, position)
     }
 
+    /// The air velocity at every segment centre during this stage, when the surroundings hold
+    /// it (sampled once per step, [`Surroundings::segment_air_velocity`] answering from the held
+    /// samples): `(uniform, held)`, segment `k`'s air being `uniform + held[k]` (held covers
+    /// every segment), exactly what `segment_air_velocity` returns for it. The loads then read
+    /// the samples in one pass that the compiler vectorizes. Default `None`: the loads ask
+    /// [`Surroundings::segment_air_velocity`] segment by segment.
+    #[inline(always)]
+    fn held_segment_air(&self, _time: f64) -> Option<(Vector3<f64>, &[Vector3<f64>])> {
+        None
+    }
+
     /// Air density at `position` (m), kg/m^3.
     fn air_density(&self, time: f64, position: &Vector3<f64>) -> f64;
 
