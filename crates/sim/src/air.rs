@@ -28,6 +28,14 @@ pub trait AirDisturbance: Send + Sync {
     /// Velocity added to the free stream at `position` (TA frame, m), m/s.
     fn velocity(&self, time: f64, position: &V3) -> V3;
 
+    /// [`AirDisturbance::velocity`] at each of `positions` into `out` (as long), m/s: one call
+    /// for the points of a step, so that a field samples them in one inlined loop.
+    fn velocities(&self, time: f64, positions: &[V3], out: &mut [V3]) {
+        for (v, p) in out.iter_mut().zip(positions) {
+            *v = self.velocity(time, p);
+        }
+    }
+
     /// Advances internal state from `time` to `time + dt`.
     fn advance(&mut self, _time: f64, _dt: f64) -> Result<()> {
         Ok(())

@@ -620,9 +620,8 @@ impl CaptureSim {
         let d = &self.derived;
         self.disturbance.prepare(&d.centres);
         self.disturbance.prepare(std::slice::from_ref(&d.tip));
-        for (held, centre) in self.held.iter_mut().zip(&d.centres) {
-            *held = self.disturbance.velocity(time, centre);
-        }
+        self.disturbance
+            .velocities(time, &d.centres, &mut self.held);
         self.held_tip = self.disturbance.velocity(time, &d.tip);
     }
 

@@ -142,7 +142,7 @@ impl Grid {
     }
 
     /// The trilinear stencil at `q`; beyond the grid as `edge` says.
-    #[inline]
+    #[inline(always)]
     pub fn stencil(&self, q: [f64; 3], edge: Edge) -> Option<Stencil> {
         let (i, fx) = self.x.locate(q[0], edge)?;
         let (j, fy) = self.y.locate(q[1], edge)?;

@@ -899,7 +899,7 @@ impl Turbulence {
     /// The turbulent velocity fluctuation at `p` (TA frame, m) now, m/s:
     /// `sqrt(2 tke / 3) * wake_unit(p) + sigma_ambient * ambient_unit(p)`, with `tke` (m^2/s^2)
     /// the wake's turbulent kinetic energy at `p`. Allocates nothing.
-    #[inline]
+    #[inline(always)]
     pub fn sample(&self, p: &Vector3<f64>, tke: f64) -> Vector3<f64> {
         let mut v = Vector3::zeros();
         let wake = tke > 0.0 && self.lanes > 0;

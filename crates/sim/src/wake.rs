@@ -790,7 +790,7 @@ impl Wake {
     /// The mean perturbation (m/s) and turbulent kinetic energy (m^2/s^2) at `p` (TA frame, m):
     /// one trilinear look-up in the shared interleaved pair, blended linearly in the angle of
     /// attack. Free stream outside the tables. Allocates nothing.
-    #[inline]
+    #[inline(always)]
     pub fn sample(&self, p: &Vector3<f64>) -> WakeSample {
         let Some(tables) = &self.tables else {
             return WakeSample::default();

@@ -136,6 +136,13 @@ impl AirDisturbance for WakeField {
         w.velocity + self.turbulence.sample(position, w.tke)
     }
 
+    fn velocities(&self, _time: f64, positions: &[Vector3<f64>], out: &mut [Vector3<f64>]) {
+        for (v, p) in out.iter_mut().zip(positions) {
+            let w = self.wake.sample(p);
+            *v = w.velocity + self.turbulence.sample(p, w.tke);
+        }
+    }
+
     fn advance(&mut self, _time: f64, dt: f64) -> Result<()> {
         self.turbulence.advance(dt)
     }
