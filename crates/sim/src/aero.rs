@@ -46,7 +46,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, SimError};
-use crate::interp::{check_axis, check_values, locate};
+use crate::interp::{check_axis, check_values, Axis};
 
 /// Names of the six coefficients, in storage order.
 pub const COEFFICIENTS: [&str; 6] = ["cx", "cy", "cz", "cl", "cm", "cn"];
@@ -141,9 +141,9 @@ pub struct AeroTableFile {
 pub struct AeroModel {
     reference_area: f64,
     reference_length: f64,
-    alpha: Vec<f64>,
-    beta: Vec<f64>,
-    deflection: Vec<f64>,
+    alpha: Axis,
+    beta: Axis,
+    deflection: Axis,
     /// [ia][ib] -> 6 coefficients.
     base: Vec<[f64; 6]>,
     /// [flap][ia][ib][id] -> 6 increments.
@@ -246,8 +246,8 @@ pub const DEFAULT_DEFLECTION_LIMIT_DEG: f64 = 15.0;
 impl AeroModel {
     /// The deflection axis's range, deg: beyond it the tables hold their edge values.
     pub fn deflection_range_deg(&self) -> (f64, f64) {
-        let first = self.deflection.first().copied().unwrap_or(0.0);
-        let last = self.deflection.last().copied().unwrap_or(0.0);
+        let first = self.deflection.values().first().copied().unwrap_or(0.0);
+        let last = self.deflection.values().last().copied().unwrap_or(0.0);
         (first.to_degrees(), last.to_degrees())
     }
 
@@ -286,9 +286,9 @@ impl AeroModel {
         AeroModel {
             reference_area: std::f64::consts::PI * body.diameter * body.diameter / 4.0,
             reference_length: body.diameter,
-            alpha,
-            beta,
-            deflection,
+            alpha: Axis::new(alpha),
+            beta: Axis::new(beta),
+            deflection: Axis::new(deflection),
             base,
             flaps,
             damping: body.damping,
@@ -383,7 +383,7 @@ impl AeroModel {
         for set in flap_sets {
             flaps.extend(interleave(set, na * nb * nd));
         }
-        let rad = |v: &Vec<f64>| v.iter().map(|x| x.to_radians()).collect();
+        let rad = |v: &Vec<f64>| Axis::new(v.iter().map(|x| x.to_radians()).collect());
         Ok(AeroModel {
             reference_area: data.reference_area,
             reference_length: data.reference_length,
@@ -415,8 +415,9 @@ impl AeroModel {
     /// The model in the file format.
     pub fn to_file_data(&self) -> AeroTableFile {
         // Degrees rounded to 1e-9 so that the file shows the grid as written (-30, not -29.999...).
-        let deg = |v: &Vec<f64>| {
-            v.iter()
+        let deg = |v: &Axis| {
+            v.values()
+                .iter()
                 .map(|x| (x.to_degrees() * 1e9).round() / 1e9)
                 .collect()
         };
@@ -464,10 +465,10 @@ impl AeroModel {
     /// Static coefficients `[C_X, C_Y, C_Z, C_l, C_m, C_n]` at (alpha, beta) with the four flap
     /// deflections (all rad), by superposition of the base table and the flap increments.
     pub fn coefficients(&self, alpha: f64, beta: f64, deflections: &[f64; 4]) -> [f64; 6] {
-        let nb = self.beta.len();
-        let nd = self.deflection.len();
-        let (ia, fa) = locate(&self.alpha, alpha);
-        let (ib, fb) = locate(&self.beta, beta);
+        let nb = self.beta.values().len();
+        let nd = self.deflection.values().len();
+        let (ia, fa) = self.alpha.locate_held(alpha);
+        let (ib, fb) = self.beta.locate_held(beta);
         let w = [
             (1.0 - fa) * (1.0 - fb),
             (1.0 - fa) * fb,
@@ -489,7 +490,7 @@ impl AeroModel {
         }
         let per_flap = self.base.len() * nd;
         for (f, &delta) in deflections.iter().enumerate() {
-            let (id, fd) = locate(&self.deflection, delta);
+            let (id, fd) = self.deflection.locate_held(delta);
             for (cell, wk) in cells.iter().zip(w) {
                 let at = f * per_flap + cell * nd + id;
                 let (lo, hi) = (&self.flaps[at], &self.flaps[at + 1]);

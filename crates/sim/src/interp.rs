@@ -93,18 +93,35 @@ impl Axis {
     #[inline(always)]
     pub fn locate(&self, x: f64, edge: Edge) -> Option<(usize, f64)> {
         let v = &self.values;
-        let n = v.len();
-        if !(x >= v[0] && x <= v[n - 1]) {
+        if !(x >= v[0] && x <= v[v.len() - 1]) {
             return match edge {
                 Edge::Zero => None,
                 Edge::Hold => Some(locate(v, x)),
             };
         }
+        Some(self.inside(x))
+    }
+
+    /// [`Axis::locate`] with [`Edge::Hold`]: the cell is always there.
+    #[inline(always)]
+    pub fn locate_held(&self, x: f64) -> (usize, f64) {
+        let v = &self.values;
+        if !(x >= v[0] && x <= v[v.len() - 1]) {
+            return locate(v, x);
+        }
+        self.inside(x)
+    }
+
+    /// The cell of `x` within `[first, last]`.
+    #[inline(always)]
+    fn inside(&self, x: f64) -> (usize, f64) {
+        let v = &self.values;
+        let n = v.len();
         let guess = match self.uniform {
             Some((first, inv_step)) => (((x - first) * inv_step) as usize).min(n - 2),
             None => v.partition_point(|&a| a <= x).saturating_sub(1).min(n - 2),
         };
-        Some(cell(v, guess, x))
+        cell(v, guess, x)
     }
 }
 
