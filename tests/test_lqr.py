@@ -167,6 +167,26 @@ def test_designs_are_scheduled_by_config_and_cached():
     assert isinstance(built, LqrPolicy) and built.design is c.design
 
 
+def test_configurations_with_one_plant_share_one_design(monkeypatch):
+    """The capture limits and the turbulence do not enter the linearization: the precision
+    tier's design is the nominal one's, designed once; another plant gets its own."""
+    from accd_gym import lqr
+    from accd_gym.tiers import TIERS
+
+    monkeypatch.setattr(lqr, "_DESIGNS", {})
+    monkeypatch.setattr(lqr, "_PLANT_DESIGNS", {})
+    calls = []
+    real = lqr.design
+    monkeypatch.setattr(lqr, "design", lambda lin, t: calls.append(t) or real(lin, t))
+    nominal = LqrPolicy.for_config(TIERS["nominal"].config())
+    precision = LqrPolicy.for_config(TIERS["precision"].config())
+    assert precision.design is nominal.design and len(calls) == 1
+    assert len(lqr._DESIGNS) == 2  # both configurations skip the linearization next time
+    heavier = LqrPolicy.for_config(TIERS["precision"].config(), accd={"mass": 60.0})
+    assert heavier.design is not nominal.design and len(calls) == 2
+    assert not np.allclose(heavier.design.k, nominal.design.k)
+
+
 def test_bad_configs_and_tunings_are_config_errors():
     with pytest.raises(ConfigError, match="segments"):
         linearize(tether={"segments": 0})

@@ -60,6 +60,7 @@ controller's 52 %. No rate cost: the flaps move more from step to step than the 
 
 from __future__ import annotations
 
+import hashlib
 import json
 from dataclasses import asdict, dataclass, fields
 from typing import Any, Mapping, Optional
@@ -252,8 +253,27 @@ def design(lin: Any, tuning: LqrTuning) -> LqrDesign:
                      closed_loop_radius=closed, observer_radius=observer)
 
 
-#: Designs by (configuration JSON without its seeds, tuning).
+#: Designs by (configuration JSON without its seeds, tuning): the look-up that skips the
+#: linearization.
 _DESIGNS: dict[tuple[str, LqrTuning], LqrDesign] = {}
+#: Designs by (plant digest, tuning): configurations that differ only where the plant does not
+#: (the capture limits, the turbulence, the sensors: every registered tier) share one design.
+_PLANT_DESIGNS: dict[tuple[str, LqrTuning], LqrDesign] = {}
+
+#: What :func:`design` reads of a linearization, the arrays of the plant key.
+_PLANT_ARRAYS = ("a", "b", "c", "e", "steps", "trim_observation")
+
+
+def _plant_key(lin: Any) -> str:
+    """SHA-256 of everything :func:`design` reads of ``lin``: equal keys, equal designs."""
+    h = hashlib.sha256()
+    for name in _PLANT_ARRAYS:
+        arr = np.ascontiguousarray(np.asarray(getattr(lin, name), dtype=np.float64))
+        h.update(f"{name}{arr.shape}".encode())
+        h.update(arr.tobytes())
+    h.update(float(lin.dt).hex().encode())
+    h.update("\0".join(lin.state_names).encode())
+    return h.hexdigest()
 
 
 def _design_key(cfg: "_core.EnvConfig") -> str:
@@ -273,7 +293,8 @@ class LqrPolicy:
     """LQR with a steady-state Kalman filter and disturbance states (see the module docstring).
 
     Build it for the env configuration it runs on: ``LqrPolicy.for_config(config)``; designs
-    are cached by configuration (seeds aside) and tuning. ``predict(obs)`` takes observations
+    are cached by configuration (seeds aside) and tuning, and shared by configurations with one
+    plant (the same linearization). ``predict(obs)`` takes observations
     of shape (N, 25) and returns flap commands (N, 4) in [-1, 1]; ``reset(mask)`` restarts the
     estimates of the envs in ``mask`` (their next observation initialises them).
     """
@@ -302,7 +323,11 @@ class LqrPolicy:
         t = tuning if isinstance(tuning, LqrTuning) else (LqrTuning.from_mapping(tuning) if tuning else default_tuning())
         key = (_design_key(cfg), t)
         if key not in _DESIGNS:
-            _DESIGNS[key] = design(_core.linearize(cfg), t)
+            lin = _core.linearize(cfg)
+            plant = (_plant_key(lin), t)
+            if plant not in _PLANT_DESIGNS:
+                _PLANT_DESIGNS[plant] = design(lin, t)
+            _DESIGNS[key] = _PLANT_DESIGNS[plant]
         return cls(_DESIGNS[key])
 
     def reset(self, mask: Optional[np.ndarray] = None) -> None:
