@@ -132,11 +132,17 @@ impl Stream {
     }
 
     /// The next N(0, 1) deviate.
-    #[inline]
+    #[inline(always)]
     pub fn gaussian(&mut self) -> f64 {
         if self.sampler == NormalSampler::Ziggurat {
             return StandardNormal.sample(&mut self.rng);
         }
+        self.box_muller()
+    }
+
+    /// [`Stream::gaussian`] by Box-Muller (a pair per two draws).
+    #[inline(never)]
+    fn box_muller(&mut self) -> f64 {
         if let Some(z) = self.spare.take() {
             return z;
         }
