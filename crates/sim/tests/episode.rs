@@ -4,21 +4,10 @@
 
 use std::sync::Arc;
 
-use accd_sim::{EnvConfig, Episode, Equilibrium, Outcome, Seeds, OBS_BOUND};
+mod support;
+use support::{episode, seeds};
 
-fn seeds(k: u64) -> Seeds {
-    Seeds {
-        initial: k,
-        wake: 1000 + k,
-        rlv: 2000 + k,
-    }
-}
-
-fn episode(config: EnvConfig, k: u64) -> Episode {
-    let config = Arc::new(config.validated().unwrap());
-    let eq = Arc::new(Equilibrium::settle(&config).unwrap());
-    Episode::new(config, eq, seeds(k)).unwrap()
-}
+use accd_sim::{EnvConfig, Episode, Equilibrium, Outcome, OBS_BOUND};
 
 /// A 5 s window; the capture radius so small that no capture ends the episode early.
 fn quick() -> EnvConfig {
@@ -57,7 +46,7 @@ fn run(ep: &mut Episode, steps: usize) -> Vec<(Outcome, Vec<f32>)> {
 
 #[test]
 fn episodes_truncate_at_the_capture_window_with_bounded_finite_observations() {
-    let mut ep = episode(quick(), 3);
+    let mut ep = episode(&quick(), 3);
     let out = run(&mut ep, 50);
     for (k, (o, obs)) in out.iter().enumerate() {
         assert!(obs.iter().all(|v| v.is_finite() && v.abs() <= OBS_BOUND));
@@ -95,8 +84,8 @@ fn same_seeds_same_episode_and_saved_states_continue_bit_for_bit() {
 fn per_lane_streams_do_not_depend_on_the_sampling_scheme() {
     let mut per_stage = fast(quick());
     per_stage.physics.wake.sampling = accd_sim::AirSampling::PerStage;
-    let mut a = episode(per_stage, 3);
-    let mut b = episode(fast(quick()), 3);
+    let mut a = episode(&per_stage, 3);
+    let mut b = episode(&fast(quick()), 3);
     let (ra, rb) = (run(&mut a, 30), run(&mut b, 30));
     // Close (the sampling differs by a first-order term in the forcing), not equal.
     let max = ra
@@ -112,14 +101,14 @@ fn per_lane_streams_do_not_depend_on_the_sampling_scheme() {
 
 fn same_seeds_and_saved_states(config: EnvConfig) {
     let quick = || config.clone();
-    let mut a = episode(quick(), 7);
-    let mut b = episode(quick(), 7);
+    let mut a = episode(&quick(), 7);
+    let mut b = episode(&quick(), 7);
     let ra = run(&mut a, 20);
     let rb = run(&mut b, 20);
     assert_eq!(format!("{ra:?}"), format!("{rb:?}"));
 
     let bytes = postcard::to_allocvec(&a.state()).unwrap();
-    let mut c = episode(quick(), 99);
+    let mut c = episode(&quick(), 99);
     c.set_state(postcard::from_bytes(&bytes).unwrap()).unwrap();
     assert_eq!(a.observation(), c.observation());
     let cloned = a.clone();
@@ -130,14 +119,14 @@ fn same_seeds_and_saved_states(config: EnvConfig) {
     assert_eq!(format!("{tail_a:?}"), format!("{tail_c:?}"));
     assert_eq!(format!("{tail_a:?}"), format!("{tail_d:?}"));
 
-    let mut e = episode(quick(), 8);
+    let mut e = episode(&quick(), 8);
     assert_ne!(format!("{:?}", run(&mut e, 5)), format!("{:?}", &ra[..5]));
 }
 
 #[test]
 fn non_finite_actions_are_rejected_and_out_of_range_ones_clipped() {
-    let mut a = episode(quick(), 1);
-    let mut b = episode(quick(), 1);
+    let mut a = episode(&quick(), 1);
+    let mut b = episode(&quick(), 1);
     let e = a.step(&[0.0, f32::NAN, 0.0, 0.0]).unwrap_err().to_string();
     assert!(e.contains("action[1]"), "{e}");
     assert_eq!(a.steps(), 0);
@@ -153,7 +142,7 @@ fn capture_ends_the_episode_with_the_documented_bonus() {
     config.physics.boom.capture_radius = 100.0;
     config.physics.boom.max_closing_speed = 1000.0;
     let w = config.reward.clone();
-    let mut ep = episode(config, 2);
+    let mut ep = episode(&config, 2);
     let o = ep.step(&[0.0; 4]).unwrap();
     assert!(o.captured && o.terminated && !o.truncated);
     assert!(
@@ -175,7 +164,7 @@ fn overload_and_envelope_exit_end_the_episode_with_the_penalty() {
     let mut config = quick();
     config.limits.overload_fraction = 1e-3;
     let w = config.reward.clone();
-    let mut ep = episode(config, 2);
+    let mut ep = episode(&config, 2);
     let o = ep.step(&[0.0; 4]).unwrap();
     assert!(o.overload && o.terminated && !o.captured);
     let expected = w.proximity * (-o.distance / w.proximity_scale).exp() - w.failure;
@@ -183,7 +172,7 @@ fn overload_and_envelope_exit_end_the_episode_with_the_penalty() {
 
     let mut config = quick();
     config.limits.max_distance = 0.01;
-    let mut ep = episode(config, 2);
+    let mut ep = episode(&config, 2);
     let o = ep.step(&[1.0, 1.0, -1.0, -1.0]).unwrap();
     assert!(o.envelope_exit && o.terminated);
     let effort = 0.05 * 1.0 + 0.05 * 0.25;

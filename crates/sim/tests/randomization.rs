@@ -4,22 +4,11 @@
 
 use std::sync::Arc;
 
-use accd_sim::{EnvConfig, Episode, Equilibrium, Parameters, Seeds};
+mod support;
+use support::{episode_with_seeds, seeds};
+
+use accd_sim::{EnvConfig, Episode, Equilibrium, Parameters};
 use accd_tether::Material;
-
-fn seeds(k: u64) -> Seeds {
-    Seeds {
-        initial: k,
-        wake: 1000 + k,
-        rlv: 2000 + k,
-    }
-}
-
-fn episode(config: EnvConfig, s: Seeds) -> Episode {
-    let config = Arc::new(config.validated().unwrap());
-    let eq = Arc::new(Equilibrium::settle(&config).unwrap());
-    Episode::new(config, eq, s).unwrap()
-}
 
 fn quick() -> EnvConfig {
     let mut c = EnvConfig {
@@ -64,7 +53,7 @@ fn run(e: &mut Episode, steps: usize) -> Vec<u32> {
 #[test]
 fn each_episode_runs_the_physics_its_wake_seed_draws() {
     let base = randomized();
-    let mut e = episode(base.clone(), seeds(1));
+    let mut e = episode_with_seeds(&base.clone(), seeds(1));
     let p = *e.parameters().expect("drawn");
     assert_eq!(p, Parameters::draw(&base.randomization, seeds(1).wake));
     let c = e.config().clone();
@@ -87,7 +76,7 @@ fn each_episode_runs_the_physics_its_wake_seed_draws() {
     assert!((e.equilibrium().position - own.position).norm() > 0.1);
     e.reset(seeds(1)).unwrap();
     assert_eq!(run(&mut e, 20), first);
-    assert_eq!(run(&mut episode(base, seeds(1)), 20), first);
+    assert_eq!(run(&mut episode_with_seeds(&base, seeds(1)), 20), first);
 }
 
 #[test]
@@ -115,8 +104,8 @@ fn randomization_moves_no_other_stream() {
     r.airspeed = [base.physics.aircraft.airspeed; 2];
     r.ambient_sigma_mps = [0.0; 2];
     for k in 0..3 {
-        let plain = run(&mut episode(base.clone(), seeds(k)), 50);
-        let drawn = run(&mut episode(fixed.clone(), seeds(k)), 50);
+        let plain = run(&mut episode_with_seeds(&base.clone(), seeds(k)), 50);
+        let drawn = run(&mut episode_with_seeds(&fixed.clone(), seeds(k)), 50);
         assert_eq!(plain, drawn, "seeds({k})");
     }
 }
@@ -124,12 +113,12 @@ fn randomization_moves_no_other_stream() {
 #[test]
 fn a_saved_state_carries_its_physics_into_an_episode_of_other_parameters() {
     let base = randomized();
-    let mut a = episode(base.clone(), seeds(3));
+    let mut a = episode_with_seeds(&base.clone(), seeds(3));
     for k in 0..7 {
         a.step(&action(k)).unwrap();
     }
     let saved = a.state();
-    let mut b = episode(base, seeds(4));
+    let mut b = episode_with_seeds(&base, seeds(4));
     assert_ne!(a.parameters(), b.parameters());
     b.set_state(saved).unwrap();
     assert_eq!(a.parameters(), b.parameters());
@@ -141,7 +130,7 @@ fn drawn_episodes_start_well_posed() {
     // Over many draws, every episode's equilibrium is inside the episode limits (the boom is
     // placed relative to it) and the episode steps: randomization never poses an impossible task.
     let base = randomized();
-    let mut e = episode(base, seeds(0));
+    let mut e = episode_with_seeds(&base, seeds(0));
     for k in 0..12 {
         e.reset(seeds(10 + k)).unwrap();
         assert_eq!(e.equilibrium().outside_limits, None, "{:?}", e.parameters());
@@ -176,7 +165,7 @@ fn ranges_whose_draws_cannot_be_built_are_refused_at_construction() {
 
 #[test]
 fn a_failed_reset_says_why() {
-    let mut e = episode(quick(), seeds(0));
+    let mut e = episode_with_seeds(&quick(), seeds(0));
     e.fail_reset(
         seeds(5),
         accd_sim::SimError::invalid_config("wake.alpha_deg", 20.0, "[0, 8] deg"),

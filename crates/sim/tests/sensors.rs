@@ -3,18 +3,11 @@
 //! draws are deterministic per seed, the latency and the observation delay shift the true
 //! signal by exactly their steps, and a saved state continues bit for bit.
 
-use std::sync::Arc;
+mod support;
+use support::episode;
 
 use accd_sim::sensors::SensorsConfig;
-use accd_sim::{observation_index, EnvConfig, Episode, Equilibrium, Outcome, Seeds};
-
-fn seeds(k: u64) -> Seeds {
-    Seeds {
-        initial: k,
-        wake: 1000 + k,
-        rlv: 2000 + k,
-    }
-}
+use accd_sim::{observation_index, EnvConfig, Episode, Outcome};
 
 /// A 5 s window; the capture radius so small that no capture ends the episode early.
 fn quick(sensors: SensorsConfig) -> EnvConfig {
@@ -59,12 +52,6 @@ fn exact() -> SensorsConfig {
     s.gnss.position_noise = 0.0;
     s.gnss.velocity_noise = 0.0;
     s
-}
-
-fn episode(config: &EnvConfig, k: u64) -> Episode {
-    let config = Arc::new(config.clone().validated().unwrap());
-    let eq = Arc::new(Equilibrium::settle(&config).unwrap());
-    Episode::new(config, eq, seeds(k)).unwrap()
 }
 
 /// Pitch and yaw sweeps and a little roll.
