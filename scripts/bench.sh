@@ -2,6 +2,7 @@
 # Runs every benchmark and prints the ratios the performance work tracks:
 #   criterion: the tether (n = 10 .. 300), one capture-system physics step (the default fast and
 #   the exact air scheme beside the tether), the batch env (N = 1, 16, 256; 1 thread and all cores);
+#   examples/capture_ratio: the capture step against the tether in interleaved rounds;
 #   scripts/bench_physics.py: MuJoCo's bare chain, the tether and the capture system in one process;
 #   scripts/bench_envs.py: the Python envs (default fast scheme and the exact one);
 #   scripts/bench_training.py: PPO end to end with the time split.
@@ -21,6 +22,8 @@ EXACT='{"wake": {"sampling": "per_stage"}, "turbulence": {"normal_sampler": "box
   cargo bench -q -p accd-tether --bench tether -- --warm-up-time 1 --measurement-time 3 recursive 2>&1 | grep -E "time:|^[a-z_/0-9]+ *$|recursive" || true
   echo "== criterion: capture-system physics step"
   cargo bench -q -p accd-sim --bench capture -- --warm-up-time 1 --measurement-time 3 2>&1 | grep -E "time:|physics_step" || true
+  echo "== capture-system step / tether alone, interleaved rounds (minimum per step)"
+  cargo run -q --release -p accd-sim --example capture_ratio 2>&1 || true
   echo "== criterion: batch env"
   cargo bench -q -p accd-batch --bench batch -- --warm-up-time 1 --measurement-time 4 2>&1 | grep -E "time:|thrpt:|batch_step" || true
   echo "== physics steps side by side (one process)"
