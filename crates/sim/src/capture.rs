@@ -79,13 +79,6 @@ impl Surroundings for Stage<'_> {
         -self.aircraft.velocity(time) + self.disturbance.velocity(time, position)
     }
     #[inline(always)]
-    fn segment_air_velocity(&self, time: f64, segment: usize, position: &V3) -> V3 {
-        match self.held {
-            Some((held, _)) => -self.aircraft.velocity(time) + held[segment],
-            None => self.air_velocity(time, position),
-        }
-    }
-    #[inline(always)]
     fn held_segment_air(&self, time: f64) -> Option<(V3, &[V3])> {
         self.held
             .map(|(held, _)| (-self.aircraft.velocity(time), held))

@@ -129,12 +129,19 @@ impl Surroundings for WakeField {
 }
 
 impl WakeField {
+    /// Wake and turbulence at `p` (TA frame, m), without the free stream, m/s: the
+    /// [`AirDisturbance`] of a capture episode.
+    #[inline(always)]
+    fn disturbance_at(&self, p: &Vector3<f64>) -> Vector3<f64> {
+        let w = self.wake.sample(p);
+        w.velocity + self.turbulence.sample(p, w.tke)
+    }
+
     /// The disturbance at each of `positions` into `out`: [`AirDisturbance::velocities`].
     #[inline(always)]
     fn velocities_body(&self, positions: &[Vector3<f64>], out: &mut [Vector3<f64>]) {
         for (v, p) in out.iter_mut().zip(positions) {
-            let w = self.wake.sample(p);
-            *v = w.velocity + self.turbulence.sample(p, w.tke);
+            *v = self.disturbance_at(p);
         }
     }
 
@@ -151,8 +158,7 @@ impl WakeField {
 /// density come from the towing aircraft instead (the field's own are not used there).
 impl AirDisturbance for WakeField {
     fn velocity(&self, _time: f64, position: &Vector3<f64>) -> Vector3<f64> {
-        let w = self.wake.sample(position);
-        w.velocity + self.turbulence.sample(position, w.tke)
+        self.disturbance_at(position)
     }
 
     fn velocities(&self, _time: f64, positions: &[Vector3<f64>], out: &mut [Vector3<f64>]) {

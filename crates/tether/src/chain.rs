@@ -381,7 +381,7 @@ impl ChainState {
             rx,
             ry,
             rz,
-        );
+        )?;
         Ok(report)
     }
 }
@@ -495,7 +495,7 @@ fn segment_loads<M: Madd, S: Surroundings + ?Sized>(
     rx: &mut [f64],
     ry: &mut [f64],
     rz: &mut [f64],
-) {
+) -> Result<()> {
     let n = ex.len();
     let (ey, ez, cx, cy, cz) = (&ey[..n], &ez[..n], &cx[..n], &cy[..n], &cz[..n]);
     let (vx, vy, vz, wx, wy, wz) = (&vx[..n], &vy[..n], &vz[..n], &wx[..n], &wy[..n], &wz[..n]);
@@ -505,9 +505,9 @@ fn segment_loads<M: Madd, S: Surroundings + ?Sized>(
     let (xx, xy, xz) = (&mut xx[..n], &mut xy[..n], &mut xz[..n]);
     let (rx, ry, rz) = (&mut rx[..n], &mut ry[..n], &mut rz[..n]);
     let (half_inv_l, inv_l2, m4) = (0.5 / c.l, 1.0 / (c.l * c.l), 0.25 * c.m);
-    // The pass over the segments, for the held samples (vectorized) or for a field asked
-    // segment by segment; `$air(k, com)` is segment k's air exactly as `segment_air_velocity`
-    // gives it. A macro, not a closure: the body must inline into the target-feature caller.
+    // The pass over the segments, for the held samples (vectorized) or for a field asked at
+    // each centre; `$air(k, com)` is segment k's air. A macro, not a closure: the body must
+    // inline into the target-feature caller.
     macro_rules! segments {
         ($air:expr) => {
             for k in 0..n {
@@ -536,10 +536,18 @@ fn segment_loads<M: Madd, S: Surroundings + ?Sized>(
         };
     }
     match surroundings.held_segment_air(time) {
+        Some((_, held)) if held.len() != n => {
+            return Err(TetherError::WrongSize {
+                what: "held segment air",
+                expected: n,
+                found: held.len(),
+            })
+        }
         Some((uniform, held)) => {
-            let held = &held[..n];
+            let held = &held[..n]; // of length n (above): tells the compiler, no bounds checks
             segments!(|k: usize, _: &V3| uniform + held[k]);
         }
-        None => segments!(|k: usize, com: &V3| surroundings.segment_air_velocity(time, k, com)),
+        None => segments!(|_: usize, com: &V3| surroundings.air_velocity(time, com)),
     }
+    Ok(())
 }

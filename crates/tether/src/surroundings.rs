@@ -19,26 +19,12 @@ pub trait Surroundings {
     /// Velocity of the air relative to the TA frame at `position` (m), m/s.
     fn air_velocity(&self, time: f64, position: &Vector3<f64>) -> Vector3<f64>;
 
-    /// Velocity of the air at the centre of segment `segment` (0 at the attachment), which is at
-    /// `position` (m), m/s. The tether's loads ask this for every segment; the default is
-    /// [`Surroundings::air_velocity`] there. Surroundings that sample a costly field once per
-    /// step and hold it over the RK4 stages answer from their held samples instead.
-    #[inline(always)]
-    fn segment_air_velocity(
-        &self,
-        time: f64,
-        _segment: usize,
-        position: &Vector3<f64>,
-    ) -> Vector3<f64> {
-        self.air_velocity(time, position)
-    }
-
     /// The air velocity at every segment centre during this stage, when the surroundings hold
-    /// it (sampled once per step, [`Surroundings::segment_air_velocity`] answering from the held
-    /// samples): `(uniform, held)`, segment `k`'s air being `uniform + held[k]` (held covers
-    /// every segment), exactly what `segment_air_velocity` returns for it. The loads then read
-    /// the samples in one pass that the compiler vectorizes. Default `None`: the loads ask
-    /// [`Surroundings::segment_air_velocity`] segment by segment.
+    /// it (a costly field sampled once per step and held over the RK4 stages): `(uniform, held)`,
+    /// segment `k`'s air being `uniform + held[k]`; `held` has one entry per segment (another
+    /// length is a [`crate::TetherError::WrongSize`]). The loads then read the samples in one
+    /// pass that the compiler vectorizes. Default `None`: the loads ask
+    /// [`Surroundings::air_velocity`] at each segment centre.
     #[inline(always)]
     fn held_segment_air(&self, _time: f64) -> Option<(Vector3<f64>, &[Vector3<f64>])> {
         None

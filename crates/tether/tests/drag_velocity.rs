@@ -2,22 +2,14 @@
 //! air velocity alone): it parses, serializes only when chosen, leaves the default bit for bit,
 //! and makes the drag a function of the configuration only (not of the rates).
 
-use accd_tether::direction::direction;
-use accd_tether::{
-    reference, DragVelocity, TetherConfig, TetherModel, TetherState, UniformFlow, Vacuum,
-};
+mod common;
+
+use accd_tether::{reference, DragVelocity, TetherConfig, TetherModel, UniformFlow, Vacuum};
 use nalgebra::Vector3;
 
 /// Table 3's tether towed with the stand-in ACCD, bent and moving (every drag term is on).
 fn bent_moving(cfg: &TetherConfig) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
-    let n = cfg.segments;
-    let dirs: Vec<_> = (0..n)
-        .map(|k| direction(0.3 + 0.02 * k as f64, 0.1 - 0.01 * k as f64))
-        .collect();
-    let rates: Vec<_> = (0..n)
-        .map(|k| Vector3::new(0.0, 0.2 * (k as f64).sin(), -0.15 * (k as f64).cos()))
-        .collect();
-    let moving = TetherState::from_directions(&dirs, &rates, 0.01, 0.05).unwrap();
+    let moving = common::bent_moving_state(cfg);
     let still = vec![0.0; moving.qd.len()];
     (moving.q, moving.qd, still)
 }

@@ -3,7 +3,7 @@
 #![allow(dead_code)]
 
 use accd_tether::direction::direction;
-use accd_tether::TetherConfig;
+use accd_tether::{TetherConfig, TetherState};
 use nalgebra::{DMatrix, Vector3};
 
 pub type V3 = Vector3<f64>;
@@ -82,4 +82,18 @@ impl SplitMix {
     pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
         lo + (hi - lo) * self.next()
     }
+}
+
+/// A bent, moving state of `config`'s tether (every drag term on): segment k at angles
+/// (0.3 + 0.02 k, 0.1 - 0.01 k) rad, turning at (0, 0.2 sin k, -0.15 cos k) rad/s, elongation
+/// 0.01 m at 0.05 m/s.
+pub fn bent_moving_state(config: &TetherConfig) -> TetherState {
+    let n = config.segments;
+    let dirs: Vec<_> = (0..n)
+        .map(|k| direction(0.3 + 0.02 * k as f64, 0.1 - 0.01 * k as f64))
+        .collect();
+    let rates: Vec<_> = (0..n)
+        .map(|k| V3::new(0.0, 0.2 * (k as f64).sin(), -0.15 * (k as f64).cos()))
+        .collect();
+    TetherState::from_directions(&dirs, &rates, 0.01, 0.05).unwrap()
 }
