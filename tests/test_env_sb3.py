@@ -120,3 +120,49 @@ def test_state_restores_and_env_pickles():
     second = [env.step(a)[0].copy() for a in acts]
     third = [copy.step(a)[0].copy() for a in acts]
     assert all(np.array_equal(x, y) and np.array_equal(x, z) for x, y, z in zip(first, second, third))
+
+
+def _reference_info_dict(row: np.ndarray, wake_seed: int) -> dict:
+    """The info dict as the Python layer built it before the native builder (the reference)."""
+    from accd_gym.task import EVENT_NAMES, INFO_NAMES
+
+    out = {name: (bool(v) if name in EVENT_NAMES else v) for name, v in zip(INFO_NAMES, row.tolist())}
+    out["episode_steps"] = int(out["episode_steps"])
+    out["wake_seed"] = int(wake_seed)
+    return out
+
+
+def test_native_info_dicts_equal_the_python_construction_in_keys_order_types_and_values():
+    from accd_gym.task import INFO_NAMES, info_dicts
+
+    rng = np.random.default_rng(5)
+    info = rng.normal(0, 1e3, (7, len(INFO_NAMES)))
+    info[:, 4:8] = rng.integers(0, 2, (7, 4))
+    info[:, 8] = rng.integers(0, 701, 7)
+    info[0, 1], info[1, 2], info[2, 3] = np.nan, np.inf, -0.0
+    wake = rng.integers(0, 2**64 - 1, 7, dtype=np.uint64)
+    got = info_dicts(info, wake)
+    assert len(got) == 7
+    for i, d in enumerate(got):
+        want = _reference_info_dict(info[i], int(wake[i]))
+        assert list(d) == list(want)
+        for k in want:
+            assert type(d[k]) is type(want[k]), k
+            assert d[k] == want[k] or (d[k] != d[k] and want[k] != want[k]), k
+        assert str(d["peak_tension"]) == str(want["peak_tension"])  # -0.0 stays -0.0
+    with pytest.raises(ValueError, match="info has shape"):
+        info_dicts(info[:, :5], wake)
+    with pytest.raises(ValueError, match="wake_seed"):
+        info_dicts(info, wake[:3])
+
+
+def test_step_infos_carry_the_time_limit_and_divergence_keys_in_order():
+    env = make(2, boom={"capture_radius": 1e-6})
+    env.seed(1)
+    env.reset()
+    for k in range(20):
+        _, _, done, infos = env.step(np.zeros((2, 4), np.float32))
+        for d in infos:
+            assert list(d)[-2:] == ["wake_seed", "TimeLimit.truncated"] or "terminal_observation" in d
+            assert d["TimeLimit.truncated"] is (k == 19)
+            assert type(d["episode_steps"]) is int and type(d["captured"]) is bool

@@ -16,7 +16,7 @@ from accd_gym.task import (
     action_space,
     check_actions,
     check_seed,
-    info_dict,
+    info_dicts,
     observation_space,
     random_seed,
 )
@@ -211,7 +211,7 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
         obs, reward, terminated, truncated, _final, info, wake, _reset = self._core.step(a)
         term, trunc = bool(terminated[0]), bool(truncated[0])
         self._needs_reset = term or trunc
-        out_info = info_dict(info[0], int(wake[0]))
+        out_info = info_dicts(info, wake)[0]
         if out_info["diverged"]:
             out_info["divergence"] = self._core.divergence(0)
         if self.render_mode == "human":

@@ -14,10 +14,11 @@ from accd_gym.config import valid_config, with_arguments
 from accd_gym.core_env import CoreEnvMixin
 from accd_gym.errors import ConfigError
 from accd_gym.task import (
+    DIVERGED_COLUMN,
     action_space,
     check_actions,
     check_seed,
-    info_dict,
+    info_dicts,
     observation_space,
     random_seed,
 )
@@ -116,11 +117,11 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         obs, reward, terminated, truncated, final_obs, info, wake, _ = self._core.step(self._actions)
         self._actions = None
         dones = terminated | truncated
-        infos = [info_dict(info[i], int(wake[i])) for i in range(self.num_envs)]
-        for i, d in enumerate(infos):
-            if d["diverged"]:  # a diverged episode ended and was replaced in this step
-                d["divergence"] = self._core.final_divergence(i)
-            d["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
+        infos = info_dicts(info, wake)
+        for i in np.flatnonzero(info[:, DIVERGED_COLUMN]):  # ended and replaced in this step
+            infos[i]["divergence"] = self._core.final_divergence(int(i))
+        for d, time_limit in zip(infos, (truncated & ~terminated).tolist()):
+            d["TimeLimit.truncated"] = time_limit
         for i in np.flatnonzero(dones):
             infos[i]["terminal_observation"] = final_obs[i].copy()
             self.reset_infos[i] = {"wake_seed": int(self._core.episode_seeds(int(i))["wake"])}

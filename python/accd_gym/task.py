@@ -47,6 +47,8 @@ def observation_indices(*names: str) -> np.ndarray:
 
 #: Flags of the info dict that say why an episode ended.
 EVENT_NAMES: tuple[str, ...] = ("captured", "overload", "envelope_exit", "diverged")
+#: Column of the "diverged" flag in a step's info array.
+DIVERGED_COLUMN: int = INFO_NAMES.index("diverged")
 
 
 def observation_space() -> spaces.Box:
@@ -59,14 +61,14 @@ def action_space() -> spaces.Box:
     return spaces.Box(-1.0, 1.0, shape=(ACT_DIM,), dtype=np.float32)
 
 
-def info_dict(info_row: np.ndarray, wake_seed: int) -> dict[str, Any]:
-    """The info dict of one env from its row of the info array (plain Python values)."""
-    out: dict[str, Any] = {}
-    for name, value in zip(INFO_NAMES, info_row.tolist()):
-        out[name] = bool(value) if name in EVENT_NAMES else value
-    out["episode_steps"] = int(out["episode_steps"])
-    out["wake_seed"] = int(wake_seed)
-    return out
+def info_dicts(info: np.ndarray, wake_seed: np.ndarray) -> list[dict[str, Any]]:
+    """One info dict per row of a step's info array (plain Python values), built natively.
+
+    ``info``: (n, len(INFO_NAMES)) float64; ``wake_seed``: (n,) uint64. Each dict has the
+    ``INFO_NAMES`` in order (the ``EVENT_NAMES`` as bool, ``episode_steps`` as int, the rest as
+    float), then ``wake_seed`` (int).
+    """
+    return _core.info_dicts(info, wake_seed)
 
 
 _FLOAT32_MAX = float(np.finfo(np.float32).max)

@@ -8,7 +8,7 @@
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use accd_sim::episode::EpisodeState;
 use accd_sim::state_format::{self, Expected, StateError, StateKind};
@@ -18,6 +18,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{BatchError, Result};
 use crate::seeds::{episode_seeds, WakeSchedule};
+use crate::shared::{run_shared, Queue, Rows};
 
 /// Columns of the per-env info array ([`StepBuffers::info`]), all f64.
 pub mod info {
@@ -190,6 +191,10 @@ pub struct BatchEnv {
     autoreset: Autoreset,
     pool: rayon::ThreadPool,
     threads: usize,
+    /// The time one env's step took in the last completed watched step (wall time x threads /
+    /// envs; `None` before the first). The calling thread takes envs itself only while this is
+    /// under [`SHARE_BELOW`], so that it still asks its interruption check that often.
+    env_step_time: Option<Duration>,
     /// Set when a step or reset panicked (a bug): the envs may be half-stepped, so every later
     /// call fails with [`BatchError::Internal`].
     poisoned: Option<String>,
@@ -270,6 +275,7 @@ impl BatchEnv {
             autoreset,
             pool,
             threads,
+            env_step_time: None,
             poisoned: None,
         })
     }
@@ -428,14 +434,17 @@ impl BatchEnv {
         self.step_watched(actions, out, None)
     }
 
-    /// [`BatchEnv::step`] that stays interruptible however long the step takes: the calling
-    /// thread waits for the pool's threads, asking `interrupted()` every [`WATCH_INTERVAL`]
-    /// (from the calling thread, so Python can run its signal handlers there). Once it returns
+    /// [`BatchEnv::step`] that stays interruptible however long the step takes, asking
+    /// `interrupted()` from the calling thread (so Python can run its signal handlers there) at
+    /// most about [`WATCH_INTERVAL`] apart. While one env's step takes under 5 ms (every usual
+    /// config) the calling thread steps envs itself beside the pool's threads and asks between
+    /// its envs ([`crate::shared`]: no thread wakes up for nothing, the step's latency drops);
+    /// otherwise (and on the first step) it only waits and asks. Once `interrupted()` returns
     /// true the envs stop before their next physics step and the call fails with
     /// [`SimError::Interrupted`]; the envs may then be part-way through the step, so each
     /// refuses to step or be saved ([`BatchError::Interrupted`]) until a reset or `set_state`.
-    /// Results are bitwise those of [`BatchEnv::step`]. Unlike it, this allocates (one small
-    /// job box a call).
+    /// Results are bitwise those of [`BatchEnv::step`] whichever thread steps which env. Unlike
+    /// it, this allocates (a small job box per helper thread a call).
     pub fn step_interruptible(
         &mut self,
         actions: &[f32],
@@ -488,18 +497,7 @@ impl BatchEnv {
         let schedule = &self.schedule;
         let n64 = n as u64;
         let stop = AtomicBool::new(false);
-        let rows = (
-            self.slots.par_iter_mut().enumerate(),
-            actions.par_chunks(ACT_DIM),
-            out.obs.par_chunks_mut(OBS_DIM),
-            out.final_obs.par_chunks_mut(OBS_DIM),
-            out.info.par_chunks_mut(info::DIM),
-            out.reward.par_iter_mut(),
-            out.terminated.par_iter_mut(),
-            out.truncated.par_iter_mut(),
-            out.wake_seed.par_iter_mut(),
-            out.autoreset.par_iter_mut(),
-        );
+        let rows = StepRows::new(&mut self.slots, actions, out);
         let job = |(
             (position, slot),
             action,
@@ -562,16 +560,45 @@ impl BatchEnv {
                 }
             }
         };
+        // The plain step runs rayon's parallel iterator over the rows (no allocation); the
+        // watched one shares them with the calling thread ([`crate::shared`]).
         let pool = &self.pool;
+        let queue = Queue::new(rows);
         match watch {
             None => run(&mut self.poisoned, || {
-                pool.install(|| rows.into_par_iter().for_each(job))
-            })?,
-            Some(interrupted) => run(&mut self.poisoned, || {
-                watched(pool, &stop, interrupted, || {
-                    rows.into_par_iter().for_each(job)
+                pool.install(|| {
+                    (0..n).into_par_iter().for_each(|_| {
+                        if let Some(row) = queue.pop() {
+                            job(row)
+                        }
+                    })
                 })
             })?,
+            Some(interrupted) => {
+                // Long env steps (unusual configs) run on the pool alone, the caller watching.
+                let share = self.env_step_time.is_some_and(|t| t < SHARE_BELOW);
+                // (With n envs the caller takes one: more than n - 1 helpers would only be
+                // waited for.)
+                let helpers = if share {
+                    (self.threads - 1).min(n - 1)
+                } else {
+                    self.threads
+                };
+                let take_one = || queue.pop().map(job).is_some();
+                let start = Instant::now();
+                run(&mut self.poisoned, || {
+                    run_shared(
+                        pool,
+                        helpers,
+                        share,
+                        &take_one,
+                        &stop,
+                        WATCH_INTERVAL,
+                        interrupted,
+                    )
+                })?;
+                self.env_step_time = Some(start.elapsed() * self.threads as u32 / n.max(1) as u32);
+            }
         }
         if stop.load(Ordering::Relaxed) {
             for slot in &mut self.slots {
@@ -743,6 +770,82 @@ type Row<'a> = (
     &'a mut bool,
 );
 
+/// A step's slots, actions and output buffers, lent out env by env ([`Row`]) to the threads of
+/// the step through a [`Queue`]. Holds the exclusive borrows it was made from for its lifetime.
+struct StepRows<'a> {
+    len: usize,
+    slots: *mut Slot,
+    actions: &'a [f32],
+    obs: *mut f32,
+    final_obs: *mut f32,
+    info: *mut f64,
+    reward: *mut f64,
+    terminated: *mut bool,
+    truncated: *mut bool,
+    wake_seed: *mut u64,
+    autoreset: *mut bool,
+    _borrow: std::marker::PhantomData<(&'a mut [Slot], StepBuffers<'a>)>,
+}
+
+impl<'a> StepRows<'a> {
+    /// The rows of `slots`; the caller has checked every buffer's length against it.
+    fn new(slots: &'a mut [Slot], actions: &'a [f32], out: StepBuffers<'a>) -> Self {
+        let len = slots.len();
+        assert!(actions.len() == len * ACT_DIM && out.obs.len() == len * OBS_DIM);
+        assert!(out.final_obs.len() == len * OBS_DIM && out.info.len() == len * info::DIM);
+        assert!([out.reward.len(), out.terminated.len(), out.truncated.len()] == [len; 3]);
+        assert!(out.wake_seed.len() == len && out.autoreset.len() == len);
+        StepRows {
+            len,
+            slots: slots.as_mut_ptr(),
+            actions,
+            obs: out.obs.as_mut_ptr(),
+            final_obs: out.final_obs.as_mut_ptr(),
+            info: out.info.as_mut_ptr(),
+            reward: out.reward.as_mut_ptr(),
+            terminated: out.terminated.as_mut_ptr(),
+            truncated: out.truncated.as_mut_ptr(),
+            wake_seed: out.wake_seed.as_mut_ptr(),
+            autoreset: out.autoreset.as_mut_ptr(),
+            _borrow: std::marker::PhantomData,
+        }
+    }
+}
+
+// SAFETY: the rows only hand out disjoint parts of exclusively borrowed slots and buffers (see
+// `row`), and a `Slot` is `Send`, so rows may be used on other threads.
+unsafe impl Sync for StepRows<'_> {}
+
+// SAFETY: row i touches slot i, the i-th chunk of every output buffer and (shared) the i-th
+// action, nothing else: rows of distinct indices are disjoint. The lengths were asserted in
+// `new`.
+unsafe impl Rows for StepRows<'_> {
+    type Row<'r>
+        = Row<'r>
+    where
+        Self: 'r;
+
+    fn len(&self) -> usize {
+        self.len
+    }
+
+    unsafe fn row(&self, i: usize) -> Row<'_> {
+        use std::slice::from_raw_parts_mut as chunk;
+        (
+            (i, &mut *self.slots.add(i)),
+            &self.actions[i * ACT_DIM..(i + 1) * ACT_DIM],
+            chunk(self.obs.add(i * OBS_DIM), OBS_DIM),
+            chunk(self.final_obs.add(i * OBS_DIM), OBS_DIM),
+            chunk(self.info.add(i * info::DIM), info::DIM),
+            &mut *self.reward.add(i),
+            &mut *self.terminated.add(i),
+            &mut *self.truncated.add(i),
+            &mut *self.wake_seed.add(i),
+            &mut *self.autoreset.add(i),
+        )
+    }
+}
+
 /// Starts the slot's episode `slot.index` (the slot is env `env` of `n`); on failure the
 /// episode is marked diverged and its outcome returned.
 fn restart(slot: &mut Slot, env: u64, n: u64, schedule: &WakeSchedule) -> Option<Outcome> {
@@ -764,42 +867,10 @@ fn restart(slot: &mut Slot, env: u64, n: u64, schedule: &WakeSchedule) -> Option
 /// calls of its interruption check.
 pub const WATCH_INTERVAL: Duration = Duration::from_millis(10);
 
-/// Runs `job` on `pool` while the calling thread asks `interrupted()` every [`WATCH_INTERVAL`]
-/// and sets `stop` once it says so; returns when the job has finished (a panic in the job is
-/// resumed here, after it has finished).
-fn watched(
-    pool: &rayon::ThreadPool,
-    stop: &AtomicBool,
-    interrupted: &mut dyn FnMut() -> bool,
-    job: impl FnOnce() + Send,
-) {
-    /// Marks the job finished and wakes the waiting thread, also when the job panics.
-    struct Finished<'a> {
-        done: &'a AtomicBool,
-        waiter: std::thread::Thread,
-    }
-    impl Drop for Finished<'_> {
-        fn drop(&mut self) {
-            self.done.store(true, Ordering::Release);
-            self.waiter.unpark();
-        }
-    }
-    let done = AtomicBool::new(false);
-    let waiter = std::thread::current();
-    pool.in_place_scope(|scope| {
-        let done = &done;
-        scope.spawn(move |_| {
-            let _finished = Finished { done, waiter };
-            job();
-        });
-        while !done.load(Ordering::Acquire) {
-            std::thread::park_timeout(WATCH_INTERVAL);
-            if !done.load(Ordering::Acquire) && !stop.load(Ordering::Relaxed) && interrupted() {
-                stop.store(true, Ordering::Relaxed);
-            }
-        }
-    });
-}
+/// The calling thread of [`BatchEnv::step_interruptible`] steps envs itself (besides the pool)
+/// while one env's step has lately taken less than this; it asks the interruption check between
+/// its envs, so at most about this long apart.
+const SHARE_BELOW: Duration = Duration::from_millis(5);
 
 /// Runs a parallel job; a panic in it (a bug, never a divergence) poisons the batch and becomes
 /// [`BatchError::Internal`] with the panic's message.
@@ -859,23 +930,5 @@ mod tests {
         let mut clean = None;
         run(&mut clean, || {}).unwrap();
         assert!(clean.is_none());
-    }
-
-    #[test]
-    fn a_panic_in_a_watched_job_is_resumed_after_it_finished() {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(1)
-            .build()
-            .unwrap();
-        let stop = AtomicBool::new(false);
-        let mut poisoned = None;
-        let err = run(&mut poisoned, || {
-            watched(&pool, &stop, &mut || false, || {
-                std::thread::sleep(Duration::from_millis(30));
-                panic!("late bug")
-            })
-        })
-        .unwrap_err();
-        assert!(err.to_string().contains("late bug"), "{err}");
     }
 }

@@ -10,6 +10,7 @@ pub mod batch;
 pub mod error;
 pub mod memory;
 pub mod seeds;
+mod shared;
 
 pub use batch::{
     info, Autoreset, BatchEnv, BatchState, ResetBuffers, SeedSpec, SlotState, StepBuffers,

@@ -81,21 +81,33 @@ fn quick() -> EnvConfig {
 
 #[test]
 fn an_interruptible_step_is_bitwise_the_plain_step() {
-    let make =
-        || BatchEnv::new(quick().validated().unwrap(), 3, 7, Autoreset::SameStep, 2).unwrap();
-    let (mut a, mut b) = (make(), make());
-    let actions: Vec<f32> = (0..3 * 4).map(|k| ((k % 5) as f32 - 2.0) / 2.0).collect();
-    let (mut oa, mut ob) = (
-        accd_batch::StepOutputs::new(3),
-        accd_batch::StepOutputs::new(3),
-    );
-    for _ in 0..30 {
-        a.step(&actions, oa.buffers()).unwrap();
-        b.step_interruptible(&actions, ob.buffers(), &mut || false)
-            .unwrap();
-        assert_eq!(oa, ob);
+    // The interruptible step shares the envs with the calling thread (after its first step);
+    // the plain one runs them on the pool: the same bits whatever the split.
+    for (threads, n) in [(1, 3), (2, 3), (2, 1), (3, 5)] {
+        let make = || {
+            BatchEnv::new(
+                quick().validated().unwrap(),
+                n,
+                7,
+                Autoreset::SameStep,
+                threads,
+            )
+            .unwrap()
+        };
+        let (mut a, mut b) = (make(), make());
+        let actions: Vec<f32> = (0..n * 4).map(|k| ((k % 5) as f32 - 2.0) / 2.0).collect();
+        let (mut oa, mut ob) = (
+            accd_batch::StepOutputs::new(n),
+            accd_batch::StepOutputs::new(n),
+        );
+        for _ in 0..30 {
+            a.step(&actions, oa.buffers()).unwrap();
+            b.step_interruptible(&actions, ob.buffers(), &mut || false)
+                .unwrap();
+            assert_eq!(oa, ob, "{threads} threads, {n} envs");
+        }
+        assert_eq!(a.save().unwrap(), b.save().unwrap());
     }
-    assert_eq!(a.save().unwrap(), b.save().unwrap());
 }
 
 #[test]

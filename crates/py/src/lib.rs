@@ -23,6 +23,7 @@ mod batch;
 mod capture;
 mod config;
 mod errors;
+mod infos;
 mod linearize;
 mod signals;
 mod tether;
@@ -39,6 +40,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(config::validation_passes, m)?)?;
     m.add_function(wrap_pyfunction!(config::config_fields, m)?)?;
     batch::register(m)?;
+    m.add_function(wrap_pyfunction!(infos::info_dicts, m)?)?;
     m.add_class::<linearize::PyLinearization>()?;
     m.add_function(wrap_pyfunction!(linearize::linearize, m)?)?;
     m.add_function(wrap_pyfunction!(capture::mix_flaps, m)?)?;
