@@ -179,3 +179,54 @@ fn an_interrupted_step_stops_part_way_and_the_batch_refuses_until_reset() {
     fresh.step(&actions, out2.buffers()).unwrap();
     assert_eq!(out, out2);
 }
+
+#[test]
+fn a_shared_step_is_interrupted_between_the_callers_envs() {
+    // 64 envs of 1 s agent steps (100 physics steps, about 1 ms each: under the 5 ms at which
+    // the calling thread stops taking envs itself): after a first, watched-only step the caller
+    // steps envs beside the pool and asks the check between them. A batch step takes far longer
+    // than one check interval, so the interruption stops it with envs not yet stepped.
+    let mut c = quick();
+    c.agent_step = 1.0;
+    c.capture_window = 60.0;
+    let n = 64;
+    let mut env = BatchEnv::new(c.validated().unwrap(), n, 1, Autoreset::SameStep, 2).unwrap();
+    let actions = vec![0.0f32; n * 4];
+    let mut out = accd_batch::StepOutputs::new(n);
+    env.step_interruptible(&actions, out.buffers(), &mut || false)
+        .unwrap();
+    let start = std::time::Instant::now();
+    env.step_interruptible(&actions, out.buffers(), &mut || false)
+        .unwrap();
+    let whole_step = start.elapsed();
+    let mut calls = 0;
+    let start = std::time::Instant::now();
+    let err = env
+        .step_interruptible(&actions, out.buffers(), &mut || {
+            calls += 1;
+            true
+        })
+        .unwrap_err();
+    let interrupted_after = start.elapsed();
+    assert!(
+        matches!(err, BatchError::Sim(SimError::Interrupted { .. })),
+        "{err}"
+    );
+    assert_eq!(calls, 1, "asked once, then stopped");
+    // Stopped part-way: some envs are still at the end of the previous step (t = 2 s).
+    let times: Vec<f64> = (0..n)
+        .map(|i| env.episode(i).unwrap().sim().time())
+        .collect();
+    assert!(
+        times.iter().any(|&t| (t - 2.0).abs() < 1e-9),
+        "every env was stepped: {times:?}"
+    );
+    assert!(
+        interrupted_after < whole_step,
+        "{interrupted_after:?} against a whole step of {whole_step:?}"
+    );
+    assert!(matches!(
+        env.step(&actions, out.buffers()).unwrap_err(),
+        BatchError::Interrupted { .. }
+    ));
+}
