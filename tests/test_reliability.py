@@ -135,6 +135,35 @@ def test_a_long_batch_step_raises_keyboard_interrupt_within_0_2_s_and_wants_a_re
     assert np.all(np.isfinite(step()))
 
 
+@pytest.mark.parametrize("make", ["AccdVecEnv", "InAirCaptureVectorEnv"])
+def test_a_step_shared_with_the_calling_thread_raises_keyboard_interrupt_within_0_2_s(make):
+    """Usual env steps (3 s agent steps, about 3 ms an env) run partly on the calling thread,
+    which asks the signal handlers between its envs: 256 of them take about 0.3 s a step here."""
+    kw = dict(agent_step=3.0, capture_window=60.0, boom={"capture_radius": 1e-6})
+    if make == "AccdVecEnv":
+        env = accd_gym.AccdVecEnv(num_envs=256, seed=1, **kw)
+        env.reset()
+
+        def step():
+            env.step_async(np.zeros((256, 4), np.float32))
+            return env.step_wait()[0]
+    else:
+        env = accd_gym.InAirCaptureVectorEnv(256, **kw)
+        env.reset(seed=1)
+
+        def step():
+            return env.step(np.zeros((256, 4), np.float32))[0]
+
+    step()  # the first step of a batch runs on the pool alone; later ones are shared
+    t0 = time.perf_counter()
+    step()
+    if time.perf_counter() - t0 < 0.15:
+        pytest.skip("this machine steps the batch too fast to interrupt it part-way")
+    _assert_interrupted_within_0_2_s(step, delay=0.05)
+    with pytest.raises(StateError, match=r"interrupted.*reset\(\)"):
+        step()
+
+
 def _towed() -> accd_gym.Tether:
     t = accd_gym.Tether()
     t.tow()
