@@ -6,7 +6,8 @@
 //! (`Tether.step`, `Tether.advance`) takes the object mutably and releases the GIL while the Rust
 //! code runs, so other Python threads proceed, but a second call on the *same* object from another
 //! thread during that time raises `RuntimeError: Already borrowed`. Different objects step in
-//! parallel freely. `BatchEnv` steps its envs on a thread pool of its own (rayon).
+//! parallel freely. `BatchEnv` steps its envs on a thread pool of its own (rayon) and, in its
+//! step, on the calling thread too (`accd_batch`'s `shared` module).
 //!
 //! # Signals
 //! Loops that may run long with the GIL released (`Tether.step`/`advance`,
