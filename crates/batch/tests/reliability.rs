@@ -79,6 +79,23 @@ fn quick() -> EnvConfig {
     c
 }
 
+/// Steps `env` with an interruption check that says yes at once: the step fails as interrupted
+/// after asking exactly once.
+fn interrupt_a_step(env: &mut BatchEnv, actions: &[f32], out: &mut accd_batch::StepOutputs) {
+    let mut calls = 0;
+    let err = env
+        .step_interruptible(actions, out.buffers(), &mut || {
+            calls += 1;
+            true
+        })
+        .unwrap_err();
+    assert!(
+        matches!(err, BatchError::Sim(SimError::Interrupted { .. })),
+        "{err}"
+    );
+    assert_eq!(calls, 1, "asked once, then stopped");
+}
+
 #[test]
 fn an_interruptible_step_is_bitwise_the_plain_step() {
     // The interruptible step shares the envs with the calling thread (after its first step);
@@ -123,19 +140,8 @@ fn an_interrupted_step_stops_part_way_and_the_batch_refuses_until_reset() {
         BatchEnv::new(c.clone().validated().unwrap(), 2, 1, Autoreset::SameStep, 1).unwrap();
     let actions = [0.0f32; 8];
     let mut out = accd_batch::StepOutputs::new(2);
-    let mut calls = 0;
     let start = std::time::Instant::now();
-    let err = env
-        .step_interruptible(&actions, out.buffers(), &mut || {
-            calls += 1;
-            true
-        })
-        .unwrap_err();
-    assert_eq!(calls, 1);
-    assert!(
-        matches!(err, BatchError::Sim(SimError::Interrupted { .. })),
-        "{err}"
-    );
+    interrupt_a_step(&mut env, &actions, &mut out);
     let time = env.episode(0).unwrap().sim().time();
     assert!(time > 0.0 && time < 10.0, "t = {time}"); // stopped part-way
     assert!(start.elapsed() < std::time::Duration::from_secs(1));
@@ -199,20 +205,9 @@ fn a_shared_step_is_interrupted_between_the_callers_envs() {
     env.step_interruptible(&actions, out.buffers(), &mut || false)
         .unwrap();
     let whole_step = start.elapsed();
-    let mut calls = 0;
     let start = std::time::Instant::now();
-    let err = env
-        .step_interruptible(&actions, out.buffers(), &mut || {
-            calls += 1;
-            true
-        })
-        .unwrap_err();
+    interrupt_a_step(&mut env, &actions, &mut out);
     let interrupted_after = start.elapsed();
-    assert!(
-        matches!(err, BatchError::Sim(SimError::Interrupted { .. })),
-        "{err}"
-    );
-    assert_eq!(calls, 1, "asked once, then stopped");
     // Stopped part-way: some envs are still at the end of the previous step (t = 2 s).
     let times: Vec<f64> = (0..n)
         .map(|i| env.episode(i).unwrap().sim().time())
