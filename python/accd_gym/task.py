@@ -45,8 +45,9 @@ def observation_indices(*names: str) -> np.ndarray:
         raise KeyError(f"no observation entry {e.args[0]!r}; the entries are {list(OBSERVATION_INDEX)}") from None
 
 
-#: Flags of the info dict that say why an episode ended.
-EVENT_NAMES: tuple[str, ...] = ("captured", "overload", "envelope_exit", "diverged")
+#: Flags of the info dict that say why an episode ended, in their order of precedence (from the
+#: Rust declaration of the info columns).
+EVENT_NAMES: tuple[str, ...] = tuple(_core.EVENT_NAMES)
 #: Column of the "diverged" flag in a step's info array.
 DIVERGED_COLUMN: int = INFO_NAMES.index("diverged")
 

@@ -42,6 +42,8 @@ pub mod info {
     pub const EPISODE_STEPS: usize = 8;
     /// Number of columns.
     pub const DIM: usize = 9;
+    /// The event flags, the reasons an episode ends, in their order of precedence.
+    pub const EVENTS: [usize; 4] = [CAPTURED, OVERLOAD, ENVELOPE_EXIT, DIVERGED];
     /// Column names, in order.
     pub const NAMES: [&str; DIM] = [
         "time",
@@ -436,8 +438,8 @@ impl BatchEnv {
 
     /// [`BatchEnv::step`] that stays interruptible however long the step takes, asking
     /// `interrupted()` from the calling thread (so Python can run its signal handlers there) at
-    /// most about [`WATCH_INTERVAL`] apart. While one env's step takes under 5 ms (every usual
-    /// config) the calling thread steps envs itself beside the pool's threads and asks between
+    /// most about [`WATCH_INTERVAL`] apart. While one env's step takes under [`SHARE_BELOW`]
+    /// (every usual config) the calling thread steps envs itself beside the pool's threads and asks between
     /// its envs ([`crate::shared`]: no thread wakes up for nothing, the step's latency drops);
     /// otherwise (and on the first step) it only waits and asks. Once `interrupted()` returns
     /// true the envs stop before their next physics step and the call fails with
@@ -597,7 +599,9 @@ impl BatchEnv {
                         interrupted,
                     )
                 })?;
-                self.env_step_time = Some(start.elapsed() * self.threads as u32 / n.max(1) as u32);
+                if !stop.load(Ordering::Relaxed) {
+                    self.env_step_time = Some(start.elapsed() * self.threads as u32 / n as u32);
+                }
             }
         }
         if stop.load(Ordering::Relaxed) {
@@ -870,7 +874,7 @@ pub const WATCH_INTERVAL: Duration = Duration::from_millis(10);
 /// The calling thread of [`BatchEnv::step_interruptible`] steps envs itself (besides the pool)
 /// while one env's step has lately taken less than this; it asks the interruption check between
 /// its envs, so at most about this long apart.
-const SHARE_BELOW: Duration = Duration::from_millis(5);
+pub const SHARE_BELOW: Duration = Duration::from_millis(5);
 
 /// Runs a parallel job; a panic in it (a bug, never a divergence) poisons the batch and becomes
 /// [`BatchError::Internal`] with the panic's message.

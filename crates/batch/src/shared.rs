@@ -12,8 +12,8 @@
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Instant;
 
-/// How long the calling thread spins for the helpers' last rows before it sleeps: about one
-/// env's agent step (10 physics steps of about 10 us).
+/// How long the calling thread spins for the helpers' last rows before it sleeps: a little over
+/// one env's agent step in the default config (10 physics steps of 9-10 us).
 const SPIN: std::time::Duration = std::time::Duration::from_micros(150);
 
 /// Items `0..len` handed out at most once each, from any thread.
@@ -60,10 +60,10 @@ impl<T: Rows> Queue<T> {
 
 /// Runs `take_one` (which takes the next row of a [`Queue`], works on it and says whether there
 /// was one) until no row is left, on `helpers` jobs of `pool` and, if `caller_works`, on the
-/// calling thread too; the calling thread then waits for the helpers. It asks `interrupted()` between its rows and while
-/// it waits, at most every `interval` apart, and sets `stop` once it says so (the work reads
-/// `stop`). Returns when every helper has finished; a panic in a helper or in the calling
-/// thread's own rows is resumed after that.
+/// calling thread too; the calling thread then waits for the helpers. It asks `interrupted()`
+/// between its rows and while it waits, at most every `interval` apart, and sets `stop` once it
+/// says so (the work reads `stop`). Returns when every helper has finished; a panic in a helper
+/// or in the calling thread's own rows is resumed after that.
 pub(crate) fn run_shared(
     pool: &rayon::ThreadPool,
     helpers: usize,
@@ -111,11 +111,14 @@ pub(crate) fn run_shared(
         while caller_works && take_one() {
             watch(&mut last);
         }
-        // The helpers are at most one row from done: spin that long before sleeping (a wake-up
-        // costs about as much), then sleep until they count themselves out.
-        let spin_until = Instant::now() + SPIN;
-        while outstanding.load(Ordering::Acquire) > 0 && Instant::now() < spin_until {
-            std::hint::spin_loop();
+        // After the caller's share the helpers are at most one row from done: spin that long
+        // before sleeping (a wake-up costs about as much), then sleep until they count
+        // themselves out. A caller that only watches sleeps at once (the rows are long).
+        if caller_works {
+            let spin_until = Instant::now() + SPIN;
+            while outstanding.load(Ordering::Acquire) > 0 && Instant::now() < spin_until {
+                std::hint::spin_loop();
+            }
         }
         while outstanding.load(Ordering::Acquire) > 0 {
             std::thread::park_timeout(interval);
@@ -171,6 +174,8 @@ mod tests {
                     let queue = Queue::new(counters(&mut v));
                     let stop = AtomicBool::new(false);
                     let take_one = || queue.pop().map(|c| *c += 1).is_some();
+                    // The caller works when nobody else does, and otherwise for odd lengths
+                    // only: both modes are covered.
                     run_shared(
                         &pool,
                         helpers,

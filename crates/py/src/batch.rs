@@ -580,6 +580,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("ACT_DIM", ACT_DIM)?;
     m.add("OBS_BOUND", OBS_BOUND)?;
     m.add("INFO_NAMES", info::NAMES.to_vec())?;
+    m.add("EVENT_NAMES", info::EVENTS.map(|k| info::NAMES[k]).to_vec())?;
     m.add("PARAMETER_NAMES", accd_sim::Parameters::NAMES.to_vec())?;
     m.add(
         "TRAINING_WAKE_SEEDS",

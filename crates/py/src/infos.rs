@@ -1,6 +1,6 @@
 //! The per-env info dicts of the SB3 VecEnv and the single gymnasium env, built from a step's
-//! info array in one native call (a Python loop over the columns cost about 14 % of PPO's wall
-//! time with 16 envs).
+//! info array in one native call: 5.2 us per step of 16 envs, against 23 us for the Python loop
+//! over the columns it replaced (about 1 % of PPO's wall time).
 
 use accd_batch::info;
 use numpy::{PyReadonlyArray1, PyReadonlyArray2};
@@ -9,16 +9,8 @@ use pyo3::types::{PyDict, PyList, PyString};
 
 use crate::errors::{raise, Kind};
 
-/// Whether info column `k` is an event flag (a Python bool), as `accd_gym.task.EVENT_NAMES`.
-fn is_event(k: usize) -> bool {
-    matches!(
-        k,
-        info::CAPTURED | info::OVERLOAD | info::ENVELOPE_EXIT | info::DIVERGED
-    )
-}
-
 /// One dict per row of ``info`` ((n, len(INFO_NAMES)) float64, the step's info array) with
-/// ``wake_seed`` ((n,) uint64): the columns by their ``INFO_NAMES`` (the event flags as bool,
+/// ``wake_seed`` ((n,) uint64): the columns by their ``INFO_NAMES`` (the ``EVENT_NAMES`` as bool,
 /// ``episode_steps`` as int, the rest as float), then ``wake_seed`` (int). The dicts are new
 /// objects; nothing refers to the arrays.
 #[pyfunction]
@@ -49,7 +41,7 @@ pub fn info_dicts<'py>(
     for (row, seed) in rows.rows().into_iter().zip(seeds.iter()) {
         let d = PyDict::new(py);
         for (k, (key, &value)) in keys.iter().zip(row.iter()).enumerate() {
-            if is_event(k) {
+            if info::EVENTS.contains(&k) {
                 d.set_item(key, value != 0.0)?;
             } else if k == info::EPISODE_STEPS {
                 d.set_item(key, value as i64)?;
