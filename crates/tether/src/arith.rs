@@ -11,6 +11,11 @@ type V3 = Vector3<f64>;
 
 /// `a * b + c`, fused or not.
 pub(crate) trait Madd {
+    /// Whether the hot loops may use the processor's AVX2 and FMA instructions directly (the
+    /// vectorized backward sweep, [`crate::recursive`]): only where [`Madd::madd`] is fused, so
+    /// that they give the same bits as the scalar loops.
+    const VECTORIZED: bool;
+
     fn madd(a: f64, b: f64, c: f64) -> f64;
 }
 
@@ -21,6 +26,8 @@ pub(crate) struct Plain;
 pub(crate) struct Fused;
 
 impl Madd for Plain {
+    const VECTORIZED: bool = false;
+
     #[inline(always)]
     fn madd(a: f64, b: f64, c: f64) -> f64 {
         a * b + c
@@ -28,6 +35,8 @@ impl Madd for Plain {
 }
 
 impl Madd for Fused {
+    const VECTORIZED: bool = true;
+
     #[inline(always)]
     fn madd(a: f64, b: f64, c: f64) -> f64 {
         a.mul_add(b, c)
@@ -64,6 +73,21 @@ pub(crate) fn cross<M: Madd>(a: &V3, b: &V3) -> V3 {
         M::madd(a.z, b.x, -(a.x * b.z)),
         M::madd(a.x, b.y, -(a.y * b.x)),
     )
+}
+
+/// [`Fused`] multiply-adds in the scalar loops only: the reference the vectorized loops are
+/// tested against bit for bit.
+#[cfg(test)]
+pub(crate) struct FusedScalar;
+
+#[cfg(test)]
+impl Madd for FusedScalar {
+    const VECTORIZED: bool = false;
+
+    #[inline(always)]
+    fn madd(a: f64, b: f64, c: f64) -> f64 {
+        a.mul_add(b, c)
+    }
 }
 
 #[cfg(test)]

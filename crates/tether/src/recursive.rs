@@ -80,6 +80,9 @@
 //!   and comes from the vectorized loads pass (`chain.rs`).
 //! * The forward step is `a_{k+1} = (a_k + l (w_k + E_k y_k)) - E_k (l G_k a_k)`, where
 //!   `l G_k a_k` also gives `u_k`.
+//! * Where the processor has AVX2 and FMA the backward sweep runs four lanes wide
+//!   (`recursive/avx2.rs`: a 3-vector per register, `B` by its columns), bit for bit the scalar
+//!   sweep with fused multiply-adds, which stays as its reference and as the portable path.
 //! * Only the directions, loads and `K`, `W`, `y` live in the sweep; everything independent per
 //!   segment (trigonometry, directions, rates, loads) is done beforehand in structure-of-arrays
 //!   passes the compiler vectorizes. Multiply-adds are fused where the processor has FMA
@@ -92,6 +95,9 @@ use nalgebra::Vector3;
 use crate::arith::{axpy, dot, dot_xz, Madd};
 use crate::chain::ChainState;
 use crate::error::{Result, TetherError};
+
+#[cfg(target_arch = "x86_64")]
+mod avx2;
 
 type V3 = Vector3<f64>;
 
@@ -140,8 +146,9 @@ impl Sym3 {
 /// What the backward sweep leaves per segment for the forward sweep and the tensions.
 #[derive(Debug, Clone, Copy, Default)]
 pub(crate) struct Articulated {
-    /// Rows of `l G_k`: `u_k = y_k - G_k a_k`.
-    lg: [V3; 2],
+    /// Rows of `l G_k`: `u_k = y_k - G_k a_k` (x, y, z and a pad, so that the vectorized
+    /// sweep stores a row in one instruction).
+    lg: [[f64; 4]; 2],
     /// `y_k`.
     y: [f64; 2],
     /// `B_k = A_k + (m/2) 1` (kept only when tensions are asked for).
@@ -187,64 +194,14 @@ pub(crate) fn solve<M: Madd>(
     let n = chain.segments();
     let (l, m) = (c.l, c.m);
     let inv_l = 1.0 / l;
-    let m6 = m / 6.0;
 
-    // Backward sweep, tip to segment 2, on B = A + (m/2) 1.
-    let mut bm = Sym3::diagonal(c.tip_mass + 0.5 * m);
-    let mut bias = chain.tip_force;
+    // Backward sweep, tip to segment 2, on B = A + (m/2) 1: four lanes wide where the
+    // processor has AVX2 and FMA (bit for bit the fused scalar sweep), scalar otherwise.
     let want_tensions = tensions.is_some();
     let qdd = &mut qdd[..2 * n + 1];
-    let (force_k, reduced_k, w_k) = (chain.force.view(n), chain.reduced.view(n), chain.w.view(n));
-    let (ep_k, es_k) = (chain.e_phi.view(n), chain.e_psi.view(n));
-    let cos_psi_k = &chain.cos_psi[..n];
     let work = &mut work[..n];
-    for k in (1..n).rev() {
-        let (force, reduced, w) = (force_k.get(k), reduced_k.get(k), w_k.get(k));
-        let cos_psi = cos_psi_k[k];
-        let (ep, es) = (&V3::new(ep_k.x[k], 0.0, ep_k.z[k]), &es_k.get(k));
-        // Articulated inertia: depends on the geometry only.
-        let bep = bm.mul_xz::<M>(ep);
-        let bes = bm.mul::<M>(es);
-        let k00 = M::madd(-m6 * cos_psi, cos_psi, dot_xz::<M>(ep, &bep));
-        let k01 = dot_xz::<M>(ep, &bes);
-        let k11 = dot::<M>(es, &bes) - m6;
-        // W = (B E) K^-1 = (B E) adj(K) / det: the adjugate products run beside the division.
-        let a0 = axpy::<M>(&bes, -k01, &(bep * k11));
-        let a1 = axpy::<M>(&bep, -k01, &(bes * k00));
-        let det = M::madd(k00, k11, -(k01 * k01));
-        // (Not positive or NaN. An infinite det makes the accelerations non-finite, which the
-        // integrator reports.)
-        if det.is_nan() || det <= 0.0 {
-            return Err(singular(time, k + 1));
-        }
-        let inv = 1.0 / det;
-        // Bias: y = K^-1 E^T (r/l^2 + (m/4) w - B w), r/l^2 + (m/4) w = `reduced` + b / l.
-        let bw = bm.mul::<M>(&w);
-        let v = axpy::<M>(&bias, inv_l, &(reduced - bw));
-        let (r0, r1) = (dot_xz::<M>(ep, &v), dot::<M>(es, &v));
-        let y0 = M::madd(k11, r0, -(k01 * r1)) * inv;
-        let y1 = M::madd(k00, r1, -(k01 * r0)) * inv;
-        let t = axpy::<M>(&bep, y0, &axpy::<M>(&bes, y1, &bw));
-        bias = axpy::<M>(&t, -l, &(force + bias));
-        let upd =
-            |a: f64, b: f64, c: f64, d: f64, base: f64| M::madd(-M::madd(a, b, c * d), inv, base);
-        bm = Sym3 {
-            xx: upd(a0.x, bep.x, a1.x, bes.x, bm.xx + m),
-            yy: upd(a0.y, bep.y, a1.y, bes.y, bm.yy + m),
-            zz: upd(a0.z, bep.z, a1.z, bes.z, bm.zz + m),
-            xy: upd(a0.x, bep.y, a1.x, bes.y, bm.xy),
-            xz: upd(a0.x, bep.z, a1.x, bes.z, bm.xz),
-            yz: upd(a0.y, bep.z, a1.y, bes.z, bm.yz),
-        };
-        // l G = W^T.
-        let art = &mut work[k];
-        art.lg = [a0 * inv, a1 * inv];
-        art.y = [y0, y1];
-        if want_tensions {
-            art.inertia = bm;
-            art.bias = bias;
-        }
-    }
+    let (bm, bias) = backward::<M>(time, c, chain, work, want_tensions)?;
+    let (ep_k, es_k, w_k) = (chain.e_phi.view(n), chain.e_psi.view(n), chain.w.view(n));
 
     // Root: s and segment 1's angles, against A_1 = B_1 - (m/2) 1 and b_1. With e, E_phi, E_psi
     // orthogonal (|E_phi| = cos psi), J_c^T J_c = diag(1, rho_c^2 cos^2 psi, rho_c^2) and
@@ -318,7 +275,7 @@ pub(crate) fn solve<M: Madd>(
             let pull = art.bias - art.inertia.mul::<M>(&acc) + acc * (0.5 * m);
             t[k] = pull.dot(&chain.e.get(k));
         }
-        let [c0, c1] = art.lg;
+        let [c0, c1] = art.lg.map(|r| V3::new(r[0], r[1], r[2]));
         let [y0, y1] = art.y;
         // u = y - G a with l G a = (c0 . a, c1 . a); then a_{k+1} = a_k + l (w_k + E_k u_k)
         // = (a_k + phi_k) - E_k (l G a_k) with phi_k = l (w_k + E_k y_k) formed aside (a shorter
@@ -335,6 +292,95 @@ pub(crate) fn solve<M: Madd>(
         t[n] = (chain.tip_force - acc * c.tip_mass).dot(&chain.e.get(n - 1));
     }
     Ok(axial_mass)
+}
+
+/// The backward sweep (tip to segment 2) on `B = A + (m/2) 1`, writing `l G_k` and `y_k` (and,
+/// for the tensions, `B_k` and `b_k`) into `work`; returns `B_1` and `b_1` for the root.
+#[inline(always)]
+fn backward<M: Madd>(
+    time: f64,
+    c: &ChainConstants,
+    chain: &ChainState,
+    work: &mut [Articulated],
+    want_tensions: bool,
+) -> Result<(Sym3, V3)> {
+    #[cfg(target_arch = "x86_64")]
+    if M::VECTORIZED && avx2::available() {
+        // SAFETY: the processor has AVX2 and FMA, checked just above.
+        return unsafe { avx2::backward(time, c, chain, work, want_tensions) };
+    }
+    backward_scalar::<M>(time, c, chain, work, want_tensions)
+}
+
+/// [`backward`] one component at a time: the reference of the vectorized sweep, and the sweep
+/// of processors without AVX2 and FMA.
+#[inline(always)]
+pub(crate) fn backward_scalar<M: Madd>(
+    time: f64,
+    c: &ChainConstants,
+    chain: &ChainState,
+    work: &mut [Articulated],
+    want_tensions: bool,
+) -> Result<(Sym3, V3)> {
+    let n = chain.segments();
+    let (l, m) = (c.l, c.m);
+    let inv_l = 1.0 / l;
+    let m6 = m / 6.0;
+    let mut bm = Sym3::diagonal(c.tip_mass + 0.5 * m);
+    let mut bias = chain.tip_force;
+    let (force_k, reduced_k, w_k) = (chain.force.view(n), chain.reduced.view(n), chain.w.view(n));
+    let (ep_k, es_k) = (chain.e_phi.view(n), chain.e_psi.view(n));
+    let cos_psi_k = &chain.cos_psi[..n];
+    let work = &mut work[..n];
+    for k in (1..n).rev() {
+        let (force, reduced, w) = (force_k.get(k), reduced_k.get(k), w_k.get(k));
+        let cos_psi = cos_psi_k[k];
+        let (ep, es) = (&V3::new(ep_k.x[k], 0.0, ep_k.z[k]), &es_k.get(k));
+        // Articulated inertia: depends on the geometry only.
+        let bep = bm.mul_xz::<M>(ep);
+        let bes = bm.mul::<M>(es);
+        let k00 = M::madd(-m6 * cos_psi, cos_psi, dot_xz::<M>(ep, &bep));
+        let k01 = dot_xz::<M>(ep, &bes);
+        let k11 = dot::<M>(es, &bes) - m6;
+        // W = (B E) K^-1 = (B E) adj(K) / det: the adjugate products run beside the division.
+        let a0 = axpy::<M>(&bes, -k01, &(bep * k11));
+        let a1 = axpy::<M>(&bep, -k01, &(bes * k00));
+        let det = M::madd(k00, k11, -(k01 * k01));
+        // (Not positive or NaN. An infinite det makes the accelerations non-finite, which the
+        // integrator reports.)
+        if det.is_nan() || det <= 0.0 {
+            return Err(singular(time, k + 1));
+        }
+        let inv = 1.0 / det;
+        // Bias: y = K^-1 E^T (r/l^2 + (m/4) w - B w), r/l^2 + (m/4) w = `reduced` + b / l.
+        let bw = bm.mul::<M>(&w);
+        let v = axpy::<M>(&bias, inv_l, &(reduced - bw));
+        let (r0, r1) = (dot_xz::<M>(ep, &v), dot::<M>(es, &v));
+        let y0 = M::madd(k11, r0, -(k01 * r1)) * inv;
+        let y1 = M::madd(k00, r1, -(k01 * r0)) * inv;
+        let t = axpy::<M>(&bep, y0, &axpy::<M>(&bes, y1, &bw));
+        bias = axpy::<M>(&t, -l, &(force + bias));
+        let upd =
+            |a: f64, b: f64, c: f64, d: f64, base: f64| M::madd(-M::madd(a, b, c * d), inv, base);
+        bm = Sym3 {
+            xx: upd(a0.x, bep.x, a1.x, bes.x, bm.xx + m),
+            yy: upd(a0.y, bep.y, a1.y, bes.y, bm.yy + m),
+            zz: upd(a0.z, bep.z, a1.z, bes.z, bm.zz + m),
+            xy: upd(a0.x, bep.y, a1.x, bes.y, bm.xy),
+            xz: upd(a0.x, bep.z, a1.x, bes.z, bm.xz),
+            yz: upd(a0.y, bep.z, a1.y, bes.z, bm.yz),
+        };
+        // l G = W^T.
+        let art = &mut work[k];
+        let (g0, g1) = (a0 * inv, a1 * inv);
+        art.lg = [[g0.x, g0.y, g0.z, 0.0], [g1.x, g1.y, g1.z, 0.0]];
+        art.y = [y0, y1];
+        if want_tensions {
+            art.inertia = bm;
+            art.bias = bias;
+        }
+    }
+    Ok((bm, bias))
 }
 
 /// The effective mass the axial element moves, `1 / (M^-1)_00`, kg, from the root's 3x3 system
