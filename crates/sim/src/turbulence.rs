@@ -333,7 +333,13 @@ pub struct Turbulence {
     channels: usize,
     /// Grid times kept.
     slots: usize,
-    /// `slots * channels` values, slot-major; slot of grid index j is j mod slots.
+    /// `slots * channels` values, lane-major: the history of each group of three channels (a
+    /// wake lane, then the ambient) is contiguous, `ring[(group * slots + slot) * 3 + c]`; slot
+    /// of grid index j is j mod slots. A point's samples at successive steps then sit side by
+    /// side (a lane's history advances 12 bytes a step), where a slot-major ring put them a row
+    /// of every channel apart: with many envs per thread the ring no longer streams from
+    /// memory (BENCHMARKS.md). Saved states keep the slot-major order
+    /// ([`TurbulenceState::ring`]).
     ring: Vec<f32>,
     /// Current value of every channel (full precision).
     state: Vec<f64>,
@@ -477,21 +483,34 @@ impl Turbulence {
     fn store_newest(&mut self) {
         let slot = self.newest.rem_euclid(self.slots as i64) as usize;
         self.newest_slot = slot;
-        let row = &mut self.ring[slot * self.channels..(slot + 1) * self.channels];
+        let store = |ring: &mut [f32], at: usize, values: &[f64]| {
+            for (r, s) in ring[at..at + 3].iter_mut().zip(values) {
+                *r = *s as f32;
+            }
+        };
+        let groups = self.channels / 3;
         if self.on_demand {
             for &l in &self.active_list {
-                let lane = 3 * l..3 * l + 3;
-                for (r, s) in row[lane.clone()].iter_mut().zip(&self.state[lane]) {
-                    *r = *s as f32;
-                }
+                store(
+                    &mut self.ring,
+                    (l * self.slots + slot) * 3,
+                    &self.state[3 * l..],
+                );
             }
-            let ambient = 3 * self.lanes..self.channels;
-            for (r, s) in row[ambient.clone()].iter_mut().zip(&self.state[ambient]) {
-                *r = *s as f32;
+            for g in self.lanes..groups {
+                store(
+                    &mut self.ring,
+                    (g * self.slots + slot) * 3,
+                    &self.state[3 * g..],
+                );
             }
         } else {
-            for (r, s) in row.iter_mut().zip(&self.state) {
-                *r = *s as f32;
+            for g in 0..groups {
+                store(
+                    &mut self.ring,
+                    (g * self.slots + slot) * 3,
+                    &self.state[3 * g..],
+                );
             }
         }
     }
@@ -499,6 +518,37 @@ impl Turbulence {
     /// Grid index of the first (stationary) sample of every history.
     fn first_index(&self) -> i64 {
         -(self.slots as i64 - 1)
+    }
+
+    /// Index in the ring of channel group `group`'s (a wake lane's, or the ambient's: group
+    /// `lanes`) three values at `slot`.
+    #[inline(always)]
+    fn at(&self, group: usize, slot: usize) -> usize {
+        (group * self.slots + slot) * 3
+    }
+
+    /// The ring in the slot-major order of [`TurbulenceState::ring`].
+    fn ring_slot_major(&self) -> Vec<f32> {
+        let mut out = vec![0.0; self.ring.len()];
+        for group in 0..self.channels / 3 {
+            for slot in 0..self.slots {
+                let from = self.at(group, slot);
+                let to = slot * self.channels + 3 * group;
+                out[to..to + 3].copy_from_slice(&self.ring[from..from + 3]);
+            }
+        }
+        out
+    }
+
+    /// Takes a slot-major ring ([`TurbulenceState::ring`], of the ring's length) into the ring.
+    fn set_ring_slot_major(&mut self, ring: &[f32]) {
+        for group in 0..self.channels / 3 {
+            for slot in 0..self.slots {
+                let to = self.at(group, slot);
+                let from = slot * self.channels + 3 * group;
+                self.ring[to..to + 3].copy_from_slice(&ring[from..from + 3]);
+            }
+        }
     }
 
     /// Generates wake lane `lane` from the start up to the newest grid time, if it is not yet
@@ -525,8 +575,9 @@ impl Turbulence {
             }
             if j >= kept {
                 let slot = j.rem_euclid(self.slots as i64) as usize;
-                for (c, gc) in g.iter().enumerate() {
-                    self.ring[slot * self.channels + 3 * lane + c] = *gc as f32;
+                let at = (lane * self.slots + slot) * 3;
+                for (r, gc) in self.ring[at..at + 3].iter_mut().zip(&g) {
+                    *r = *gc as f32;
                 }
             }
         }
@@ -622,7 +673,7 @@ impl Turbulence {
             seed: self.seed,
             time: self.time,
             newest: self.newest,
-            ring: self.ring.clone(),
+            ring: self.ring_slot_major(),
             processes: self.state.clone(),
             wake_stream: self.wake_rng.state(),
             ambient_stream: self.ambient_rng.state(),
@@ -714,7 +765,7 @@ impl Turbulence {
         self.time = state.time;
         self.newest = state.newest;
         self.newest_slot = self.newest.rem_euclid(self.slots as i64) as usize;
-        self.ring = state.ring;
+        self.set_ring_slot_major(&state.ring);
         self.state = state.processes;
         self.wake_rng = Stream::from_state(&state.wake_stream, sampler);
         self.ambient_rng = Stream::from_state(&state.ambient_stream, sampler);
@@ -834,9 +885,6 @@ impl Turbulence {
             (iy1 * nz + iz0, fy * (1.0 - fz)),
             (iy1 * nz + iz1, fy * fz),
         ];
-        // The two ring rows of the stencil's grid times.
-        let row0 = &self.ring[ts.slot0 * self.channels..][..self.channels];
-        let row1 = &self.ring[ts.slot1 * self.channels..][..self.channels];
         let mut sum = Vector3::zeros();
         let mut weights2 = 0.0;
         for (lane, w) in corners {
@@ -848,7 +896,11 @@ impl Turbulence {
                 "wake lane {lane} sampled before it was generated"
             );
             weights2 += w * w;
-            let (g0, g1) = (&row0[3 * lane..][..3], &row1[3 * lane..][..3]);
+            // The lane's values at the stencil's two grid times.
+            let (g0, g1) = (
+                &self.ring[self.at(lane, ts.slot0)..][..3],
+                &self.ring[self.at(lane, ts.slot1)..][..3],
+            );
             for c in 0..3 {
                 sum[c] += w * Self::lerp(ts.f, g0[c], g1[c]);
             }
@@ -869,9 +921,8 @@ impl Turbulence {
     /// [`Turbulence::ambient_unit`] with the time stencil given (ambient turbulence on).
     #[inline(always)]
     fn ambient_unit_at(&self, ts: &TimeStencil) -> Vector3<f64> {
-        let base = 3 * self.lanes;
-        let g0 = &self.ring[ts.slot0 * self.channels + base..][..3];
-        let g1 = &self.ring[ts.slot1 * self.channels + base..][..3];
+        let g0 = &self.ring[self.at(self.lanes, ts.slot0)..][..3];
+        let g1 = &self.ring[self.at(self.lanes, ts.slot1)..][..3];
         let scale = 1.0 / Self::time_variance(ts.f, self.a_ambient).sqrt();
         Vector3::new(
             Self::lerp(ts.f, g0[0], g1[0]),
