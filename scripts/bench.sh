@@ -5,7 +5,8 @@
 #   examples/capture_ratio: the capture step against the tether in interleaved rounds;
 #   scripts/bench_physics.py: MuJoCo's bare chain, the tether and the capture system in one process;
 #   scripts/bench_envs.py: the Python envs (default fast scheme and the exact one);
-#   scripts/bench_training.py: PPO end to end with the time split.
+#   scripts/bench_training.py: PPO end to end with the time split;
+#   scripts/bench_summary.py: the performance targets against this run's figures.
 # Does its own set-up (the venv with the sb3 extras and mujoco). Takes about 15 minutes.
 #   bash scripts/bench.sh [OUT_DIR]      (default runs/bench)
 set -euo pipefail
@@ -36,4 +37,7 @@ EXACT='{"wake": {"sampling": "per_stage"}, "turbulence": {"normal_sampler": "box
   "$ACCD_PY" scripts/bench_training.py --json "$OUT/training_default.json"
   echo "== PPO training, exact scheme"
   "$ACCD_PY" scripts/bench_training.py --env "$EXACT" --json "$OUT/training_exact.json"
+  echo "== the performance targets (issue 12) from this run"
+  "$ACCD_PY" scripts/bench_summary.py "$OUT" --json "$OUT/targets.json"
+  echo "load at the end: $(cut -d' ' -f1-3 /proc/loadavg)"
 } 2>&1 | tee "$OUT/bench.txt"
