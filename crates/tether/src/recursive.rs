@@ -315,7 +315,7 @@ fn backward<M: Madd>(
 /// [`backward`] one component at a time: the reference of the vectorized sweep, and the sweep
 /// of processors without AVX2 and FMA.
 #[inline(always)]
-pub(crate) fn backward_scalar<M: Madd>(
+fn backward_scalar<M: Madd>(
     time: f64,
     c: &ChainConstants,
     chain: &ChainState,
