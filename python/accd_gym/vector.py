@@ -26,6 +26,11 @@ from accd_gym.task import (
     random_seed,
 )
 
+#: Per info column (``INFO_NAMES``): whether it is an event (reported as bool) or the step count
+#: (int64); the others are float64.
+_IS_EVENT = tuple(name in EVENT_NAMES for name in INFO_NAMES)
+_IS_COUNT = tuple(name == "episode_steps" for name in INFO_NAMES)
+
 _MODES = {
     AutoresetMode.NEXT_STEP: "next_step",
     AutoresetMode.SAME_STEP: "same_step",
@@ -273,22 +278,31 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         single env's info dicts (other entries 0 with the mask False; no keys if none).
         ``ended``: the rows' episodes ended and were replaced in this step (``SAME_STEP``)."""
         out: dict[str, Any] = {}
-        if not rows.any():
+        # (np.count_nonzero is several times cheaper than .any()/.all() on a small bool array.)
+        selected = np.count_nonzero(rows)
+        if selected == 0:
             return out
-        unselected = ~rows
-        columns = [(name, info[:, k]) for k, name in enumerate(INFO_NAMES)] + [("wake_seed", wake_seed)]
-        for name, column in columns:
-            if name in EVENT_NAMES:
-                value = column > 0.5
-            elif name in ("episode_steps", "wake_seed"):
-                value = column.astype(np.int64)
+        # Every column at once: the info transposed, each key's values one contiguous row of it
+        # (each key its own memory, as SyncVectorEnv gives each its own array).
+        values = info.T.copy()
+        seeds = wake_seed.astype(np.int64)
+        if selected < rows.size:
+            unselected = ~rows
+            values[:, unselected] = 0
+            seeds[unselected] = 0
+        events = values > 0.5
+        for k, name in enumerate(INFO_NAMES):
+            if _IS_EVENT[k]:
+                out[name] = events[k]
+            elif _IS_COUNT[k]:
+                out[name] = values[k].astype(np.int64)
             else:
-                value = column.copy()
-            value[unselected] = 0
-            out[name] = value
+                out[name] = values[k]
             out["_" + name] = rows.copy()
+        out["wake_seed"] = seeds
+        out["_wake_seed"] = rows.copy()
         diverged = out["diverged"]
-        if diverged.any():
+        if np.count_nonzero(diverged):
             messages = np.full(self.num_envs, None, dtype=object)
             for i in np.flatnonzero(diverged):
                 messages[i] = (self._core.final_divergence if ended else self._core.divergence)(int(i))
