@@ -10,7 +10,7 @@ use nalgebra::Vector3;
 type V3 = Vector3<f64>;
 
 /// `a * b + c`, fused or not.
-pub(crate) trait Madd {
+pub(crate) trait Madd: 'static {
     /// Whether the hot loops may use the processor's AVX2 and FMA instructions directly (the
     /// vectorized backward sweep, [`crate::recursive`]): only where [`Madd::madd`] is fused, so
     /// that they give the same bits as the scalar loops.

@@ -146,6 +146,42 @@ pub(crate) struct ChainState {
     pub tip: V3,
     pub tip_vel: V3,
     pub tip_force: V3,
+    /// Which inputs the kinematics fields hold (see [`ChainState::kinematics`]).
+    held: HeldKinematics,
+}
+
+/// The inputs of the kinematics a [`ChainState`] holds: the bits of `q` and `q'` (their first
+/// 2n + 1 entries, all the pass reads) and the multiply-add flavour, or nothing.
+#[derive(Debug, Clone)]
+struct HeldKinematics {
+    flavour: Option<std::any::TypeId>,
+    /// `q` then `q'`, as bits (so that -0 and +0 differ, and NaN never matches).
+    inputs: Vec<u64>,
+}
+
+impl HeldKinematics {
+    /// Whether the held kinematics are those of `(q, qd)` with flavour `M`.
+    #[inline(always)]
+    fn holds<M: Madd>(&self, q: &[f64], qd: &[f64]) -> bool {
+        if self.flavour != Some(std::any::TypeId::of::<M>()) {
+            return false;
+        }
+        let (held_q, held_qd) = self.inputs.split_at(q.len());
+        q.iter().zip(held_q).all(|(a, b)| a.to_bits() == *b)
+            && qd.iter().zip(held_qd).all(|(a, b)| a.to_bits() == *b)
+    }
+
+    #[inline(always)]
+    fn hold<M: Madd>(&mut self, q: &[f64], qd: &[f64]) {
+        let (held_q, held_qd) = self.inputs.split_at_mut(q.len());
+        for (h, v) in held_q.iter_mut().zip(q) {
+            *h = v.to_bits();
+        }
+        for (h, v) in held_qd.iter_mut().zip(qd) {
+            *h = v.to_bits();
+        }
+        self.flavour = Some(std::any::TypeId::of::<M>());
+    }
 }
 
 impl ChainState {
@@ -175,6 +211,10 @@ impl ChainState {
             tip: V3::zeros(),
             tip_vel: V3::zeros(),
             tip_force: V3::zeros(),
+            held: HeldKinematics {
+                flavour: None,
+                inputs: vec![0; 2 * (2 * n + 1)],
+            },
         }
     }
 
@@ -185,6 +225,7 @@ impl ChainState {
 
     /// Directions and their partials only, from libm's sin and cos (for the mass matrix).
     pub fn directions(&mut self, q: &[f64]) {
+        self.held.flavour = None;
         for k in 0..self.n {
             let jet = DirectionJet::new(q[1 + 2 * k], q[2 + 2 * k]);
             self.e.set(k, jet.e);
@@ -195,8 +236,48 @@ impl ChainState {
     }
 
     /// The kinematics pass (see the module documentation). Errors at the coordinate singularity.
+    ///
+    /// A pure function of `(q, q')` (their first 2n + 1 entries; `l` is the model's): when the
+    /// fields hold the pass of the same inputs, bit for bit and with the same multiply-adds, as
+    /// [`ChainState::kinematics_held`] left them, it returns at once. That is the first RK4
+    /// stage of a capture step, whose state the step before has just walked through
+    /// ([`crate::TetherModel::centres_and_tip_batch`]).
     #[inline(always)]
     pub fn kinematics<M: Madd>(&mut self, time: f64, l: f64, q: &[f64], qd: &[f64]) -> Result<()> {
+        let n = self.n;
+        let (q, qd) = (&q[..2 * n + 1], &qd[..2 * n + 1]);
+        if self.held.holds::<M>(q, qd) {
+            return Ok(());
+        }
+        self.held.flavour = None;
+        self.kinematics_pass::<M>(time, l, q, qd)
+    }
+
+    /// Whether the kinematics fields hold the pass of `(q, qd)` with flavour `M` (for tests).
+    #[cfg(test)]
+    pub fn holds_kinematics_of<M: Madd>(&self, q: &[f64], qd: &[f64]) -> bool {
+        let n = self.n;
+        self.held.holds::<M>(&q[..2 * n + 1], &qd[..2 * n + 1])
+    }
+
+    /// [`ChainState::kinematics`], then remembers its inputs, so that the next pass of the same
+    /// inputs is skipped (for a walk through a state that a step will start from).
+    #[inline(always)]
+    pub fn kinematics_held<M: Madd>(
+        &mut self,
+        time: f64,
+        l: f64,
+        q: &[f64],
+        qd: &[f64],
+    ) -> Result<()> {
+        self.kinematics::<M>(time, l, q, qd)?;
+        let n = self.n;
+        self.held.hold::<M>(&q[..2 * n + 1], &qd[..2 * n + 1]);
+        Ok(())
+    }
+
+    #[inline(always)]
+    fn kinematics_pass<M: Madd>(&mut self, time: f64, l: f64, q: &[f64], qd: &[f64]) -> Result<()> {
         let n = self.n;
         let (s, sd) = (q[0], qd[0]);
         let (phi, psi) = (&mut self.phi[..n], &mut self.psi[..n]);
@@ -275,6 +356,8 @@ impl ChainState {
     /// [`ChainState::kinematics`] (whose prefix sums carry segment 1's stretch only): segment k's
     /// rod starts `s_k e_k` beyond its joint, with `s_k` and `s_k'` from `stretch(k)`.
     pub fn stretch_centres(&mut self, l: f64, stretch: impl Fn(usize) -> (f64, f64)) {
+        // The centres and the tip are no longer the kinematics pass's alone.
+        self.held.flavour = None;
         let n = self.n;
         let half = 0.5 * l;
         let mut p = V3::zeros();

@@ -788,7 +788,7 @@ impl TetherModel {
             return Ok(self.copy_centres(centres));
         }
         let l = self.l;
-        self.ws.chain.kinematics::<Plain>(0.0, l, q, qd)?;
+        self.ws.chain.kinematics_held::<Plain>(0.0, l, q, qd)?;
         self.stretch_batch(q, qd);
         Ok(self.copy_centres(centres))
     }
@@ -810,7 +810,7 @@ impl TetherModel {
         let l = self.l;
         self.ws
             .chain
-            .kinematics::<crate::arith::Fused>(0.0, l, q, qd)
+            .kinematics_held::<crate::arith::Fused>(0.0, l, q, qd)
     }
 
     fn copy_centres(&self, centres: &mut [V3]) -> (V3, V3) {
@@ -925,6 +925,91 @@ mod tests {
         }
         let mut bad = [1.0, 2.0, 2.0, 1.0];
         assert_eq!(cholesky_in_place(&mut bad, 2), Err(1));
+    }
+
+    /// A walk through a state (`centres_and_tip_batch`) leaves its kinematics for the next
+    /// right-hand side of the same state to reuse: the reuse gives a fresh model's results bit
+    /// for bit, a state that differs in one bit (here -0 for +0) or a pass in between that
+    /// writes the directions another way (the mass matrix's) is computed afresh.
+    #[test]
+    fn kinematics_held_by_a_walk_are_reused_only_for_the_same_state() {
+        use crate::reference;
+        let n = 12;
+        let cfg = TetherConfig {
+            segments: n,
+            ..TetherConfig::table3()
+        };
+        let (cfg, flow) = reference::towed(&cfg, reference::StandInBody::accd()).unwrap();
+        let dim = cfg.dofs();
+        let mut q = vec![0.03];
+        let mut qd = vec![0.2];
+        for k in 0..n {
+            let f = k as f64;
+            q.extend([0.25 + 0.3 * (0.6 * f).sin(), 0.1 * (1.1 * f).cos()]);
+            qd.extend([0.4 * (0.5 * f).cos(), -0.2 * (0.8 * f).sin()]);
+        }
+        q[4] = 0.0; // psi of segment 2: +0
+        let fresh = |q: &[f64], qd: &[f64]| {
+            let mut model = TetherModel::new(&cfg).unwrap();
+            let mut out = vec![0.0; dim];
+            model.accelerations(0.5, q, qd, &flow, &mut out).unwrap();
+            out.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+        };
+        let mut model = TetherModel::new(&cfg).unwrap();
+        let mut centres = vec![V3::zeros(); n];
+        let mut out = vec![0.0; dim];
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        // Reused: the same state.
+        model.centres_and_tip_batch(&q, &qd, &mut centres).unwrap();
+        model.accelerations(0.5, &q, &qd, &flow, &mut out).unwrap();
+        assert_eq!(bits(&out), fresh(&q, &qd));
+        // One bit apart: an angle one ulp larger, whose accelerations differ from the held
+        // state's (so that reusing the held pass would show), and -0 for +0.
+        let mut other = q.clone();
+        other[3] = f64::from_bits(q[3].to_bits() + 1);
+        assert_ne!(fresh(&other, &qd), fresh(&q, &qd));
+        model.centres_and_tip_batch(&q, &qd, &mut centres).unwrap();
+        model
+            .accelerations(0.5, &other, &qd, &flow, &mut out)
+            .unwrap();
+        assert_eq!(bits(&out), fresh(&other, &qd));
+        let mut signed = q.clone();
+        signed[4] = -0.0;
+        model.centres_and_tip_batch(&q, &qd, &mut centres).unwrap();
+        assert!(!model
+            .ws
+            .chain
+            .holds_kinematics_of::<crate::arith::Fused>(&signed, &qd));
+        assert!(!model.ws.chain.holds_kinematics_of::<Plain>(&signed, &qd));
+        model
+            .accelerations(0.5, &signed, &qd, &flow, &mut out)
+            .unwrap();
+        assert_eq!(bits(&out), fresh(&signed, &qd));
+        // The mass matrix's directions in between.
+        model.centres_and_tip_batch(&q, &qd, &mut centres).unwrap();
+        model.mass_matrix(&other).unwrap();
+        model.accelerations(0.5, &q, &qd, &flow, &mut out).unwrap();
+        assert_eq!(bits(&out), fresh(&q, &qd));
+        // A right-hand side does not hold its inputs: only walks do.
+        model
+            .accelerations(0.5, &other, &qd, &flow, &mut out)
+            .unwrap();
+        assert!(!model
+            .ws
+            .chain
+            .holds_kinematics_of::<crate::arith::Fused>(&other, &qd));
+        model
+            .centres_and_tip_batch(&other, &qd, &mut centres)
+            .unwrap();
+        let held_fused = model
+            .ws
+            .chain
+            .holds_kinematics_of::<crate::arith::Fused>(&other, &qd);
+        let held_plain = model.ws.chain.holds_kinematics_of::<Plain>(&other, &qd);
+        assert!(
+            held_fused ^ held_plain,
+            "the walk holds its state in its own flavour"
+        );
     }
 
     /// The vectorized backward sweep (AVX2 and FMA, `recursive/avx2.rs`) gives the scalar
