@@ -912,6 +912,18 @@ fn cholesky_solve(l: &[f64], dim: usize, b: &mut [f64]) {
 mod tests {
     use super::*;
 
+    /// A smoothly bent, moving state of `n` segments (q, q'; attachment layout).
+    fn wavy_state(n: usize) -> (Vec<f64>, Vec<f64>) {
+        let mut q = vec![0.05];
+        let mut qd = vec![0.3];
+        for k in 0..n {
+            let f = k as f64;
+            q.extend([0.3 + 0.4 * (0.7 * f).sin(), 0.2 * (1.3 * f).cos()]);
+            qd.extend([0.5 * (0.4 * f).cos(), -0.3 * (0.9 * f).sin()]);
+        }
+        (q, qd)
+    }
+
     #[test]
     fn cholesky_solves_spd_system() {
         let a = [4.0, 1.0, 0.5, 1.0, 3.0, 0.2, 0.5, 0.2, 2.0];
@@ -941,13 +953,7 @@ mod tests {
         };
         let (cfg, flow) = reference::towed(&cfg, reference::StandInBody::accd()).unwrap();
         let dim = cfg.dofs();
-        let mut q = vec![0.03];
-        let mut qd = vec![0.2];
-        for k in 0..n {
-            let f = k as f64;
-            q.extend([0.25 + 0.3 * (0.6 * f).sin(), 0.1 * (1.1 * f).cos()]);
-            qd.extend([0.4 * (0.5 * f).cos(), -0.2 * (0.8 * f).sin()]);
-        }
+        let (mut q, qd) = wavy_state(n);
         q[4] = 0.0; // psi of segment 2: +0
         let fresh = |q: &[f64], qd: &[f64]| {
             let mut model = TetherModel::new(&cfg).unwrap();
@@ -1122,13 +1128,7 @@ mod tests {
             let (cfg, flow) = reference::towed(&cfg, reference::StandInBody::accd()).unwrap();
             let mut model = TetherModel::new(&cfg).unwrap();
             let dim = cfg.dofs();
-            let mut q = vec![0.05];
-            let mut qd = vec![0.3];
-            for k in 0..n {
-                let f = k as f64;
-                q.extend([0.3 + 0.4 * (0.7 * f).sin(), 0.2 * (1.3 * f).cos()]);
-                qd.extend([0.5 * (0.4 * f).cos(), -0.3 * (0.9 * f).sin()]);
-            }
+            let (q, qd) = wavy_state(n);
             let mut dense = vec![0.0; dim];
             model
                 .accelerations_dense(0.5, &q, &qd, &flow, &mut dense)
