@@ -440,7 +440,7 @@ impl BatchEnv {
     /// `interrupted()` from the calling thread (so Python can run its signal handlers there) at
     /// most about [`WATCH_INTERVAL`] apart. While one env's step takes under [`SHARE_BELOW`]
     /// (every usual config) the calling thread steps envs itself beside the pool's threads and asks between
-    /// its envs ([`crate::shared`]: no thread wakes up for nothing, the step's latency drops);
+    /// its envs (`crate::shared`: no thread wakes up for nothing, the step's latency drops);
     /// otherwise (and on the first step) it only waits and asks. Once `interrupted()` returns
     /// true the envs stop before their next physics step and the call fails with
     /// [`SimError::Interrupted`]; the envs may then be part-way through the step, so each
