@@ -483,35 +483,28 @@ impl Turbulence {
     fn store_newest(&mut self) {
         let slot = self.newest.rem_euclid(self.slots as i64) as usize;
         self.newest_slot = slot;
-        let store = |ring: &mut [f32], at: usize, values: &[f64]| {
-            for (r, s) in ring[at..at + 3].iter_mut().zip(values) {
-                *r = *s as f32;
-            }
-        };
-        let groups = self.channels / 3;
+        // The generated wake lanes (every lane with one stream), then the ambient group.
         if self.on_demand {
-            for &l in &self.active_list {
-                store(
-                    &mut self.ring,
-                    (l * self.slots + slot) * 3,
-                    &self.state[3 * l..],
-                );
-            }
-            for g in self.lanes..groups {
-                store(
-                    &mut self.ring,
-                    (g * self.slots + slot) * 3,
-                    &self.state[3 * g..],
-                );
+            for i in 0..self.active_list.len() {
+                self.store_group(self.active_list[i], slot);
             }
         } else {
-            for g in 0..groups {
-                store(
-                    &mut self.ring,
-                    (g * self.slots + slot) * 3,
-                    &self.state[3 * g..],
-                );
+            for lane in 0..self.lanes {
+                self.store_group(lane, slot);
             }
+        }
+        for group in self.lanes..self.channels / 3 {
+            self.store_group(group, slot);
+        }
+    }
+
+    /// Stores channel group `group`'s current values at `slot` of the ring.
+    #[inline(always)]
+    fn store_group(&mut self, group: usize, slot: usize) {
+        let at = self.at(group, slot);
+        let values = &self.state[3 * group..3 * group + 3];
+        for (r, v) in self.ring[at..at + 3].iter_mut().zip(values) {
+            *r = *v as f32;
         }
     }
 
@@ -524,7 +517,13 @@ impl Turbulence {
     /// `lanes`) three values at `slot`.
     #[inline(always)]
     fn at(&self, group: usize, slot: usize) -> usize {
-        (group * self.slots + slot) * 3
+        Self::ring_at(self.slots, group, slot)
+    }
+
+    /// [`Turbulence::at`] for a ring of `slots` grid times (where `self` is borrowed apart).
+    #[inline(always)]
+    fn ring_at(slots: usize, group: usize, slot: usize) -> usize {
+        (group * slots + slot) * 3
     }
 
     /// The ring in the slot-major order of [`TurbulenceState::ring`].
@@ -562,8 +561,9 @@ impl Turbulence {
         self.active_list.push(lane);
         let (a, b) = (self.a_wake, self.b_wake);
         let first = self.first_index();
+        let slots = self.slots;
         let rng = &mut self.lane_rngs[lane];
-        let kept = self.newest - self.slots as i64 + 1;
+        let kept = self.newest - slots as i64 + 1;
         let mut g = [0.0; 3];
         for j in first..=self.newest {
             for gc in &mut g {
@@ -574,8 +574,8 @@ impl Turbulence {
                 };
             }
             if j >= kept {
-                let slot = j.rem_euclid(self.slots as i64) as usize;
-                let at = (lane * self.slots + slot) * 3;
+                let slot = j.rem_euclid(slots as i64) as usize;
+                let at = Self::ring_at(slots, lane, slot);
                 for (r, gc) in self.ring[at..at + 3].iter_mut().zip(&g) {
                     *r = *gc as f32;
                 }

@@ -75,6 +75,14 @@ pub(crate) fn cross<M: Madd>(a: &V3, b: &V3) -> V3 {
     )
 }
 
+/// Whether the processor has AVX2 and FMA: where [`Fused`] and the vectorized loops may run
+/// (cached by the standard library after the first call).
+#[cfg(target_arch = "x86_64")]
+#[inline]
+pub(crate) fn has_avx2_fma() -> bool {
+    std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+}
+
 /// [`Fused`] multiply-adds in the scalar loops only: the reference the vectorized loops are
 /// tested against bit for bit.
 #[cfg(test)]

@@ -518,8 +518,7 @@ impl TetherModel {
         tensions: Option<&mut [f64]>,
     ) -> Result<S::TipReport> {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
-        {
+        if crate::arith::has_avx2_fma() {
             // SAFETY: the processor has AVX2 and FMA, checked just above.
             return unsafe { self.solve_recursive_avx2(time, q, qd, surroundings, qdd, tensions) };
         }
@@ -780,8 +779,7 @@ impl TetherModel {
     ) -> Result<(V3, V3)> {
         self.check_walk(q, qd, centres)?;
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
-        {
+        if crate::arith::has_avx2_fma() {
             // SAFETY: the processor has AVX2 and FMA, checked just above.
             unsafe { self.kinematics_avx2(q, qd)? };
             self.stretch_batch(q, qd);
@@ -1027,9 +1025,7 @@ mod tests {
         use crate::reference;
         use crate::surroundings::UniformFlow;
         #[cfg(target_arch = "x86_64")]
-        if !(std::arch::is_x86_feature_detected!("avx2")
-            && std::arch::is_x86_feature_detected!("fma"))
-        {
+        if !crate::arith::has_avx2_fma() {
             eprintln!("no AVX2 and FMA: the vectorized sweep is not used on this processor");
             return;
         }

@@ -295,7 +295,9 @@ pub(crate) fn solve<M: Madd>(
 }
 
 /// The backward sweep (tip to segment 2) on `B = A + (m/2) 1`, writing `l G_k` and `y_k` (and,
-/// for the tensions, `B_k` and `b_k`) into `work`; returns `B_1` and `b_1` for the root.
+/// for the tensions, `B_k` and `b_k`) into `work`; returns `B_1` and `b_1` for the root. Four
+/// lanes wide where the processor has AVX2 and FMA (`recursive/avx2.rs`); the scalar loop
+/// below is its bitwise reference and the sweep of other processors.
 #[inline(always)]
 fn backward<M: Madd>(
     time: f64,
@@ -305,23 +307,10 @@ fn backward<M: Madd>(
     want_tensions: bool,
 ) -> Result<(Sym3, V3)> {
     #[cfg(target_arch = "x86_64")]
-    if M::VECTORIZED && avx2::available() {
+    if M::VECTORIZED && crate::arith::has_avx2_fma() {
         // SAFETY: the processor has AVX2 and FMA, checked just above.
         return unsafe { avx2::backward(time, c, chain, work, want_tensions) };
     }
-    backward_scalar::<M>(time, c, chain, work, want_tensions)
-}
-
-/// [`backward`] one component at a time: the reference of the vectorized sweep, and the sweep
-/// of processors without AVX2 and FMA.
-#[inline(always)]
-fn backward_scalar<M: Madd>(
-    time: f64,
-    c: &ChainConstants,
-    chain: &ChainState,
-    work: &mut [Articulated],
-    want_tensions: bool,
-) -> Result<(Sym3, V3)> {
     let n = chain.segments();
     let (l, m) = (c.l, c.m);
     let inv_l = 1.0 / l;

@@ -1,5 +1,5 @@
 //! The backward sweep of [`crate::recursive`] four lanes wide (AVX2 and FMA), bit for bit the
-//! scalar sweep with fused multiply-adds ([`super::backward_scalar`] with `Fused`).
+//! scalar sweep with fused multiply-adds ([`super::backward`]'s scalar loop with `Fused`).
 //!
 //! The scalar sweep spends most of its instructions on the 3-vectors `B E_phi`, `B E_psi`,
 //! `B w`, the bias and the six entries of the articulated inertia `B`, each a few multiply-adds
@@ -27,9 +27,10 @@
 //! spinning states; the physics fingerprints (`tests/test_physics_hash.py`) pin whole episodes.
 //!
 //! Measured (BENCHMARKS.md): 188 -> 129 instructions per segment and right-hand side, the
-//! tether's RK4 step 4 % faster. The sweep is bound by its chain of dependent operations
-//! (`B_{k+1}` -> `B E` -> `K` -> `det` -> `1/det` -> `B_k`, about 50 cycles a segment), not by
-//! the instruction count; lane moves on that chain are what the layout above keeps short.
+//! tether's RK4 step about 3.5 % faster (side-by-side runs). The sweep is bound by its chain of
+//! dependent operations (`B_{k+1}` -> `B E` -> `K` -> `det` -> `1/det` -> `B_k`; about 60
+//! cycles a segment measured), not by the instruction count; lane moves on that chain are what
+//! the layout above keeps short.
 
 use std::arch::x86_64::*;
 
@@ -40,13 +41,6 @@ use crate::chain::ChainState;
 use crate::error::Result;
 
 type V3 = Vector3<f64>;
-
-/// Whether the processor has what [`backward`] needs (AVX2 and FMA); cached by the standard
-/// library after the first call.
-#[inline(always)]
-pub(super) fn available() -> bool {
-    std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
-}
 
 /// `(x, y, z, 0)`.
 #[inline(always)]
@@ -123,10 +117,10 @@ unsafe fn to_sym3(c0: __m256d, c1: __m256d, c2: __m256d) -> Sym3 {
     }
 }
 
-/// [`super::backward_scalar`] four lanes wide; the same results bit for bit.
+/// [`super::backward`]'s scalar loop four lanes wide; the same results bit for bit.
 ///
 /// # Safety
-/// The processor must have AVX2 and FMA ([`available`]).
+/// The processor must have AVX2 and FMA ([`crate::arith::has_avx2_fma`]).
 #[target_feature(enable = "avx2,fma")]
 pub(super) unsafe fn backward(
     time: f64,
