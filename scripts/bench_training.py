@@ -11,7 +11,8 @@ Trains for ``--timesteps`` agent steps with the recipe's hyperparameters (16 env
 
 Also runs the same PPO on a zero-cost VecEnv with our spaces (the ceiling SB3 and torch allow on
 this machine). ``--env JSON`` sets the env configuration (e.g. the fast air scheme),
-``--torch-threads`` and ``--num-threads`` the split of cores between torch and the env pool.
+``--torch-threads``, ``--update-threads`` and ``--num-threads`` the split of cores between torch
+(while the envs step / in the gradient updates) and the env pool.
 
     python scripts/bench_training.py [--timesteps 65536] [--env JSON] [--torch-threads 1]
 """
@@ -21,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from typing import Optional
 
 import numpy as np
 
@@ -73,16 +75,19 @@ def _zero_env(num_envs: int):
     return ZeroVecEnv()
 
 
-def run(timesteps: int, env_config: dict, torch_threads: int, num_threads: int, zero: bool) -> dict:
+def run(timesteps: int, env_config: dict, torch_threads: int, num_threads: int, zero: bool,
+        update_threads: Optional[int] = None) -> dict:
     """Trains PPO for ``timesteps`` steps; returns steps/s and the time split (s)."""
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
     from accd_gym.sb3 import AccdVecEnv
-    from accd_gym.training import _policy_kwargs, load_config
+    from accd_gym.training import _policy_kwargs, _thread_split, load_config
 
     cfg = load_config("training/ppo.json")
+    if update_threads is None:
+        update_threads = cfg["update_threads"]
     torch.set_num_threads(torch_threads)
     timing = {"env": 0.0, "train": 0.0, "collect": 0.0}
     base = _zero_env(cfg["num_envs"]) if zero else AccdVecEnv(num_envs=cfg["num_envs"], seed=0, num_threads=num_threads, **env_config)
@@ -112,7 +117,9 @@ def run(timesteps: int, env_config: dict, torch_threads: int, num_threads: int, 
 
     model.train, model.collect_rollouts = timed_train, timed_collect
     t0 = time.perf_counter()
-    model.learn(timesteps)
+    # The split of threads as training.train makes it (update_threads 0: torch_threads throughout).
+    split = update_threads not in (0, torch_threads)
+    model.learn(timesteps, callback=_thread_split(torch_threads, update_threads) if split else None)
     wall = time.perf_counter() - t0
     steps = model.num_timesteps
     return {
@@ -131,12 +138,14 @@ def main() -> None:
     p.add_argument("--timesteps", type=int, default=65_536)
     p.add_argument("--env", default="{}", help="env configuration, JSON")
     p.add_argument("--torch-threads", type=int, default=1)
+    p.add_argument("--update-threads", type=int, default=None,
+                   help="torch threads in the gradient updates (default: the recipe's update_threads; 0: --torch-threads)")
     p.add_argument("--num-threads", type=int, default=0, help="env pool threads (0: one per core)")
     p.add_argument("--json", help="write the results here")
     a = p.parse_args()
     out = {}
     for name, zero in (("accd env", False), ("zero-cost VecEnv", True)):
-        r = run(a.timesteps, json.loads(a.env), a.torch_threads, a.num_threads, zero)
+        r = run(a.timesteps, json.loads(a.env), a.torch_threads, a.num_threads, zero, a.update_threads)
         out[name] = r
         print(
             f"| {name} | {r['agent_steps_per_s']:,.0f} | {r['env_s']:.1f} | {r['inference_and_collection_s']:.1f} "

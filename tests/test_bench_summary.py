@@ -60,3 +60,19 @@ def test_targets_are_computed_from_the_files_and_missing_inputs_are_said(tmp_pat
     assert abs(rows["Rust batch 1 -> 2 threads, N = 16"]["value"] - 2.0) < 1e-12
     assert rows["Rust batch 1 -> 2 threads, N = 256"]["met"] is None  # no one-thread estimate
     assert rows["PPO with training/ppo.json, end to end"]["met"] is True
+
+
+def test_the_share_of_the_rust_batch_comes_from_the_side_by_side_rounds_when_there(tmp_path):
+    s = _summary()
+    out, crit = tmp_path / "run", tmp_path / "criterion"
+    out.mkdir()
+    env_rows = [{"env": "native VectorEnv (gymnasium.make_vec)", "num_envs": 16, "agent_steps_per_s": 10_000.0}]
+    beside = {"16": {"rust batch": 16_000.0, "native VectorEnv": 15_200.0, "native SB3 AccdVecEnv": 14_000.0}}
+    (out / "envs_default.json").write_text(json.dumps({"substeps": 10, "rows": env_rows, "side_by_side": beside}))
+    _criterion(crit, 16, 2, 0.5e6)  # 32,000/s in another process: not what the share is taken from
+    rows = {r["target"]: r for r in s.targets(out, crit)}
+    share = rows["vector envs / Rust batch, N = 16"]
+    assert abs(share["value"] - 14_000.0 / 16_000.0) < 1e-12 and share["met"] is False
+    assert share["source"] == "envs_default.json, side by side"
+    # N = 256 has no side-by-side rounds and no env rows: not measured.
+    assert rows["vector envs / Rust batch, N = 256"]["value"] is None

@@ -151,3 +151,27 @@ def test_an_interrupted_job_continues_from_its_checkpoint(tmp_path, monkeypatch)
     (run / "run.json").write_text(json.dumps({"status": "interrupted", "config": seen[0]}))
     with pytest.raises(Chosen, match="train"):
         benchmark.run_job(job, str(tmp_path), cfg["episodes"], cfg["num_envs"])
+
+
+def test_a_job_with_a_cpu_budget_keeps_its_gradient_updates_within_it(tmp_path, monkeypatch):
+    """The recipe's ``update_threads`` (2) is capped at a Ray job's ``cpus_per_job``; without a
+    budget (num_threads 0, one process on the machine) the recipe's value stands."""
+    from accd_gym import training
+
+    class Chosen(Exception):
+        pass
+
+    seen: list[dict] = []
+
+    def probe(cfg, *_a, **_k):
+        seen.append(cfg)
+        raise Chosen()
+
+    monkeypatch.setattr(training, "train", probe)
+    cfg = benchmark.load_config(ROOT / "training" / "benchmark.json", quick=True)
+    job = [j for j in benchmark.jobs(cfg) if j.train_config][0]
+    assert training.load_config(job.train_config)["update_threads"] == 2
+    for threads, expected in ((1, 1), (2, 2), (0, 2)):
+        with pytest.raises(Chosen):
+            benchmark.run_job(job, str(tmp_path / str(threads)), cfg["episodes"], cfg["num_envs"], threads)
+        assert seen[-1]["update_threads"] == expected and seen[-1]["num_threads"] == threads

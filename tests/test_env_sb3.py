@@ -166,3 +166,19 @@ def test_step_infos_carry_the_time_limit_and_divergence_keys_in_order():
             assert list(d)[-2:] == ["wake_seed", "TimeLimit.truncated"] or "terminal_observation" in d
             assert d["TimeLimit.truncated"] is (k == 19)
             assert type(d["episode_steps"]) is int and type(d["captured"]) is bool
+
+
+def test_the_rust_step_loop_of_the_benchmarks_advances_the_envs_as_step_does():
+    """``BatchEnv.time_rust_steps`` (bench_envs.py's side-by-side rounds) steps the batch the way
+    ``step`` does: after it, a twin stepped through the Python env holds the same state."""
+    a, b = accd_gym.AccdVecEnv(num_envs=3, seed=5, num_threads=1), accd_gym.AccdVecEnv(num_envs=3, seed=5, num_threads=2)
+    a.reset()
+    b.reset()
+    actions = np.array([[0.5, -0.25, 0.0, 1.0], [-1.0, 0.0, 0.75, -0.5], [0.0, 0.1, -0.1, 0.2]], np.float32)
+    seconds = a._core.time_rust_steps(actions, 25)
+    assert seconds > 0
+    for _ in range(25):
+        b.step(actions)
+    assert a.get_state() == b.get_state()
+    with pytest.raises(accd_gym.StateError, match=r"shape \[2, 4\]"):
+        a._core.time_rust_steps(actions[:2], 1)

@@ -216,3 +216,47 @@ def test_training_refuses_held_out_wake_seeds():
         with pytest.raises(accd_gym.ConfigError, match="held-out"):
             training.validate_config({"env": env})
     training.validate_config({"env": {"wake_seed": 999_999_999}})
+
+
+def test_ppo_updates_run_on_update_threads_and_the_envs_step_beside_torch_threads(tmp_path, monkeypatch):
+    """``update_threads``: PyTorch has that many threads in every gradient update and
+    ``torch_threads`` while the envs step, and the process keeps ``torch_threads`` afterwards."""
+    import torch
+    from stable_baselines3 import PPO
+
+    seen = {"train": set(), "step": set()}
+    train = PPO.train
+
+    def recording_train(self):
+        seen["train"].add(torch.get_num_threads())
+        return train(self)
+
+    monkeypatch.setattr(PPO, "train", recording_train)
+    from accd_gym.sb3 import AccdVecEnv
+
+    step_wait = AccdVecEnv.step_wait
+
+    def recording_step_wait(self):
+        seen["step"].add(torch.get_num_threads())
+        return step_wait(self)
+
+    monkeypatch.setattr(AccdVecEnv, "step_wait", recording_step_wait)
+    before = torch.get_num_threads()
+    try:
+        cfg = training.validate_config({
+            "algo": "ppo", "total_timesteps": 96, "num_envs": 2, "num_threads": 1, "seed": 1, "env": SHORT,
+            "torch_threads": 1, "update_threads": 3,
+            "algo_kwargs": {"n_steps": 16, "batch_size": 32, "n_epochs": 1},
+            "policy_kwargs": {"net_arch": [8]}, "checkpoint_every": 10**6,
+        })
+        training.train(cfg, tmp_path / "ppo", progress=False)
+        assert seen == {"train": {3}, "step": {1}}
+        assert torch.get_num_threads() == 1
+        # 0 (the default) is torch_threads everywhere
+        seen = {"train": set(), "step": set()}
+        training.train(dict(cfg, update_threads=0), tmp_path / "ppo0", progress=False)
+        assert seen == {"train": {1}, "step": {1}}
+    finally:
+        torch.set_num_threads(before)
+    with pytest.raises(accd_gym.ConfigError, match="update_threads"):
+        training.validate_config({"update_threads": -1})

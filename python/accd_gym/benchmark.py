@@ -44,7 +44,8 @@ baselines        baseline names (default ``["zero", "random", "guidance", "lqr"]
                  are refused)
 episodes         held-out episodes per tier (default 500)
 num_envs         evaluation batch (default 16)
-cpus_per_job     CPUs a Ray job reserves, also the threads stepping its envs (default 1)
+cpus_per_job     CPUs a Ray job reserves, also the threads stepping its envs and at most those of
+                 PyTorch in its gradient updates (default 1)
 quick            overrides for ``--quick``
 ================ ===================================================================================
 """
@@ -270,6 +271,9 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
     raw["seed"] = job.seed
     raw["total_timesteps"] = job.timesteps
     raw["num_threads"] = num_threads
+    if num_threads > 0 and int(raw.get("update_threads", 0)) > num_threads:
+        # A job with a CPU budget (Ray's cpus_per_job) keeps its gradient updates within it.
+        raw["update_threads"] = num_threads
     cfg = training.validate_config(raw)
     t0 = time.perf_counter()
     if _continues(run, cfg):

@@ -11,6 +11,10 @@ total_timesteps    environment steps (all envs together); ``--timesteps`` overri
 num_envs           parallel episodes in the AccdVecEnv (default 16)
 num_threads        threads stepping the envs (0: one per core)
 torch_threads      threads PyTorch uses (default 1: leaves the cores to the physics)
+update_threads     PPO: threads PyTorch uses in the gradient updates, when the envs are idle
+                   (0, the default: ``torch_threads``). A fixed number, never "per core": the
+                   trained policy can depend on it (on an AMD EPYC, 1 and 2 give the same bits,
+                   3 and 4 others; BENCHMARKS.md)
 seed               seed of the env (training wake seeds only) and of the algorithm (default 0)
 env                environment config overrides (see :mod:`accd_gym.config`)
 vec_normalize      ``VecNormalize`` options: ``norm_obs``, ``norm_reward`` (PPO; false for SAC),
@@ -58,6 +62,7 @@ DEFAULTS: dict[str, Any] = {
     "num_envs": 16,
     "num_threads": 0,
     "torch_threads": 1,
+    "update_threads": 0,
     "seed": 0,
     "env": {},
     "vec_normalize": {"norm_obs": True, "norm_reward": True, "clip_obs": 10.0, "clip_reward": 10.0},
@@ -91,7 +96,7 @@ def validate_config(raw: dict[str, Any]) -> dict[str, Any]:
     if cfg["algo"] not in _ALGOS:
         raise ConfigError(f"invalid config: `algo` = {cfg['algo']!r} is outside the allowed range {list(_ALGOS)}")
     for key, low, high in (("total_timesteps", 1, 10**12), ("num_envs", 1, 65_536), ("num_threads", 0, 1024),
-                           ("torch_threads", 1, 1024), ("checkpoint_every", 1, 10**12), ("seed", 0, 2**64 - 1)):
+                           ("torch_threads", 1, 1024), ("update_threads", 0, 1024), ("checkpoint_every", 1, 10**12), ("seed", 0, 2**64 - 1)):
         v = cfg[key]
         if not isinstance(v, int) or isinstance(v, bool) or not low <= v <= high:
             raise ConfigError(f"invalid config: `{key}` = {v!r} is outside the allowed range: an integer in [{low}, {high}]")
@@ -195,6 +200,31 @@ def make_training_env(cfg: dict[str, Any]):
     env = VecMonitor(env, info_keywords=("captured",))
     gamma = cfg["algo_kwargs"].get("gamma", 0.99)
     return VecNormalize(env, gamma=gamma, **cfg["vec_normalize"])
+
+
+def _thread_split(collection: int, updates: int):
+    """A callback giving PyTorch ``updates`` threads for PPO's gradient updates and ``collection``
+    threads while the envs step (the env pool then has the cores; an idle PyTorch worker thread
+    spinning beside it halves the env's speed)."""
+    import torch
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class ThreadSplit(BaseCallback):
+        """Sets PyTorch's thread count at each rollout's start and end."""
+
+        def _on_rollout_start(self) -> None:
+            torch.set_num_threads(collection)
+
+        def _on_rollout_end(self) -> None:
+            torch.set_num_threads(updates)
+
+        def _on_training_end(self) -> None:
+            torch.set_num_threads(collection)
+
+        def _on_step(self) -> bool:
+            return True
+
+    return ThreadSplit()
 
 
 def _capture_callback():
@@ -469,12 +499,15 @@ def _learn(model: Any, env: Any, cfg: dict[str, Any], out: Path, meta: dict[str,
     t0 = time.time()
     start_steps = 0 if fresh else int(model.num_timesteps)
     stop = _StopRequest()
+    callbacks = [checkpoints, _capture_callback(), stop.callback()]
+    if cfg["algo"] == "ppo" and cfg["update_threads"] not in (0, cfg["torch_threads"]):
+        callbacks.append(_thread_split(cfg["torch_threads"], cfg["update_threads"]))
     try:
         with stop.installed():
             if remaining > 0:
                 model.learn(
                     total_timesteps=remaining,
-                    callback=CallbackList([checkpoints, _capture_callback(), stop.callback()]),
+                    callback=CallbackList(callbacks),
                     progress_bar=progress,
                     tb_log_name=cfg["algo"],
                     reset_num_timesteps=fresh,

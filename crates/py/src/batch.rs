@@ -335,6 +335,49 @@ impl PyBatchEnv {
         )
     }
 
+    /// Benchmark support: ``steps`` agent steps of every env with the same ``actions``
+    /// (``(num_envs, 4)`` float32), stepped by the Rust batch alone (its ``step``, as the
+    /// criterion benchmark ``batch_step`` runs it: no Python and no numpy between the steps, the
+    /// outputs into buffers of its own), with the GIL released. Returns the wall time in seconds.
+    /// The envs advance as :meth:`step` advances them; Ctrl+C stops the loop between two steps
+    /// (``KeyboardInterrupt``).
+    fn time_rust_steps(
+        &mut self,
+        py: Python<'_>,
+        actions: PyReadonlyArray2<'_, f32>,
+        steps: usize,
+    ) -> PyResult<f64> {
+        let n = self.inner.num_envs();
+        let shape = actions.shape();
+        if shape != [n, ACT_DIM] {
+            return Err(raise(
+                Kind::State,
+                format!("actions have shape {shape:?}, expected ({n}, {ACT_DIM})"),
+            ));
+        }
+        let a = actions
+            .as_slice()
+            .map_err(|_| raise(Kind::State, "actions must be a C-contiguous float32 array"))?
+            .to_vec();
+        let mut out = accd_batch::StepOutputs::new(n);
+        let inner = &mut self.inner;
+        let mut check = SignalCheck::new();
+        let result = py.detach(|| {
+            let start = std::time::Instant::now();
+            for _ in 0..steps {
+                if check.interrupted() {
+                    break;
+                }
+                inner.step(&a, out.buffers())?;
+            }
+            Ok::<f64, BatchError>(start.elapsed().as_secs_f64())
+        });
+        if let Some(e) = check.take() {
+            return Err(e);
+        }
+        result.py_err()
+    }
+
     /// Sets where the wake seeds of the episodes started from now on come from:
     /// ``"training"`` (drawn from the training range), ``"fixed"`` (``seeds[0]`` for every
     /// episode) or ``"list"`` (env ``i``'s episode ``e`` uses ``seeds[(i + e * num_envs) % len]``).
