@@ -94,9 +94,10 @@ def _criterion_actions(n: int) -> np.ndarray:
     return (((k % 7) - 3) / 4.0).astype(np.float32).reshape(n, 4)
 
 
-def side_by_side(n: int, seconds: float, threads: int, rounds: int = 5) -> dict[str, float]:
+def side_by_side(n: int, seconds: float, threads: int, rounds: int = 20) -> dict[str, float]:
     """Agent steps/s of the Rust batch, the native VectorEnv and the SB3 AccdVecEnv at ``n`` envs,
-    in ``rounds`` interleaved rounds of ``seconds / rounds`` per case (best round of each), all with
+    in ``rounds`` interleaved rounds of ``seconds / rounds`` per case (best round of each: on a shared
+    machine other load only ever slows a round, so short rounds and the best of many), all with
     the criterion benchmark's fixed actions."""
     from accd_gym import _core
     from accd_gym.config import valid_config
