@@ -154,8 +154,9 @@ def test_an_interrupted_job_continues_from_its_checkpoint(tmp_path, monkeypatch)
 
 
 def test_a_job_with_a_cpu_budget_keeps_its_gradient_updates_within_it(tmp_path, monkeypatch):
-    """The recipe's ``update_threads`` (2) is capped at a Ray job's ``cpus_per_job``; without a
+    """A recipe's ``update_threads`` (2 here) is capped at a Ray job's ``cpus_per_job``; without a
     budget (num_threads 0, one process on the machine) the recipe's value stands."""
+    import dataclasses
     from accd_gym import training
 
     class Chosen(Exception):
@@ -170,7 +171,9 @@ def test_a_job_with_a_cpu_budget_keeps_its_gradient_updates_within_it(tmp_path, 
     monkeypatch.setattr(training, "train", probe)
     cfg = benchmark.load_config(ROOT / "training" / "benchmark.json", quick=True)
     job = [j for j in benchmark.jobs(cfg) if j.train_config][0]
-    assert training.load_config(job.train_config)["update_threads"] == 2
+    recipe = json.loads(Path(job.train_config).read_text()) | {"update_threads": 2}
+    (tmp_path / "recipe.json").write_text(json.dumps(recipe))
+    job = dataclasses.replace(job, train_config=str(tmp_path / "recipe.json"))
     for threads, expected in ((1, 1), (2, 2), (0, 2)):
         with pytest.raises(Chosen):
             benchmark.run_job(job, str(tmp_path / str(threads)), cfg["episodes"], cfg["num_envs"], threads)
