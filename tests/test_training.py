@@ -260,3 +260,5 @@ def test_ppo_updates_run_on_update_threads_and_the_envs_step_beside_torch_thread
         torch.set_num_threads(before)
     with pytest.raises(accd_gym.ConfigError, match="update_threads"):
         training.validate_config({"update_threads": -1})
+    with pytest.raises(accd_gym.ConfigError, match="`update_threads` = 2 .* for algo 'sac'"):
+        training.validate_config({"algo": "sac", "update_threads": 2})

@@ -102,6 +102,9 @@ def validate_config(raw: dict[str, Any]) -> dict[str, Any]:
         v = cfg[key]
         if not isinstance(v, int) or isinstance(v, bool) or not low <= v <= high:
             raise ConfigError(f"invalid config: `{key}` = {v!r} is outside the allowed range: an integer in [{low}, {high}]")
+    if cfg["algo"] != "ppo" and cfg["update_threads"] != 0:
+        raise ConfigError(f"invalid config: `update_threads` = {cfg['update_threads']} is outside the allowed range "
+                          f"for algo {cfg['algo']!r}: 0 (it applies to PPO's gradient updates only)")
     for key in ("env", "vec_normalize", "algo_kwargs", "policy_kwargs"):
         if not isinstance(cfg[key], dict):
             raise ConfigError(f"invalid config: `{key}` = {cfg[key]!r} is outside the allowed range: a JSON object")
