@@ -1,5 +1,5 @@
 //! The cost of the interruptible batch step (the path the Python envs take) against the plain
-//! one: best of interleaved rounds, per batch step, for N = 1, 4, 16.
+//! one: best of interleaved rounds, per batch step, for N = 1, 4, 16, 256.
 //!
 //!     cargo run --release -p accd-batch --example watch_overhead [ROUNDS]
 
@@ -12,7 +12,7 @@ fn main() {
         .nth(1)
         .and_then(|s| s.parse().ok())
         .unwrap_or(7);
-    for n in [1usize, 4, 16] {
+    for n in [1usize, 4, 16, 256] {
         let mut env = BatchEnv::new(
             EnvConfig::default().validated().unwrap(),
             n,
