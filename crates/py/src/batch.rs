@@ -138,6 +138,20 @@ fn parse_autoreset(mode: &str) -> PyResult<Autoreset> {
     }
 }
 
+/// The flap commands of a step, `(num_envs, 4)` float32 and C-contiguous, as one slice.
+fn action_rows<'a>(actions: &'a PyReadonlyArray2<'_, f32>, n: usize) -> PyResult<&'a [f32]> {
+    let shape = actions.shape();
+    if shape != [n, ACT_DIM] {
+        return Err(raise(
+            Kind::State,
+            format!("actions have shape {shape:?}, expected ({n}, {ACT_DIM})"),
+        ));
+    }
+    actions
+        .as_slice()
+        .map_err(|_| raise(Kind::State, "actions must be a C-contiguous float32 array"))
+}
+
 #[pymethods]
 impl PyBatchEnv {
     /// ``num_envs`` episodes of ``config`` (a validated ``EnvConfig``, used as it is, or an
@@ -270,17 +284,7 @@ impl PyBatchEnv {
         py: Python<'py>,
         actions: PyReadonlyArray2<'py, f32>,
     ) -> PyResult<Bound<'py, PyTuple>> {
-        let n = self.inner.num_envs();
-        let shape = actions.shape();
-        if shape != [n, ACT_DIM] {
-            return Err(raise(
-                Kind::State,
-                format!("actions have shape {shape:?}, expected ({n}, {ACT_DIM})"),
-            ));
-        }
-        let a = actions
-            .as_slice()
-            .map_err(|_| raise(Kind::State, "actions must be a C-contiguous float32 array"))?;
+        let a = action_rows(&actions, self.inner.num_envs())?;
         let b = self.next_buffers(py);
         let arrays = (
             b.obs.bind(py).clone(),
@@ -348,17 +352,7 @@ impl PyBatchEnv {
         steps: usize,
     ) -> PyResult<f64> {
         let n = self.inner.num_envs();
-        let shape = actions.shape();
-        if shape != [n, ACT_DIM] {
-            return Err(raise(
-                Kind::State,
-                format!("actions have shape {shape:?}, expected ({n}, {ACT_DIM})"),
-            ));
-        }
-        let a = actions
-            .as_slice()
-            .map_err(|_| raise(Kind::State, "actions must be a C-contiguous float32 array"))?
-            .to_vec();
+        let a = action_rows(&actions, n)?.to_vec();
         let mut out = accd_batch::StepOutputs::new(n);
         let inner = &mut self.inner;
         let mut check = SignalCheck::new();

@@ -238,54 +238,32 @@ mod lanes {
         acc
     }
 
+    /// Both sweeps (backward, a stand-in for the root's solution, forward), compiled for AVX2
+    /// and FMA, for one env (`f64`) or four ([`X4`]); returns the tip's acceleration.
     #[target_feature(enable = "avx2,fma")]
-    pub unsafe fn sweeps_scalar(
-        c: &Chain<f64>,
+    pub unsafe fn sweeps<L: Lane>(
+        c: &Chain<L>,
         l: f64,
         m: f64,
         tip: f64,
-        out: &mut [Out<f64>],
-        qdd: &mut [[f64; 2]],
-    ) -> [f64; 3] {
+        out: &mut [Out<L>],
+        qdd: &mut [[L; 2]],
+    ) -> [L; 3] {
         let (bm, bias) = backward(c, l, m, tip, out);
-        // A stand-in for the root's solution: segment 2's base acceleration from B_1 and b_1.
-        let acc = [bias[0] / bm[0], bias[1] / bm[1], bias[2] / bm[2]];
-        forward(c, out, l, acc, qdd)
-    }
-
-    #[target_feature(enable = "avx2,fma")]
-    pub unsafe fn sweeps_x4(
-        c: &Chain<X4>,
-        l: f64,
-        m: f64,
-        tip: f64,
-        out: &mut [Out<X4>],
-        qdd: &mut [[X4; 2]],
-    ) -> [X4; 3] {
-        let (bm, bias) = backward(c, l, m, tip, out);
+        // Segment 2's base acceleration from B_1 and b_1, in place of the root's 3x3 solve.
         let acc = [bias[0].div(bm[0]), bias[1].div(bm[1]), bias[2].div(bm[2])];
         forward(c, out, l, acc, qdd)
     }
 
+    /// The backward sweep alone, compiled for AVX2 and FMA.
     #[target_feature(enable = "avx2,fma")]
-    pub unsafe fn backward_scalar(
-        c: &Chain<f64>,
+    pub unsafe fn backward_avx2<L: Lane>(
+        c: &Chain<L>,
         l: f64,
         m: f64,
         tip: f64,
-        out: &mut [Out<f64>],
-    ) -> ([f64; 6], [f64; 3]) {
-        backward(c, l, m, tip, out)
-    }
-
-    #[target_feature(enable = "avx2,fma")]
-    pub unsafe fn backward_x4(
-        c: &Chain<X4>,
-        l: f64,
-        m: f64,
-        tip: f64,
-        out: &mut [Out<X4>],
-    ) -> ([X4; 6], [X4; 3]) {
+        out: &mut [Out<L>],
+    ) -> ([L; 6], [L; 3]) {
         backward(c, l, m, tip, out)
     }
 
@@ -391,9 +369,9 @@ fn main() {
     // Lane j of the lockstep sweep is chain j's scalar sweep, bit for bit.
     let mut roots = vec![];
     for (j, c) in chains.iter().enumerate() {
-        roots.push(unsafe { backward_scalar(c, l, m, tip, &mut out1[j]) });
+        roots.push(unsafe { backward_avx2(c, l, m, tip, &mut out1[j]) });
     }
-    let root4 = unsafe { backward_x4(&lockstep, l, m, tip, &mut out4) };
+    let root4 = unsafe { backward_avx2(&lockstep, l, m, tip, &mut out4) };
     let mut same = true;
     for j in 0..4 {
         for i in 0..6 {
@@ -420,15 +398,15 @@ fn main() {
         for _ in 0..reps {
             for (j, c) in chains.iter().enumerate() {
                 sink +=
-                    unsafe { backward_scalar(std::hint::black_box(c), l, m, tip, &mut out1[j]) }.0
-                        [0];
+                    unsafe { backward_avx2(std::hint::black_box(c), l, m, tip, &mut out1[j]) }.0[0];
             }
         }
         best1 = best1.min(t.elapsed().as_secs_f64());
         let t = Instant::now();
         for _ in 0..reps {
             sink += lane(
-                unsafe { backward_x4(std::hint::black_box(&lockstep), l, m, tip, &mut out4) }.0[0],
+                unsafe { backward_avx2(std::hint::black_box(&lockstep), l, m, tip, &mut out4) }.0
+                    [0],
                 0,
             );
         }
@@ -446,9 +424,9 @@ fn main() {
     let mut qdd1 = vec![vec![[0.0; 2]; n]; 4];
     let mut qdd4 = vec![[z4; 2]; n];
     let tips: Vec<[f64; 3]> = (0..4)
-        .map(|j| unsafe { sweeps_scalar(&chains[j], l, m, tip, &mut out1[j], &mut qdd1[j]) })
+        .map(|j| unsafe { sweeps(&chains[j], l, m, tip, &mut out1[j], &mut qdd1[j]) })
         .collect();
-    let tip4 = unsafe { sweeps_x4(&lockstep, l, m, tip, &mut out4, &mut qdd4) };
+    let tip4 = unsafe { sweeps(&lockstep, l, m, tip, &mut out4, &mut qdd4) };
     let mut same = true;
     for j in 0..4 {
         for i in 0..3 {
@@ -467,7 +445,7 @@ fn main() {
         for _ in 0..reps {
             for (j, c) in chains.iter().enumerate() {
                 sink += unsafe {
-                    sweeps_scalar(
+                    sweeps(
                         std::hint::black_box(c),
                         l,
                         m,
@@ -483,7 +461,7 @@ fn main() {
         for _ in 0..reps {
             sink += lane(
                 unsafe {
-                    sweeps_x4(
+                    sweeps(
                         std::hint::black_box(&lockstep),
                         l,
                         m,
