@@ -14,7 +14,7 @@ this machine). ``--env JSON`` sets the env configuration (e.g. the fast air sche
 ``--torch-threads``, ``--update-threads`` and ``--num-threads`` the split of cores between torch
 (while the envs step / in the gradient updates) and the env pool.
 
-    python scripts/bench_training.py [--timesteps 65536] [--env JSON] [--torch-threads 1]
+    python scripts/bench_training.py [--timesteps 65536] [--env JSON] [--torch-threads 1] [--update-threads N]
 """
 
 from __future__ import annotations
@@ -118,8 +118,7 @@ def run(timesteps: int, env_config: dict, torch_threads: int, num_threads: int, 
     model.train, model.collect_rollouts = timed_train, timed_collect
     t0 = time.perf_counter()
     # The split of threads as training.train makes it (update_threads 0: torch_threads throughout).
-    split = update_threads not in (0, torch_threads)
-    model.learn(timesteps, callback=_thread_split(torch_threads, update_threads) if split else None)
+    model.learn(timesteps, callback=_thread_split(torch_threads, update_threads))
     wall = time.perf_counter() - t0
     steps = model.num_timesteps
     return {

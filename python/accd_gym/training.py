@@ -210,7 +210,10 @@ def make_training_env(cfg: dict[str, Any]):
 def _thread_split(collection: int, updates: int):
     """A callback giving PyTorch ``updates`` threads for PPO's gradient updates and ``collection``
     threads while the envs step (the env pool then has the cores; an idle PyTorch worker thread
-    spinning beside it halves the env's speed)."""
+    spinning beside it halves the env's speed); None when ``updates`` is 0 or ``collection``
+    (one count throughout)."""
+    if updates in (0, collection):
+        return None
     import torch
     from stable_baselines3.common.callbacks import BaseCallback
 
@@ -505,8 +508,9 @@ def _learn(model: Any, env: Any, cfg: dict[str, Any], out: Path, meta: dict[str,
     start_steps = 0 if fresh else int(model.num_timesteps)
     stop = _StopRequest()
     callbacks = [checkpoints, _capture_callback(), stop.callback()]
-    if cfg["algo"] == "ppo" and cfg["update_threads"] not in (0, cfg["torch_threads"]):
-        callbacks.append(_thread_split(cfg["torch_threads"], cfg["update_threads"]))
+    split = _thread_split(cfg["torch_threads"], cfg["update_threads"])  # PPO only: validate_config
+    if split is not None:
+        callbacks.append(split)
     try:
         with stop.installed():
             if remaining > 0:
