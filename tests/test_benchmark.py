@@ -178,3 +178,9 @@ def test_a_job_with_a_cpu_budget_keeps_its_gradient_updates_within_it(tmp_path, 
         with pytest.raises(Chosen):
             benchmark.run_job(job, str(tmp_path / str(threads)), cfg["episodes"], cfg["num_envs"], threads)
         assert seen[-1]["update_threads"] == expected and seen[-1]["num_threads"] == threads
+    # A value of the wrong type is refused by the config's validation, named, not converted.
+    for bad in ("2", True, 2.0):
+        (tmp_path / "bad.json").write_text(json.dumps(recipe | {"update_threads": bad}))
+        with pytest.raises(ConfigError, match="update_threads"):
+            benchmark.run_job(dataclasses.replace(job, train_config=str(tmp_path / "bad.json")), str(tmp_path / "bad"),
+                              cfg["episodes"], cfg["num_envs"], 1)

@@ -271,7 +271,9 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
     raw["seed"] = job.seed
     raw["total_timesteps"] = job.timesteps
     raw["num_threads"] = num_threads
-    if num_threads > 0 and int(raw.get("update_threads", 0)) > num_threads:
+    updates = raw.get("update_threads", 0)
+    # (A value that is not an integer is left for validate_config to refuse, naming it.)
+    if num_threads > 0 and type(updates) is int and updates > num_threads:
         # A job with a CPU budget (Ray's cpus_per_job) keeps its gradient updates within it.
         raw["update_threads"] = num_threads
     cfg = training.validate_config(raw)
