@@ -129,6 +129,29 @@ pub struct TetherModel {
     ws: Workspace,
 }
 
+/// The work space of [`TetherModel::accelerations_four`]: what the lockstep sweeps leave per
+/// segment for four chains. Sized on first use (per number of segments); one per thread that
+/// steps models four at a time.
+#[derive(Debug, Clone)]
+pub struct LockstepWork {
+    #[cfg(target_arch = "x86_64")]
+    lanes: recursive::lockstep::Work4,
+    /// The chain the kinematics and loads of each model run in (sized on first use).
+    #[cfg(target_arch = "x86_64")]
+    chain: ChainState,
+}
+
+impl Default for LockstepWork {
+    fn default() -> Self {
+        LockstepWork {
+            #[cfg(target_arch = "x86_64")]
+            lanes: Default::default(),
+            #[cfg(target_arch = "x86_64")]
+            chain: ChainState::new(0),
+        }
+    }
+}
+
 #[derive(Debug, Clone)]
 struct Workspace {
     /// Kinematics and loads of every segment.
@@ -271,6 +294,18 @@ impl TetherModel {
         }
     }
 
+    /// The constants of the lumped chain the recursion needs.
+    fn chain_constants(&self) -> ChainConstants {
+        ChainConstants {
+            l: self.l,
+            m: self.m,
+            rod_inertia: self.rod_inertia,
+            tip_mass: self.tip_mass,
+            k: self.k,
+            c_s: self.c_s,
+        }
+    }
+
     /// Kinematics and loads of every segment and the tip ([`ChainState`]).
     ///
     /// Errors at the coordinate singularity or at a completely folded joint.
@@ -283,16 +318,8 @@ impl TetherModel {
         surroundings: &S,
     ) -> Result<S::TipReport> {
         let constants = self.load_constants();
-        let (distributed, n) = (self.distributed, self.n);
-        let chain = &mut self.ws.chain;
-        chain.kinematics::<M>(time, self.l, q, qd)?;
-        if distributed {
-            chain.stretch_centres(self.l, |k| {
-                let i = stretch_index(n, k);
-                (q[i], qd[i])
-            });
-        }
-        chain.loads::<M, S>(time, &constants, surroundings)
+        let distributed = self.distributed;
+        prepare_in::<M, S>(&constants, distributed, &mut self.ws.chain, time, q, qd, surroundings)
     }
 
     /// Walks the chain with the state's positions and velocities: calls `visit(e, e_dot, centre,
@@ -567,14 +594,7 @@ impl TetherModel {
             distributed::solve(time, &c, &ws.chain, q, qd, &mut ws.axial, qdd, tensions)?;
             return Ok(report);
         }
-        let constants = ChainConstants {
-            l: self.l,
-            m: self.m,
-            rod_inertia: self.rod_inertia,
-            tip_mass: self.tip_mass,
-            k: self.k,
-            c_s: self.c_s,
-        };
+        let constants = self.chain_constants();
         let report = self.prepare::<M, S>(time, q, qd, surroundings)?;
         let ws = &mut self.ws;
         self.axial_mass = recursive::solve::<M>(
@@ -588,6 +608,119 @@ impl TetherModel {
             tensions,
         )?;
         Ok(report)
+    }
+
+    /// Whether four models can have their right-hand sides evaluated in lockstep
+    /// ([`TetherModel::accelerations_four`] runs them four lanes wide): the processor has AVX2
+    /// and FMA, and all four use the recursive solver on the lumped elasticity with the same
+    /// number of segments. Their other constants may differ.
+    pub fn lockstep_eligible(models: [&TetherModel; 4]) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        {
+            let n = models[0].n;
+            crate::arith::has_avx2_fma()
+                && models
+                    .iter()
+                    .all(|m| m.n == n && !m.distributed && m.solver == Solver::Recursive)
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            let _ = models;
+            false
+        }
+    }
+
+    /// [`TetherModel::accelerations`] of four models at once: lane j is model j at
+    /// `(time[j], q[j], qd[j])` in `surroundings[j]`, bit for bit what `accelerations` gives for
+    /// it alone. Where [`TetherModel::lockstep_eligible`] holds, the kinematics and loads run per
+    /// model and the recursion's sweeps run for the four together, one per AVX2 lane
+    /// ([`crate::recursive`]'s `lockstep`), at about the cost of one; otherwise one after another.
+    /// A model's error leaves the other lanes' results unchanged. Allocates nothing once `work`
+    /// has been used at this number of segments.
+    #[allow(clippy::too_many_arguments)]
+    pub fn accelerations_four<S: Surroundings + ?Sized>(
+        models: [&mut TetherModel; 4],
+        time: [f64; 4],
+        q: [&[f64]; 4],
+        qd: [&[f64]; 4],
+        surroundings: [&S; 4],
+        qdd: [&mut [f64]; 4],
+        work: &mut LockstepWork,
+    ) -> [Result<S::TipReport>; 4] {
+        #[cfg(target_arch = "x86_64")]
+        if TetherModel::lockstep_eligible([&*models[0], &*models[1], &*models[2], &*models[3]])
+            && (0..4).all(|j| {
+                let dim = models[j].dofs();
+                q[j].len() == dim && qd[j].len() == dim && qdd[j].len() == dim
+            })
+        {
+            // SAFETY: eligibility includes the processor's AVX2 and FMA.
+            return unsafe {
+                TetherModel::accelerations_four_avx2(models, time, q, qd, surroundings, qdd, work)
+            };
+        }
+        let _ = work;
+        let mut qdd = qdd.into_iter();
+        let mut models = models.into_iter();
+        std::array::from_fn(|j| {
+            let (model, out) = (models.next().unwrap(), qdd.next().unwrap());
+            model.accelerations(time[j], q[j], qd[j], surroundings[j], out)
+        })
+    }
+
+
+    /// [`TetherModel::accelerations_four`] for eligible models with inputs of the right sizes.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn accelerations_four_avx2<S: Surroundings + ?Sized>(
+        models: [&mut TetherModel; 4],
+        time: [f64; 4],
+        q: [&[f64]; 4],
+        qd: [&[f64]; 4],
+        surroundings: [&S; 4],
+        qdd: [&mut [f64]; 4],
+        work: &mut LockstepWork,
+    ) -> [Result<S::TipReport>; 4] {
+        let mut models = models;
+        let n = models[0].n;
+        work.lanes.ensure(n);
+        if work.chain.segments() != n {
+            work.chain = ChainState::new(n);
+        }
+        // Kinematics and loads per model, each copied into its lane at once. A model whose
+        // kinematics fail still has a chain of the right size: its lane runs on whatever it
+        // holds and its result is dropped. The passes run in the one scratch chain, which stays
+        // in the cache (four chains and the lanes do not fit in the first level), except for a
+        // model whose own chain holds the kinematics of its state (a walk left them there).
+        let mut reports: [Option<Result<S::TipReport>>; 4] = Default::default();
+        for (j, model) in models.iter_mut().enumerate() {
+            let constants = model.load_constants();
+            let chain = if model.ws.chain.holds_kinematics_of::<crate::arith::Fused>(q[j], qd[j]) {
+                &mut model.ws.chain
+            } else {
+                &mut work.chain
+            };
+            reports[j] = Some(prepare_fused(&constants, chain, time[j], q[j], qd[j], surroundings[j]));
+            recursive::lockstep::load_lane(j, chain, &mut work.lanes);
+        }
+        let constants: [ChainConstants; 4] = std::array::from_fn(|j| models[j].chain_constants());
+        let solved = recursive::lockstep::solve4(
+            time,
+            std::array::from_fn(|j| &constants[j]),
+            n,
+            std::array::from_fn(|j| q[j][0]),
+            std::array::from_fn(|j| qd[j][0]),
+            &mut work.lanes,
+            qdd,
+        );
+        let mut solved = solved.into_iter();
+        std::array::from_fn(|j| {
+            let axial_mass = solved.next().unwrap();
+            let report = reports[j].take().unwrap()?;
+            models[j].axial_mass = axial_mass?;
+            Ok(report)
+        })
     }
 
     /// The mass matrix M(q) (symmetric, dim x dim). Allocates; for analysis and tests.
@@ -887,6 +1020,59 @@ fn dense_axial_mass(l: &[f64], dim: usize, unit: &mut Vec<f64>) -> f64 {
     1.0 / sum
 }
 
+/// [`TetherModel::prepare`] into a given chain: kinematics and loads of every segment and the tip.
+#[inline(always)]
+fn prepare_in<M: Madd, S: Surroundings + ?Sized>(
+    constants: &LoadConstants,
+    distributed: bool,
+    chain: &mut ChainState,
+    time: f64,
+    q: &[f64],
+    qd: &[f64],
+    surroundings: &S,
+) -> Result<S::TipReport> {
+    let (n, l) = (chain.segments(), constants.l);
+    chain.kinematics::<M>(time, l, q, qd)?;
+    if distributed {
+        chain.stretch_centres(l, |k| {
+            let i = stretch_index(n, k);
+            (q[i], qd[i])
+        });
+    }
+    chain.loads::<M, S>(time, constants, surroundings)
+}
+
+/// [`prepare_in`] with fused multiply-adds, compiled for AVX2 and FMA as a function of its
+/// own: inlined into the lockstep loop, its passes were not vectorized as they are in the single
+/// solve (a plain function boundary, since the compiler inlines a `target_feature` function into
+/// a caller with the same features whatever it is told).
+///
+/// # Safety
+/// The processor must have AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[inline(never)]
+unsafe fn prepare_fused<S: Surroundings + ?Sized>(
+    constants: &LoadConstants,
+    chain: &mut ChainState,
+    time: f64,
+    q: &[f64],
+    qd: &[f64],
+    surroundings: &S,
+) -> Result<S::TipReport> {
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn fused<S: Surroundings + ?Sized>(
+        constants: &LoadConstants,
+        chain: &mut ChainState,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        surroundings: &S,
+    ) -> Result<S::TipReport> {
+        prepare_in::<crate::arith::Fused, S>(constants, false, chain, time, q, qd, surroundings)
+    }
+    fused(constants, chain, time, q, qd, surroundings)
+}
+
 /// Solves L L^T x = b in place, with L from [`cholesky_in_place`].
 fn cholesky_solve(l: &[f64], dim: usize, b: &mut [f64]) {
     for i in 0..dim {
@@ -909,6 +1095,40 @@ fn cholesky_solve(l: &[f64], dim: usize, b: &mut [f64]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// SplitMix64 as uniform numbers in `[lo, hi)`, for reproducible states.
+    fn splitmix(mut seed: u64) -> impl FnMut(f64, f64) -> f64 {
+        move |lo: f64, hi: f64| {
+            seed = seed.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = seed;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            lo + (hi - lo) * ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    /// A random bent, spinning, out-of-plane state of `n` segments; in every third case a third
+    /// of the joints folded close to back on themselves.
+    fn random_state(
+        n: usize,
+        case: usize,
+        uniform: &mut impl FnMut(f64, f64) -> f64,
+    ) -> (Vec<f64>, Vec<f64>) {
+        let mut q = vec![uniform(-0.05, 0.2)];
+        let mut qd = vec![uniform(-2.0, 2.0)];
+        let (mut phi, mut psi) = (uniform(0.0, 1.5), uniform(-0.5, 0.5));
+        for k in 0..n {
+            if k > 0 && case % 3 == 0 && k % 3 == 0 {
+                phi += std::f64::consts::PI - uniform(0.02, 0.2);
+            } else {
+                phi += uniform(-0.6, 0.6);
+                psi = (psi + uniform(-0.4, 0.4)).clamp(-1.2, 1.2);
+            }
+            q.extend([phi, psi]);
+            qd.extend([uniform(-1.5, 1.5), uniform(-1.5, 1.5)]);
+        }
+        (q, qd)
+    }
 
     /// A smoothly bent, moving state of `n` segments (q, q'; attachment layout).
     fn wavy_state(n: usize) -> (Vec<f64>, Vec<f64>) {
@@ -1029,15 +1249,7 @@ mod tests {
             eprintln!("no AVX2 and FMA: the vectorized sweep is not used on this processor");
             return;
         }
-        // SplitMix64 for reproducible states.
-        let mut seed = 0x5EED_u64;
-        let mut uniform = move |lo: f64, hi: f64| {
-            seed = seed.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = seed;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            lo + (hi - lo) * ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut uniform = splitmix(0x5EED);
         let mut compared = 0;
         for n in [1usize, 2, 3, 7, 30, 61] {
             let cfg = TetherConfig {
@@ -1054,20 +1266,7 @@ mod tests {
             let mut model = TetherModel::new(&cfg).unwrap();
             let dim = cfg.dofs();
             for case in 0..40 {
-                let mut q = vec![uniform(-0.05, 0.2)];
-                let mut qd = vec![uniform(-2.0, 2.0)];
-                let (mut phi, mut psi) = (uniform(0.0, 1.5), uniform(-0.5, 0.5));
-                for k in 0..n {
-                    // A third of the joints folded close to back on themselves.
-                    if k > 0 && case % 3 == 0 && k % 3 == 0 {
-                        phi += std::f64::consts::PI - uniform(0.02, 0.2);
-                    } else {
-                        phi += uniform(-0.6, 0.6);
-                        psi = (psi + uniform(-0.4, 0.4)).clamp(-1.2, 1.2);
-                    }
-                    q.extend([phi, psi]);
-                    qd.extend([uniform(-1.5, 1.5), uniform(-1.5, 1.5)]);
-                }
+                let (q, qd) = random_state(n, case, &mut uniform);
                 let (mut lanes, mut scalar) = (vec![0.0; dim], vec![0.0; dim]);
                 let (mut lane_t, mut scalar_t) = (vec![0.0; n + 1], vec![0.0; n + 1]);
                 let solved = model.solve_recursive_body::<Fused, _>(
@@ -1108,6 +1307,114 @@ mod tests {
             }
         }
         assert!(compared >= 200, "only {compared} states compared");
+    }
+
+    /// Four models in lockstep (`accelerations_four`, the sweeps four lanes wide) give each
+    /// model's own `accelerations` bit for bit: the accelerations, the axial mass and the tip
+    /// report, for four different configurations (tip mass, length, stiffness) in four different
+    /// flows, on random bent, folded and spinning states; a lane whose state fails (a NaN
+    /// angle, a folded chain) returns the error its single solve returns and leaves the other
+    /// lanes' results as they are alone.
+    #[test]
+    fn lockstep_solve_is_bitwise_four_single_solves() {
+        use crate::reference;
+        use crate::surroundings::UniformFlow;
+        let mut uniform = splitmix(0x10C5);
+        let mut work = LockstepWork::default();
+        let (mut compared, mut failures) = (0, 0);
+        for n in [1usize, 2, 5, 30, 61] {
+            let lanes: Vec<(TetherConfig, UniformFlow)> = (0..4)
+                .map(|j| {
+                    let cfg = TetherConfig {
+                        segments: n,
+                        length: 250.0 - 20.0 * j as f64,
+                        tip_mass: 50.0 + 7.0 * j as f64,
+                        axial_stiffness: TetherConfig::table3().axial_stiffness * (1.0 + 0.1 * j as f64),
+                        ..TetherConfig::table3()
+                    };
+                    let (cfg, towed) =
+                        reference::towed(&cfg, reference::StandInBody::accd()).unwrap();
+                    let flow = UniformFlow {
+                        velocity: towed.velocity + Vector3::new(0.0, 7.0 - 3.0 * j as f64, -3.0),
+                        tip_force: Vector3::new(40.0, -25.0 + 10.0 * j as f64, 310.0),
+                        frame_acceleration: Vector3::new(0.4, -0.2, 0.1 * j as f64),
+                        ..towed
+                    };
+                    (cfg, flow)
+                })
+                .collect();
+            let mut models: Vec<TetherModel> =
+                lanes.iter().map(|(c, _)| TetherModel::new(c).unwrap()).collect();
+            let mut alone: Vec<TetherModel> = models.clone();
+            assert_eq!(
+                TetherModel::lockstep_eligible(std::array::from_fn(|j| &models[j])),
+                cfg!(target_arch = "x86_64") && {
+                    #[cfg(target_arch = "x86_64")]
+                    {
+                        crate::arith::has_avx2_fma()
+                    }
+                    #[cfg(not(target_arch = "x86_64"))]
+                    {
+                        false
+                    }
+                }
+            );
+            let dim = 2 * n + 1;
+            for case in 0..30 {
+                let mut states: Vec<(Vec<f64>, Vec<f64>)> =
+                    (0..4).map(|j| random_state(n, case + j, &mut uniform)).collect();
+                // Every fifth case one lane's state is broken.
+                if case % 5 == 4 {
+                    states[case % 4].0[dim - 1] = f64::NAN;
+                }
+                let times: [f64; 4] = std::array::from_fn(|j| 0.5 + j as f64);
+                let mut four = vec![vec![0.0; dim]; 4];
+                let results = {
+                    let [a, b, c, d] = &mut four[..] else { unreachable!() };
+                    let [m0, m1, m2, m3] = &mut models[..] else { unreachable!() };
+                    TetherModel::accelerations_four(
+                        [m0, m1, m2, m3],
+                        times,
+                        std::array::from_fn(|j| &states[j].0[..]),
+                        std::array::from_fn(|j| &states[j].1[..]),
+                        std::array::from_fn(|j| &lanes[j].1),
+                        [a, b, c, d],
+                        &mut work,
+                    )
+                };
+                for (j, result) in results.into_iter().enumerate() {
+                    let mut single = vec![0.0; dim];
+                    let reference = alone[j].accelerations(
+                        times[j],
+                        &states[j].0,
+                        &states[j].1,
+                        &lanes[j].1,
+                        &mut single,
+                    );
+                    let what = format!("n = {n}, case {case}, lane {j}");
+                    match (&result, &reference) {
+                        (Ok(a), Ok(b)) => {
+                            assert_eq!(format!("{a:?}"), format!("{b:?}"), "{what}");
+                            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                            assert_eq!(bits(&four[j]), bits(&single), "{what}");
+                            compared += 1;
+                        }
+                        (Err(a), Err(b)) => {
+                            assert_eq!(a.to_string(), b.to_string(), "{what}");
+                            failures += 1;
+                        }
+                        _ => panic!("{what}: lockstep {result:?}, alone {reference:?}"),
+                    }
+                    assert_eq!(
+                        models[j].axial_mass().to_bits(),
+                        alone[j].axial_mass().to_bits(),
+                        "{what}"
+                    );
+                }
+            }
+        }
+        assert!(compared >= 400, "only {compared} lanes compared");
+        assert!(failures >= 25, "only {failures} failing lanes");
     }
 
     /// Both builds of the recursive solver (plain multiply-adds, used where the processor has no

@@ -42,7 +42,7 @@ mod trig;
 pub use atmosphere::Atmosphere;
 pub use config::{DragVelocity, Elasticity, TetherConfig, STANDARD_GRAVITY};
 pub use direction::DirectionJet;
-pub use dynamics::{Energy, Solver, TetherModel};
+pub use dynamics::{Energy, LockstepWork, Solver, TetherModel};
 pub use error::{Result, TetherError};
 pub use integrator::{InSurroundings, Rk4, System};
 pub use material::Material;

@@ -98,6 +98,8 @@ use crate::error::{Result, TetherError};
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
+#[cfg(target_arch = "x86_64")]
+pub(crate) mod lockstep;
 
 type V3 = Vector3<f64>;
 
