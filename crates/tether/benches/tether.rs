@@ -11,9 +11,7 @@
 use std::hint::black_box;
 
 use accd_tether::config::{StepLoad, RK4_STABILITY_LIMIT};
-use accd_tether::{
-    reference, Elasticity, LockstepWork, Solver, Tether, TetherConfig, TetherModel,
-};
+use accd_tether::{reference, Elasticity, LockstepWork, Solver, Tether, TetherConfig, TetherModel};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 
 /// The towed reference case with `n` segments and the given solver, advanced 20 s so that the
@@ -90,8 +88,12 @@ fn lockstep(
     let mut work = LockstepWork::default();
     group.bench_with_input(BenchmarkId::new("rhs_four", n), &n, |b, _| {
         b.iter(|| {
-            let [m0, m1, m2, m3] = &mut models[..] else { unreachable!() };
-            let [a0, a1, a2, a3] = &mut qdd[..] else { unreachable!() };
+            let [m0, m1, m2, m3] = &mut models[..] else {
+                unreachable!()
+            };
+            let [a0, a1, a2, a3] = &mut qdd[..] else {
+                unreachable!()
+            };
             let results = TetherModel::accelerations_four(
                 [m0, m1, m2, m3],
                 std::array::from_fn(|j| states[j].time),
@@ -105,6 +107,17 @@ fn lockstep(
                 r.unwrap();
             }
             black_box(&qdd);
+        })
+    });
+    let flows = [flow; 4];
+    group.bench_with_input(BenchmarkId::new("rk4_step_four", n), &n, |b, _| {
+        b.iter(|| {
+            let [t0, t1, t2, t3] = &mut four[..] else {
+                unreachable!()
+            };
+            for r in Tether::step_four([t0, t1, t2, t3], black_box(flows), &mut work) {
+                r.unwrap();
+            }
         })
     });
 }

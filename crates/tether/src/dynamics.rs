@@ -319,7 +319,15 @@ impl TetherModel {
     ) -> Result<S::TipReport> {
         let constants = self.load_constants();
         let distributed = self.distributed;
-        prepare_in::<M, S>(&constants, distributed, &mut self.ws.chain, time, q, qd, surroundings)
+        prepare_in::<M, S>(
+            &constants,
+            distributed,
+            &mut self.ws.chain,
+            time,
+            q,
+            qd,
+            surroundings,
+        )
     }
 
     /// Walks the chain with the state's positions and velocities: calls `visit(e, e_dot, centre,
@@ -668,7 +676,6 @@ impl TetherModel {
         })
     }
 
-
     /// [`TetherModel::accelerations_four`] for eligible models with inputs of the right sizes.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
@@ -696,12 +703,23 @@ impl TetherModel {
         let mut reports: [Option<Result<S::TipReport>>; 4] = Default::default();
         for (j, model) in models.iter_mut().enumerate() {
             let constants = model.load_constants();
-            let chain = if model.ws.chain.holds_kinematics_of::<crate::arith::Fused>(q[j], qd[j]) {
+            let chain = if model
+                .ws
+                .chain
+                .holds_kinematics_of::<crate::arith::Fused>(q[j], qd[j])
+            {
                 &mut model.ws.chain
             } else {
                 &mut work.chain
             };
-            reports[j] = Some(prepare_fused(&constants, chain, time[j], q[j], qd[j], surroundings[j]));
+            reports[j] = Some(prepare_fused(
+                &constants,
+                chain,
+                time[j],
+                q[j],
+                qd[j],
+                surroundings[j],
+            ));
             recursive::lockstep::load_lane(j, chain, &mut work.lanes);
         }
         let constants: [ChainConstants; 4] = std::array::from_fn(|j| models[j].chain_constants());
@@ -1329,7 +1347,8 @@ mod tests {
                         segments: n,
                         length: 250.0 - 20.0 * j as f64,
                         tip_mass: 50.0 + 7.0 * j as f64,
-                        axial_stiffness: TetherConfig::table3().axial_stiffness * (1.0 + 0.1 * j as f64),
+                        axial_stiffness: TetherConfig::table3().axial_stiffness
+                            * (1.0 + 0.1 * j as f64),
                         ..TetherConfig::table3()
                     };
                     let (cfg, towed) =
@@ -1343,8 +1362,10 @@ mod tests {
                     (cfg, flow)
                 })
                 .collect();
-            let mut models: Vec<TetherModel> =
-                lanes.iter().map(|(c, _)| TetherModel::new(c).unwrap()).collect();
+            let mut models: Vec<TetherModel> = lanes
+                .iter()
+                .map(|(c, _)| TetherModel::new(c).unwrap())
+                .collect();
             let mut alone: Vec<TetherModel> = models.clone();
             assert_eq!(
                 TetherModel::lockstep_eligible(std::array::from_fn(|j| &models[j])),
@@ -1361,8 +1382,9 @@ mod tests {
             );
             let dim = 2 * n + 1;
             for case in 0..30 {
-                let mut states: Vec<(Vec<f64>, Vec<f64>)> =
-                    (0..4).map(|j| random_state(n, case + j, &mut uniform)).collect();
+                let mut states: Vec<(Vec<f64>, Vec<f64>)> = (0..4)
+                    .map(|j| random_state(n, case + j, &mut uniform))
+                    .collect();
                 // Every fifth case one lane's state is broken.
                 if case % 5 == 4 {
                     states[case % 4].0[dim - 1] = f64::NAN;
@@ -1370,8 +1392,12 @@ mod tests {
                 let times: [f64; 4] = std::array::from_fn(|j| 0.5 + j as f64);
                 let mut four = vec![vec![0.0; dim]; 4];
                 let results = {
-                    let [a, b, c, d] = &mut four[..] else { unreachable!() };
-                    let [m0, m1, m2, m3] = &mut models[..] else { unreachable!() };
+                    let [a, b, c, d] = &mut four[..] else {
+                        unreachable!()
+                    };
+                    let [m0, m1, m2, m3] = &mut models[..] else {
+                        unreachable!()
+                    };
                     TetherModel::accelerations_four(
                         [m0, m1, m2, m3],
                         times,
@@ -1395,7 +1421,8 @@ mod tests {
                     match (&result, &reference) {
                         (Ok(a), Ok(b)) => {
                             assert_eq!(format!("{a:?}"), format!("{b:?}"), "{what}");
-                            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                            let bits =
+                                |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                             assert_eq!(bits(&four[j]), bits(&single), "{what}");
                             compared += 1;
                         }

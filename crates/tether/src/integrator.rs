@@ -11,7 +11,7 @@
 //! substep j starts at `t + j dt / k`. The stepper never keeps time: callers hold the clock
 //! (`origin + steps dt`, free of the drift of summing dt). Stage buffers are allocated once.
 
-use crate::dynamics::TetherModel;
+use crate::dynamics::{LockstepWork, TetherModel};
 use crate::error::{Result, TetherError};
 use crate::surroundings::Surroundings;
 
@@ -49,6 +49,25 @@ pub trait System {
     }
 }
 
+/// A [`System`] of which four can have their derivatives evaluated together, as
+/// [`Rk4::advance_adaptive_four`] steps them: the tether's recursion then runs four AVX2 lanes
+/// wide ([`TetherModel::accelerations_four`]).
+pub trait Lockstep: System {
+    /// [`System::derivatives`] of four systems, lane j for `systems[j]`, each bit for bit what
+    /// it gives alone; a lane's error leaves the others' results unchanged.
+    #[allow(clippy::too_many_arguments)]
+    fn derivatives_four(
+        systems: &mut [&mut Self; 4],
+        time: [f64; 4],
+        q: [&[f64]; 4],
+        qd: [&[f64]; 4],
+        x: [&[f64]; 4],
+        qdd: [&mut [f64]; 4],
+        xd: [&mut [f64]; 4],
+        work: &mut LockstepWork,
+    ) -> [Result<()>; 4];
+}
+
 /// The tether model in its surroundings, as a [`System`] without first-order states.
 pub struct InSurroundings<'a, S: Surroundings + ?Sized> {
     /// The equations of motion.
@@ -74,6 +93,30 @@ impl<S: Surroundings + ?Sized> System for InSurroundings<'_, S> {
         self.model
             .accelerations(time, q, qd, self.surroundings, qdd)
             .map(|_| ())
+    }
+}
+
+impl<S: Surroundings + ?Sized> Lockstep for InSurroundings<'_, S> {
+    fn derivatives_four(
+        systems: &mut [&mut Self; 4],
+        time: [f64; 4],
+        q: [&[f64]; 4],
+        qd: [&[f64]; 4],
+        _x: [&[f64]; 4],
+        qdd: [&mut [f64]; 4],
+        _xd: [&mut [f64]; 4],
+        work: &mut LockstepWork,
+    ) -> [Result<()>; 4] {
+        let [a, b, c, d] = systems;
+        let surroundings = [
+            a.surroundings,
+            b.surroundings,
+            c.surroundings,
+            d.surroundings,
+        ];
+        let models = [&mut *a.model, &mut *b.model, &mut *c.model, &mut *d.model];
+        TetherModel::accelerations_four(models, time, q, qd, surroundings, qdd, work)
+            .map(|r| r.map(|_| ()))
     }
 }
 
@@ -248,6 +291,23 @@ impl Rk4 {
         Y: System + ?Sized,
         F: FnOnce(&Y, &[f64], &[f64]) -> Result<usize>,
     {
+        self.check_sizes(system, q, qd, x)?;
+        if evaluate_first {
+            system.derivatives(time, q, qd, x, &mut self.a_k[0], &mut self.xd_k[0])?;
+        }
+        let substeps = substeps(system, q, qd)?.max(1);
+        self.run_substeps(system, time, dt, substeps, q, qd, x, evaluate_first)?;
+        Ok(substeps)
+    }
+
+    /// The sizes [`Rk4::advance`] checks: the state's and these buffers' against the system's.
+    fn check_sizes<Y: System + ?Sized>(
+        &self,
+        system: &Y,
+        q: &[f64],
+        qd: &[f64],
+        x: &[f64],
+    ) -> Result<()> {
         let (dim, first) = (system.dofs(), system.first_order_states());
         let sizes = [
             ("q", q.len(), dim),
@@ -256,27 +316,34 @@ impl Rk4 {
             ("integrator buffers", self.q_stage.len(), dim),
             ("integrator first-order buffers", self.x_stage.len(), first),
         ];
-        if let Some(&(what, found, expected)) = sizes.iter().find(|(_, f, e)| f != e) {
-            return Err(TetherError::WrongSize {
+        match sizes.iter().find(|(_, f, e)| f != e) {
+            Some(&(what, found, expected)) => Err(TetherError::WrongSize {
                 what,
                 expected,
                 found,
-            });
+            }),
+            None => Ok(()),
         }
-        if evaluate_first {
-            system.derivatives(time, q, qd, x, &mut self.a_k[0], &mut self.xd_k[0])?;
-        }
-        let substeps = substeps(system, q, qd)?.max(1);
+    }
+
+    /// `substeps` RK4 steps of `dt / substeps` from `(q, qd, x)` at `time`, the result written
+    /// back into them; with `evaluated` the first stage's derivatives are already in place.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn run_substeps<Y: System + ?Sized>(
+        &mut self,
+        system: &mut Y,
+        time: f64,
+        dt: f64,
+        substeps: usize,
+        q: &mut Vec<f64>,
+        qd: &mut Vec<f64>,
+        x: &mut [f64],
+        evaluated: bool,
+    ) -> Result<()> {
         let h = dt / substeps as f64;
-        let [first_slot, second_slot] = &mut self.slots;
-        let mut stages = Stages {
-            q_stage: &mut self.q_stage,
-            qd_k: &mut self.qd_k,
-            a_k: &mut self.a_k,
-            x_stage: &mut self.x_stage,
-            xd_k: &mut self.xd_k,
-        };
-        stages.step(system, time, h, q, qd, x, first_slot, evaluate_first)?;
+        let (mut stages, first_slot, second_slot) = self.parts();
+        stages.step(system, time, h, q, qd, x, first_slot, evaluated)?;
         let (mut done, mut spare) = (first_slot, second_slot);
         for j in 1..substeps {
             let t = time + j as f64 * h;
@@ -287,8 +354,180 @@ impl Rk4 {
         std::mem::swap(q, &mut done.q);
         std::mem::swap(qd, &mut done.qd);
         x.copy_from_slice(&done.x);
-        Ok(substeps)
+        Ok(())
     }
+
+    /// The stage buffers and the two end-of-substep slots, borrowed apart.
+    fn parts(&mut self) -> (Stages<'_>, &mut Slot, &mut Slot) {
+        let [first_slot, second_slot] = &mut self.slots;
+        let stages = Stages {
+            q_stage: &mut self.q_stage,
+            qd_k: &mut self.qd_k,
+            a_k: &mut self.a_k,
+            x_stage: &mut self.x_stage,
+            xd_k: &mut self.xd_k,
+        };
+        (stages, first_slot, second_slot)
+    }
+
+    /// [`Rk4::advance_adaptive`] for four systems at once, lane j with `rk4[j]` for
+    /// `systems[j]`: each stage's derivatives of the four are evaluated together
+    /// ([`Lockstep::derivatives_four`]), everything else lane by lane with the very operations
+    /// of the single step, so that every lane's result, error included, is bit for bit what
+    /// `advance_adaptive` gives it alone. `substeps(j, system, q, qd)` chooses lane j's
+    /// substeps after its first stage; lanes that choose differently, or any state or buffer of
+    /// the wrong size, finish one at a time. A failed lane's state is unchanged, as alone.
+    /// Allocates nothing once `work` is sized.
+    #[allow(clippy::too_many_arguments)]
+    pub fn advance_adaptive_four<Y, F>(
+        rk4: [&mut Rk4; 4],
+        systems: &mut [&mut Y; 4],
+        time: [f64; 4],
+        dt: [f64; 4],
+        q: [&mut Vec<f64>; 4],
+        qd: [&mut Vec<f64>; 4],
+        x: [&mut [f64]; 4],
+        work: &mut LockstepWork,
+        mut substeps: F,
+    ) -> [Result<usize>; 4]
+    where
+        Y: Lockstep,
+        F: FnMut(usize, &Y, &[f64], &[f64]) -> Result<usize>,
+    {
+        let [r0, r1, r2, r3] = rk4;
+        let [q0, q1, q2, q3] = q;
+        let [qd0, qd1, qd2, qd3] = qd;
+        let [x0, x1, x2, x3] = x;
+        let sizes: [Result<()>; 4] = std::array::from_fn(|j| {
+            let rk4 = [&*r0, &*r1, &*r2, &*r3][j];
+            let (q, qd, x) = (
+                [&*q0, &*q1, &*q2, &*q3][j],
+                [&*qd0, &*qd1, &*qd2, &*qd3][j],
+                [&*x0, &*x1, &*x2, &*x3][j],
+            );
+            rk4.check_sizes(&*systems[j], q, qd, x)
+        });
+        let [s0, s1, s2, s3] = sizes;
+        let mut lanes = [
+            LaneRun::new(0, r0, s0, q0, qd0, x0),
+            LaneRun::new(1, r1, s1, q1, qd1, x1),
+            LaneRun::new(2, r2, s2, q2, qd2, x2),
+            LaneRun::new(3, r3, s3, q3, qd3, x3),
+        ];
+        if (0..4).any(|j| lanes[j].sizes.is_err()) {
+            return std::array::from_fn(|j| {
+                let lane = &mut lanes[j];
+                let (rk4, q, qd, x) = (&mut *lane.rk4, &mut *lane.q, &mut *lane.qd, &mut *lane.x);
+                rk4.advance_adaptive(&mut *systems[j], time[j], dt[j], q, qd, x, |y, q, qd| {
+                    substeps(j, y, q, qd)
+                })
+            });
+        }
+        let mut failed: [Option<TetherError>; 4] = Default::default();
+        let evaluate = |lanes: &mut [LaneRun<'_>; 4],
+                        systems: &mut [&mut Y; 4],
+                        work: &mut LockstepWork,
+                        stage: usize,
+                        sub: usize,
+                        t: [f64; 4],
+                        h: [f64; 4],
+                        failed: &mut [Option<TetherError>; 4]| {
+            let [l0, l1, l2, l3] = lanes;
+            let [(i0, a0, xd0), (i1, a1, xd1), (i2, a2, xd2), (i3, a3, xd3)] = [
+                l0.args(stage, sub),
+                l1.args(stage, sub),
+                l2.args(stage, sub),
+                l3.args(stage, sub),
+            ];
+            let inputs = [i0, i1, i2, i3];
+            let time = std::array::from_fn(|j| Stages::stage_time(t[j], stage, h[j]));
+            let results = Y::derivatives_four(
+                systems,
+                time,
+                inputs.map(|i| i[0]),
+                inputs.map(|i| i[1]),
+                inputs.map(|i| i[2]),
+                [a0, a1, a2, a3],
+                [xd0, xd1, xd2, xd3],
+                work,
+            );
+            for (j, r) in results.into_iter().enumerate() {
+                if let (Err(e), None) = (r, &failed[j]) {
+                    failed[j] = Some(e);
+                }
+            }
+        };
+        // The first stage of every lane, then the substeps each chooses.
+        evaluate(&mut lanes, systems, work, 0, 0, time, dt, &mut failed);
+        let mut chosen = [1usize; 4];
+        for j in 0..4 {
+            if failed[j].is_none() {
+                let lane = &lanes[j];
+                match substeps(j, &*systems[j], lane.q, lane.qd) {
+                    Ok(k) => chosen[j] = k.max(1),
+                    Err(e) => failed[j] = Some(e),
+                }
+            }
+        }
+        let alive = |failed: &[Option<TetherError>; 4]| -> [bool; 4] {
+            std::array::from_fn(|j| failed[j].is_none())
+        };
+        let live = alive(&failed);
+        let k = (0..4).find(|&j| live[j]).map_or(1, |j| chosen[j]);
+        if (0..4).any(|j| live[j] && chosen[j] != k) {
+            // Lanes that disagree on the substeps go on one at a time from their first stage.
+            return std::array::from_fn(|j| match failed[j].take() {
+                Some(e) => Err(e),
+                None => {
+                    let lane = &mut lanes[j];
+                    let (rk4, q, qd, x) =
+                        (&mut *lane.rk4, &mut *lane.q, &mut *lane.qd, &mut *lane.x);
+                    rk4.run_substeps(&mut *systems[j], time[j], dt[j], chosen[j], q, qd, x, true)
+                        .map(|_| chosen[j])
+                }
+            });
+        }
+        let h: [f64; 4] = std::array::from_fn(|j| dt[j] / k as f64);
+        for sub in 0..k {
+            let t: [f64; 4] = std::array::from_fn(|j| time[j] + sub as f64 * h[j]);
+            for stage in 0..4 {
+                if stage > 0 {
+                    for lane in lanes.iter_mut() {
+                        lane.set_input(stage, sub, h[lane.index]);
+                    }
+                }
+                if stage > 0 || sub > 0 {
+                    evaluate(&mut lanes, systems, work, stage, sub, t, h, &mut failed);
+                }
+            }
+            for (j, lane) in lanes.iter_mut().enumerate() {
+                if failed[j].is_none() {
+                    if let Err(e) = lane.finish(&*systems[j], sub, t[j], h[j]) {
+                        failed[j] = Some(e);
+                    }
+                }
+            }
+        }
+        std::array::from_fn(|j| match failed[j].take() {
+            Some(e) => Err(e),
+            None => {
+                lanes[j].take_result();
+                Ok(k)
+            }
+        })
+    }
+}
+
+/// One lane of [`Rk4::advance_adaptive_four`]: its integrator's buffers and its state.
+struct LaneRun<'a> {
+    index: usize,
+    sizes: Result<()>,
+    rk4: &'a mut Rk4,
+    q: &'a mut Vec<f64>,
+    qd: &'a mut Vec<f64>,
+    x: &'a mut [f64],
+    /// The slot that holds the end of the last substep.
+    done: usize,
 }
 
 /// The stage buffers, borrowed apart from the end-of-substep slots.
@@ -301,44 +540,63 @@ struct Stages<'a> {
 }
 
 impl Stages<'_> {
-    /// One RK4 step of length `dt` from `(q0, qd0, x0)` at `t` into `out`; with `evaluated` the
-    /// first stage's derivatives at `(t, q0, qd0, x0)` are already in `a_k[0]`, `xd_k[0]`.
+    /// The time of RK4 stage `stage` (0 to 3) of a step of length `dt` from `t`.
+    #[inline(always)]
+    fn stage_time(t: f64, stage: usize, dt: f64) -> f64 {
+        match stage {
+            0 => t,
+            1 | 2 => t + 0.5 * dt,
+            _ => t + dt,
+        }
+    }
+
+    /// The state of stage `stage` (1 to 3) of a step of length `dt` from `(q0, qd0, x0)`, from
+    /// the previous stage's derivatives: into `q_stage`, `qd_k[stage - 1]`, `x_stage`.
+    #[inline(always)]
+    fn set_input(&mut self, stage: usize, q0: &[f64], qd0: &[f64], x0: &[f64], dt: f64) {
+        let h = if stage == 3 { dt } else { 0.5 * dt };
+        let (q, qd_k, a_k) = (&mut *self.q_stage, &mut *self.qd_k, &*self.a_k);
+        let [k0, k1, k2] = qd_k;
+        match stage {
+            1 => stage_state(q, k0, q0, qd0, qd0, &a_k[0], h),
+            2 => stage_state(q, k1, q0, qd0, k0, &a_k[1], h),
+            _ => stage_state(q, k2, q0, qd0, k1, &a_k[2], h),
+        }
+        stage_first_order(self.x_stage, x0, &self.xd_k[stage - 1], h);
+    }
+
+    /// The inputs `(q, q', x)` of stage `stage` (those of the step's start for stage 0) and
+    /// where its derivatives go.
+    #[inline(always)]
+    #[allow(clippy::type_complexity)]
+    fn args<'s>(
+        &'s mut self,
+        stage: usize,
+        start: [&'s [f64]; 3],
+    ) -> ([&'s [f64]; 3], &'s mut [f64], &'s mut [f64]) {
+        let inputs = if stage == 0 {
+            start
+        } else {
+            [&*self.q_stage, &self.qd_k[stage - 1][..], &*self.x_stage]
+        };
+        (inputs, &mut self.a_k[stage], &mut self.xd_k[stage])
+    }
+
+    /// RK4's combination of the four stages into `out`, its check for divergence and the
+    /// projection of its first-order states.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn step<Y: System + ?Sized>(
+    fn finish<Y: System + ?Sized>(
         &mut self,
-        system: &mut Y,
+        system: &Y,
         t: f64,
         dt: f64,
         q0: &[f64],
         qd0: &[f64],
         x0: &[f64],
         out: &mut Slot,
-        evaluated: bool,
     ) -> Result<()> {
-        let h = 0.5 * dt;
-        let (q, qd_k, a_k) = (&mut *self.q_stage, &mut *self.qd_k, &mut *self.a_k);
-        let (x, xd_k) = (&mut *self.x_stage, &mut *self.xd_k);
-
-        if !evaluated {
-            system.derivatives(t, q0, qd0, x0, &mut a_k[0], &mut xd_k[0])?;
-        }
-        stage_state(q, &mut qd_k[0], q0, qd0, qd0, &a_k[0], h);
-        stage_first_order(x, x0, &xd_k[0], h);
-        system.derivatives(t + h, q, &qd_k[0], x, &mut a_k[1], &mut xd_k[1])?;
-        {
-            let [k0, k1, _] = qd_k;
-            stage_state(q, k1, q0, qd0, k0, &a_k[1], h);
-        }
-        stage_first_order(x, x0, &xd_k[1], h);
-        system.derivatives(t + h, q, &qd_k[1], x, &mut a_k[2], &mut xd_k[2])?;
-        {
-            let [_, k1, k2] = qd_k;
-            stage_state(q, k2, q0, qd0, k1, &a_k[2], dt);
-        }
-        stage_first_order(x, x0, &xd_k[2], dt);
-        system.derivatives(t + dt, q, &qd_k[2], x, &mut a_k[3], &mut xd_k[3])?;
-
+        let (qd_k, a_k, xd_k) = (&*self.qd_k, &*self.a_k, &*self.xd_k);
         let sixth = dt / 6.0;
         combine(&mut out.q, q0, qd0, &qd_k[0], &qd_k[1], &qd_k[2], sixth);
         combine(&mut out.qd, qd0, &a_k[0], &a_k[1], &a_k[2], &a_k[3], sixth);
@@ -360,5 +618,126 @@ impl Stages<'_> {
             });
         }
         system.project(end, &mut out.x)
+    }
+
+    /// One RK4 step of length `dt` from `(q0, qd0, x0)` at `t` into `out`; with `evaluated` the
+    /// first stage's derivatives at `(t, q0, qd0, x0)` are already in `a_k[0]`, `xd_k[0]`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn step<Y: System + ?Sized>(
+        &mut self,
+        system: &mut Y,
+        t: f64,
+        dt: f64,
+        q0: &[f64],
+        qd0: &[f64],
+        x0: &[f64],
+        out: &mut Slot,
+        evaluated: bool,
+    ) -> Result<()> {
+        for stage in 0..4 {
+            if stage > 0 {
+                self.set_input(stage, q0, qd0, x0, dt);
+            }
+            if stage > 0 || !evaluated {
+                let time = Self::stage_time(t, stage, dt);
+                let ([q, qd, x], qdd, xd) = self.args(stage, [q0, qd0, x0]);
+                system.derivatives(time, q, qd, x, qdd, xd)?;
+            }
+        }
+        self.finish(system, t, dt, q0, qd0, x0, out)
+    }
+}
+
+impl<'a> LaneRun<'a> {
+    fn new(
+        index: usize,
+        rk4: &'a mut Rk4,
+        system_sizes: Result<()>,
+        q: &'a mut Vec<f64>,
+        qd: &'a mut Vec<f64>,
+        x: &'a mut [f64],
+    ) -> Self {
+        LaneRun {
+            index,
+            sizes: system_sizes,
+            rk4,
+            q,
+            qd,
+            x,
+            done: 0,
+        }
+    }
+
+    /// The slot substep `sub` writes.
+    fn out_slot(&self, sub: usize) -> usize {
+        if sub == 0 {
+            0
+        } else {
+            1 - self.done
+        }
+    }
+
+    /// The stage buffers, the start of substep `sub` and the slot it writes, borrowed apart.
+    #[allow(clippy::type_complexity)]
+    fn split(&mut self, sub: usize) -> (Stages<'_>, [&[f64]; 3], &mut Slot) {
+        let out = self.out_slot(sub);
+        let (stages, first, second) = self.rk4.parts();
+        let (written, other) = if out == 0 {
+            (first, second)
+        } else {
+            (second, first)
+        };
+        let start: [&[f64]; 3] = if sub == 0 {
+            [&self.q[..], &self.qd[..], &self.x[..]]
+        } else {
+            [&other.q[..], &other.qd[..], &other.x[..]]
+        };
+        (stages, start, written)
+    }
+
+    #[allow(clippy::type_complexity)]
+    fn args(&mut self, stage: usize, sub: usize) -> ([&[f64]; 3], &mut [f64], &mut [f64]) {
+        let (stages, start, _) = self.split(sub);
+        let Stages {
+            q_stage,
+            qd_k,
+            a_k,
+            x_stage,
+            xd_k,
+        } = stages;
+        let inputs = if stage == 0 {
+            start
+        } else {
+            [&*q_stage, &qd_k[stage - 1][..], &*x_stage]
+        };
+        (inputs, &mut a_k[stage][..], &mut xd_k[stage][..])
+    }
+
+    fn set_input(&mut self, stage: usize, sub: usize, dt: f64) {
+        let (mut stages, [q0, qd0, x0], _) = self.split(sub);
+        stages.set_input(stage, q0, qd0, x0, dt);
+    }
+
+    fn finish<Y: System + ?Sized>(
+        &mut self,
+        system: &Y,
+        sub: usize,
+        t: f64,
+        dt: f64,
+    ) -> Result<()> {
+        let out = self.out_slot(sub);
+        let (mut stages, [q0, qd0, x0], written) = self.split(sub);
+        stages.finish(system, t, dt, q0, qd0, x0, written)?;
+        self.done = out;
+        Ok(())
+    }
+
+    /// The end of the last substep into the state (its vectors become the slot's buffers).
+    fn take_result(&mut self) {
+        let slot = &mut self.rk4.slots[self.done];
+        std::mem::swap(self.q, &mut slot.q);
+        std::mem::swap(self.qd, &mut slot.qd);
+        self.x.copy_from_slice(&slot.x);
     }
 }

@@ -44,7 +44,7 @@ pub use config::{DragVelocity, Elasticity, TetherConfig, STANDARD_GRAVITY};
 pub use direction::DirectionJet;
 pub use dynamics::{Energy, LockstepWork, Solver, TetherModel};
 pub use error::{Result, TetherError};
-pub use integrator::{InSurroundings, Rk4, System};
+pub use integrator::{InSurroundings, Lockstep, Rk4, System};
 pub use material::Material;
 pub use state::TetherState;
 pub use surroundings::{Surroundings, UniformFlow, Vacuum};

@@ -353,7 +353,8 @@ pub(crate) unsafe fn solve4(
         let y1 = X4::madd(k00, r1, -(k01 * r0)) * inv;
         let t = axpy(&bep, y0, &axpy(&bes, y1, &bw));
         bias = axpy(&t, -l, &add3(&force, &bias));
-        let upd = |a: X4, b: X4, c: X4, d: X4, base: X4| X4::madd(-X4::madd(a, b, c * d), inv, base);
+        let upd =
+            |a: X4, b: X4, c: X4, d: X4, base: X4| X4::madd(-X4::madd(a, b, c * d), inv, base);
         bm = [
             upd(a0[0], bep[0], a1[0], bes[0], bm[0] + m),
             upd(a0[1], bep[1], a1[1], bes[1], bm[1] + m),
@@ -394,7 +395,11 @@ pub(crate) unsafe fn solve4(
     let cos2 = cos_psi0 * cos_psi0;
     let (s_v, sd_v) = (X4::gather(|j| s[j]), X4::gather(|j| sd[j]));
     let (rho_c, rho_t) = (s_v + X4::splat(0.5) * l, s_v + l);
-    let (ae, aep, aes) = (sym_mul(&a_mat, &e1), sym_mul(&a_mat, &ep1), sym_mul(&a_mat, &es1));
+    let (ae, aep, aes) = (
+        sym_mul(&a_mat, &e1),
+        sym_mul(&a_mat, &ep1),
+        sym_mul(&a_mat, &es1),
+    );
     let rod_inertia = X4::gather(|j| c[j].rod_inertia);
     let own = m * rho_c * rho_c + rod_inertia;
     let rho_t2 = rho_t * rho_t;
