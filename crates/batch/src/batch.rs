@@ -13,6 +13,7 @@ use std::time::{Duration, Instant};
 use accd_sim::episode::EpisodeState;
 use accd_sim::state_format::{self, Expected, StateError, StateKind};
 use accd_sim::{EnvConfig, Episode, Equilibrium, Outcome, SimError, Valid, ACT_DIM, OBS_DIM};
+use accd_tether::LockstepWork;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -500,38 +501,35 @@ impl BatchEnv {
         let n64 = n as u64;
         let stop = AtomicBool::new(false);
         let rows = StepRows::new(&mut self.slots, actions, out);
-        let job = |(
-            (position, slot),
-            action,
-            obs,
-            final_obs,
-            info,
-            reward,
-            terminated,
-            truncated,
-            wake,
-            reset,
-        ): Row<'_>| {
-            *reset = false;
+        // Before its step: a pending reset starts the next episode (the row is done); returns
+        // whether the row's episode steps.
+        let prologue = |row: &mut Row<'_>| -> bool {
+            let ((position, slot), _, obs, _, info, reward, terminated, truncated, wake, reset) =
+                row;
+            **reset = false;
             slot.final_divergence = None;
             if slot.pending_reset {
                 slot.pending_reset = false;
                 slot.index += 1;
-                let outcome = restart(slot, position as u64, n64, schedule);
+                let outcome = restart(slot, *position as u64, n64, schedule);
                 obs.copy_from_slice(slot.episode.observation());
-                *reward = 0.0;
-                *terminated = outcome.is_some();
-                *truncated = false;
-                *reset = true;
-                *wake = slot.episode.seeds().wake;
+                **reward = 0.0;
+                **terminated = outcome.is_some();
+                **truncated = false;
+                **reset = true;
+                **wake = slot.episode.seeds().wake;
                 write_info(info, &outcome.unwrap_or_default(), 0);
-                return;
+                return false;
             }
-            *wake = slot.episode.seeds().wake;
-            if stop.load(Ordering::Relaxed) {
-                return; // interrupted: this env is left as it was
-            }
-            let o = match slot.episode.step_interruptible(action, &stop) {
+            **wake = slot.episode.seeds().wake;
+            // Interrupted: this env is left as it was.
+            !stop.load(Ordering::Relaxed)
+        };
+        // After its step: the outputs, and the automatic reset of an ended episode.
+        let epilogue = |row: &mut Row<'_>, result: std::result::Result<Outcome, SimError>| {
+            let ((position, slot), _, obs, final_obs, info, reward, terminated, truncated, _, _) =
+                row;
+            let o = match result {
                 Ok(o) => o,
                 Err(SimError::Interrupted { .. }) => return,
                 // Actions were checked; a remaining error is a divergence (a panic is a bug:
@@ -542,9 +540,9 @@ impl BatchEnv {
                     ..Outcome::default()
                 },
             };
-            *reward = o.reward;
-            *terminated = o.terminated;
-            *truncated = o.truncated;
+            **reward = o.reward;
+            **terminated = o.terminated;
+            **truncated = o.truncated;
             write_info(info, &o, slot.episode.steps());
             obs.copy_from_slice(slot.episode.observation());
             if o.terminated || o.truncated {
@@ -556,12 +554,49 @@ impl BatchEnv {
                             slot.final_divergence = slot.episode.divergence().map(str::to_owned);
                         }
                         slot.index += 1;
-                        restart(slot, position as u64, n64, schedule);
+                        restart(slot, *position as u64, n64, schedule);
                         obs.copy_from_slice(slot.episode.observation());
                     }
                 }
             }
         };
+        // A run of up to LANES rows: four that step run together (`Episode::step_four`, the
+        // tether's recursion four AVX2 lanes wide), bit for bit as one by one.
+        let job = |mut rows: [Option<Row<'_>>; LANES]| {
+            let steps: [bool; LANES] =
+                std::array::from_fn(|j| rows[j].as_mut().is_some_and(|row| prologue(row)));
+            if steps.iter().all(|&s| s) {
+                let [Some(r0), Some(r1), Some(r2), Some(r3)] = &mut rows else {
+                    unreachable!("all four step")
+                };
+                let results = LOCKSTEP.with_borrow_mut(|work| {
+                    Episode::step_four(
+                        [
+                            &mut r0.0 .1.episode,
+                            &mut r1.0 .1.episode,
+                            &mut r2.0 .1.episode,
+                            &mut r3.0 .1.episode,
+                        ],
+                        [r0.1, r1.1, r2.1, r3.1],
+                        &stop,
+                        work,
+                    )
+                });
+                for (row, result) in rows.iter_mut().zip(results) {
+                    epilogue(row.as_mut().expect("all four step"), result);
+                }
+                return;
+            }
+            for (row, steps) in rows.iter_mut().zip(steps) {
+                if let (Some(row), true) = (row, steps) {
+                    let result = row.0 .1.episode.step_interruptible(row.1, &stop);
+                    epilogue(row, result);
+                }
+            }
+        };
+        // Runs of four rows where every thread gets at least one run; one row at a time below.
+        let run_len = if n >= LANES * self.threads { LANES } else { 1 };
+        let pop = |queue| pop_rows(queue, run_len);
         // The plain step runs rayon's parallel iterator over the rows (no allocation); the
         // watched one shares them with the calling thread ([`crate::shared`]).
         let pool = &self.pool;
@@ -569,9 +604,9 @@ impl BatchEnv {
         match watch {
             None => run(&mut self.poisoned, || {
                 pool.install(|| {
-                    (0..n).into_par_iter().for_each(|_| {
-                        if let Some(row) = queue.pop() {
-                            job(row)
+                    (0..n.div_ceil(run_len)).into_par_iter().for_each(|_| {
+                        if let Some(rows) = pop(&queue) {
+                            job(rows)
                         }
                     })
                 })
@@ -586,7 +621,7 @@ impl BatchEnv {
                 } else {
                     self.threads
                 };
-                let take_one = || queue.pop().map(job).is_some();
+                let take_one = || pop(&queue).map(job).is_some();
                 let start = Instant::now();
                 run(&mut self.poisoned, || {
                     run_shared(
@@ -865,6 +900,20 @@ fn restart(slot: &mut Slot, env: u64, n: u64, schedule: &WakeSchedule) -> Option
             })
         }
     }
+}
+
+/// The next run of `len` (at most [`LANES`]) rows nobody has taken, or None when all are.
+fn pop_rows<'q>(queue: &'q Queue<StepRows<'_>>, len: usize) -> Option<[Option<Row<'q>>; LANES]> {
+    let mut rows = queue.pop_run(len.min(LANES))?;
+    Some(std::array::from_fn(|_| rows.next()))
+}
+
+/// Envs stepped together in a run ([`Episode::step_four`]).
+const LANES: usize = 4;
+
+thread_local! {
+    /// The lanes' work space of the thread's runs of four (sized on its first run).
+    static LOCKSTEP: std::cell::RefCell<LockstepWork> = std::cell::RefCell::new(LockstepWork::default());
 }
 
 /// Longest time the calling thread of [`BatchEnv::step_interruptible`] waits between two

@@ -14,7 +14,9 @@
 
 use std::sync::Arc;
 
-use accd_tether::{Atmosphere, Rk4, Surroundings, System, TetherModel, TetherState};
+use accd_tether::{
+    Atmosphere, Lockstep, LockstepWork, Rk4, Surroundings, System, TetherModel, TetherState,
+};
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -163,10 +165,7 @@ impl System for Coupled<'_> {
             omega,
         };
         let loads = self.model.accelerations(time, q, qd, &self.stage, qdd)?;
-        let omega_dot = angular_acceleration(&self.inertia, &omega, &loads.moment);
-        let quat_dot = quat * Quaternion::from_parts(0.0, omega) * 0.5;
-        xd[..4].copy_from_slice(quat_dot.coords.as_slice());
-        xd[4..].copy_from_slice(omega_dot.as_slice());
+        accd_rates(&self.inertia, (quat, omega), &loads, xd);
         Ok(())
     }
 
@@ -184,6 +183,54 @@ impl System for Coupled<'_> {
         x[..4].copy_from_slice(unit.coords.as_slice());
         Ok(())
     }
+}
+
+impl Lockstep for Coupled<'_> {
+    fn derivatives_four(
+        systems: &mut [&mut Self; 4],
+        time: [f64; 4],
+        q: [&[f64]; 4],
+        qd: [&[f64]; 4],
+        x: [&[f64]; 4],
+        qdd: [&mut [f64]; 4],
+        xd: [&mut [f64]; 4],
+        work: &mut LockstepWork,
+    ) -> [accd_tether::Result<()>; 4] {
+        let parts: [(Quaternion<f64>, V3); 4] = std::array::from_fn(|j| states_to_parts(x[j]));
+        for (system, &(quat, omega)) in systems.iter_mut().zip(&parts) {
+            system.stage.accd = AccdState {
+                attitude: UnitQuaternion::new_normalize(quat),
+                omega,
+            };
+        }
+        let loads = {
+            let [a, b, c, d] = systems;
+            let stages = [&a.stage, &b.stage, &c.stage, &d.stage];
+            let models = [&mut *a.model, &mut *b.model, &mut *c.model, &mut *d.model];
+            TetherModel::accelerations_four(models, time, q, qd, stages, qdd, work)
+        };
+        let mut xd = xd.into_iter();
+        let mut loads = loads.into_iter();
+        std::array::from_fn(|j| {
+            let (loads, xd) = (loads.next().unwrap()?, xd.next().unwrap());
+            accd_rates(&systems[j].inertia, parts[j], &loads, xd);
+            Ok(())
+        })
+    }
+}
+
+/// The ACCD's first-order rates (quaternion kinematics, Euler's equations) under `loads`.
+#[inline(always)]
+fn accd_rates(
+    inertia: &V3,
+    (quat, omega): (Quaternion<f64>, V3),
+    loads: &AeroLoads,
+    xd: &mut [f64],
+) {
+    let omega_dot = angular_acceleration(inertia, &omega, &loads.moment);
+    let quat_dot = quat * Quaternion::from_parts(0.0, omega) * 0.5;
+    xd[..4].copy_from_slice(quat_dot.coords.as_slice());
+    xd[4..].copy_from_slice(omega_dot.as_slice());
 }
 
 /// What the stepper derives from the current state once and uses several times (the boom before
@@ -621,6 +668,97 @@ impl CaptureSim {
     /// Advances one physics step with the flap commands `command` (rad; clipped to the limit).
     /// On error the episode keeps its last good state.
     pub fn step(&mut self, command: [f64; 4]) -> Result<()> {
+        let start = self.begin_step(command)?;
+        self.step_from(start)
+    }
+
+    /// [`CaptureSim::step`] of four simulations at once (four envs of a batch), each with its
+    /// command: the tether's right-hand sides of the four are evaluated together, their
+    /// recursion four AVX2 lanes wide ([`accd_tether::Rk4::advance_adaptive_four`]); everything
+    /// else runs per simulation. Every simulation's result, error included, is bit for bit that
+    /// of its own `step`. `work` is the lanes' work space (one per thread).
+    pub fn step_four(
+        sims: [&mut CaptureSim; 4],
+        commands: [[f64; 4]; 4],
+        work: &mut LockstepWork,
+    ) -> [Result<()>; 4] {
+        let [s0, s1, s2, s3] = sims;
+        let mut sims = [s0, s1, s2, s3];
+        let mut starts: [Option<Result<StepStart>>; 4] =
+            std::array::from_fn(|j| Some(sims[j].begin_step(commands[j])));
+        // The air of every step (what `parts` may fail on) before any is lent out: a step that
+        // cannot start, or a group with one, runs one by one.
+        let together =
+            (0..4).all(|j| matches!(starts[j], Some(Ok(_))) && sims[j].air_at_step().is_ok());
+        if !together {
+            return std::array::from_fn(|j| {
+                let start = starts[j].take().unwrap()?;
+                sims[j].step_from(start)
+            });
+        }
+        let starts: [StepStart; 4] =
+            std::array::from_fn(|j| starts[j].take().unwrap().expect("checked above"));
+        let mut x: [[f64; ACCD_STATES]; 4] = std::array::from_fn(|j| accd_to_states(&sims[j].accd));
+        let mut q: [Vec<f64>; 4] = std::array::from_fn(|j| std::mem::take(&mut sims[j].tether.q));
+        let mut qd: [Vec<f64>; 4] = std::array::from_fn(|j| std::mem::take(&mut sims[j].tether.qd));
+        let rules: [SubstepRule; 4] = std::array::from_fn(|j| sims[j].substep_rule(starts[j].time));
+        let results = {
+            let [a, b, c, d] = &mut sims;
+            let inertia = [a.inertia, b.inertia, c.inertia, d.inertia];
+            let parts = [
+                a.parts(starts[0].hold),
+                b.parts(starts[1].hold),
+                c.parts(starts[2].hold),
+                d.parts(starts[3].hold),
+            ];
+            let [Ok((g0, m0, r0)), Ok((g1, m1, r1)), Ok((g2, m2, r2)), Ok((g3, m3, r3))] = parts
+            else {
+                unreachable!("the air of every step was checked")
+            };
+            let coupled = |model, stage, j: usize| Coupled {
+                model,
+                stage,
+                inertia: inertia[j],
+            };
+            let (mut c0, mut c1, mut c2, mut c3) = (
+                coupled(m0, g0, 0),
+                coupled(m1, g1, 1),
+                coupled(m2, g2, 2),
+                coupled(m3, g3, 3),
+            );
+            let [q0, q1, q2, q3] = &mut q;
+            let [qd0, qd1, qd2, qd3] = &mut qd;
+            let [x0, x1, x2, x3] = &mut x;
+            Rk4::advance_adaptive_four(
+                [r0, r1, r2, r3],
+                &mut [&mut c0, &mut c1, &mut c2, &mut c3],
+                std::array::from_fn(|j| starts[j].time),
+                std::array::from_fn(|j| starts[j].dt),
+                [q0, q1, q2, q3],
+                [qd0, qd1, qd2, qd3],
+                [&mut x0[..], &mut x1[..], &mut x2[..], &mut x3[..]],
+                work,
+                |j, system, q, qd| rules[j].substeps(system.model, q, qd),
+            )
+        };
+        let mut results = results.into_iter();
+        let mut q = q.into_iter();
+        let mut qd = qd.into_iter();
+        let mut starts = starts.into_iter();
+        std::array::from_fn(|j| {
+            let result = results.next().unwrap().map(|_| ()).map_err(SimError::from);
+            let (q, qd, start) = (
+                q.next().unwrap(),
+                qd.next().unwrap(),
+                starts.next().unwrap(),
+            );
+            sims[j].end_step(start, q, qd, &x[j], result)
+        })
+    }
+
+    /// Everything of a step before the RK4: the command and the flaps, the boom, the air
+    /// disturbance (and, per-step sampling, its held samples).
+    fn begin_step(&mut self, command: [f64; 4]) -> Result<StepStart> {
         let dt = self.time_step();
         let t = self.tether.time;
         self.actuators.set_command(&self.config.accd, command)?;
@@ -638,48 +776,67 @@ impl CaptureSim {
         if hold {
             self.hold_disturbance(t);
         }
-        let inertia = self.inertia;
-        let (accd_mass, airspeed) = (self.config.accd.mass, self.config.aircraft.airspeed);
+        Ok(StepStart { time: t, dt, hold })
+    }
+
+    /// The rest of [`CaptureSim::step`] after [`CaptureSim::begin_step`]: the RK4 of the
+    /// coupled system, then [`CaptureSim::end_step`].
+    fn step_from(&mut self, start: StepStart) -> Result<()> {
         let mut x = accd_to_states(&self.accd);
         // The state is advanced while the stage borrows the rest: lend it out for the step.
         let mut q = std::mem::take(&mut self.tether.q);
         let mut qd = std::mem::take(&mut self.tether.qd);
-        let result = self.parts(hold).and_then(|(stage, model, rk4)| {
+        let (inertia, choose) = (self.inertia, self.substep_rule(start.time));
+        let result = self.parts(start.hold).and_then(|(stage, model, rk4)| {
             let mut system = Coupled {
                 model,
                 stage,
                 inertia,
             };
-            // Substeps for the chain's fastest mode (one at the default discretization), chosen
-            // after the first stage, whose evaluation gives the state's axial mass.
-            let choose = |system: &Coupled<'_>, q: &[f64], qd: &[f64]| {
-                let model = &*system.model;
-                let k = substeps_at(model.config(), accd_mass, airspeed, q, qd, model.axial_mass());
-                if k > accd_tether::config::MAX_SUBSTEPS {
-                    return Err(accd_tether::TetherError::Diverged {
-                        time: t,
-                        reason: format!(
-                            "the tether's fastest mode needs {k} RK4 substeps per step (at most {})",
-                            accd_tether::config::MAX_SUBSTEPS
-                        ),
-                    });
-                }
-                Ok(k)
-            };
-            rk4.advance_adaptive(&mut system, t, dt, &mut q, &mut qd, &mut x, choose)?;
+            rk4.advance_adaptive(
+                &mut system,
+                start.time,
+                start.dt,
+                &mut q,
+                &mut qd,
+                &mut x,
+                |s, q, qd| choose.substeps(s.model, q, qd),
+            )?;
             Ok(())
         });
+        self.end_step(start, q, qd, &x, result)
+    }
+
+    /// Everything of a step after the RK4: the state back, the clock, the ACCD, the derived
+    /// quantities; on error only the state back.
+    fn end_step(
+        &mut self,
+        start: StepStart,
+        q: Vec<f64>,
+        qd: Vec<f64>,
+        x: &[f64],
+        result: Result<()>,
+    ) -> Result<()> {
         self.tether.q = q;
         self.tether.qd = qd;
         result?;
         self.steps += 1;
-        self.tether.time = self.time_origin + self.steps as f64 * dt;
-        let (attitude, omega) = states_to_parts(&x);
+        self.tether.time = self.time_origin + self.steps as f64 * start.dt;
+        let (attitude, omega) = states_to_parts(x);
         self.accd = AccdState {
             attitude: UnitQuaternion::new_unchecked(attitude),
             omega,
         };
         self.refresh()
+    }
+
+    /// How a step from `time` chooses its substeps.
+    fn substep_rule(&self, time: f64) -> SubstepRule {
+        SubstepRule {
+            time,
+            accd_mass: self.config.accd.mass,
+            airspeed: self.config.aircraft.airspeed,
+        }
     }
 
     /// RK4 substeps of the next step ([`accd_tether::TetherConfig::substeps_for`]) under the load of the
@@ -831,6 +988,48 @@ pub struct CaptureState {
 /// RK4 substeps of a step of the tether `c` from `(q, qd)` with the ACCD's `accd_mass` (kg) at
 /// its tip and effective axial mass `axial_mass` (kg), under sea-level density at the aircraft's
 /// `airspeed` (m/s) ([`CaptureSim::substeps`]).
+/// What [`CaptureSim::begin_step`] leaves for the RK4 of the step.
+struct StepStart {
+    /// The step's start, s.
+    time: f64,
+    /// Its length, s.
+    dt: f64,
+    /// Whether the disturbance is held over the step ([`AirSampling::PerStep`]).
+    hold: bool,
+}
+
+/// The substeps of a capture step: for the chain's fastest mode (one at the default
+/// discretization), chosen after the first stage, whose evaluation gives the state's axial mass.
+#[derive(Clone, Copy)]
+struct SubstepRule {
+    time: f64,
+    accd_mass: f64,
+    airspeed: f64,
+}
+
+impl SubstepRule {
+    fn substeps(&self, model: &TetherModel, q: &[f64], qd: &[f64]) -> accd_tether::Result<usize> {
+        let k = substeps_at(
+            model.config(),
+            self.accd_mass,
+            self.airspeed,
+            q,
+            qd,
+            model.axial_mass(),
+        );
+        if k > accd_tether::config::MAX_SUBSTEPS {
+            return Err(accd_tether::TetherError::Diverged {
+                time: self.time,
+                reason: format!(
+                    "the tether's fastest mode needs {k} RK4 substeps per step (at most {})",
+                    accd_tether::config::MAX_SUBSTEPS
+                ),
+            });
+        }
+        Ok(k)
+    }
+}
+
 fn substeps_at(
     c: &accd_tether::TetherConfig,
     accd_mass: f64,
