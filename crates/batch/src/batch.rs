@@ -564,7 +564,7 @@ impl BatchEnv {
         // tether's recursion four AVX2 lanes wide), bit for bit as one by one.
         let job = |mut rows: [Option<Row<'_>>; LANES]| {
             let steps: [bool; LANES] =
-                std::array::from_fn(|j| rows[j].as_mut().is_some_and(|row| prologue(row)));
+                std::array::from_fn(|j| rows[j].as_mut().is_some_and(&prologue));
             if steps.iter().all(|&s| s) {
                 let [Some(r0), Some(r1), Some(r2), Some(r3)] = &mut rows else {
                     unreachable!("all four step")

@@ -103,7 +103,10 @@ fn four_episodes_in_lockstep_step_as_each_alone() {
     // Until the 4 s episode ends: 40 agent steps.
     assert!(history.iter().all(|h| h.len() == 40));
     let refused = |j: usize| history[j].iter().filter(|o| o.starts_with("Err")).count();
-    assert_eq!([refused(0), refused(1), refused(2), refused(3)], [20, 0, 10, 10]);
+    assert_eq!(
+        [refused(0), refused(1), refused(2), refused(3)],
+        [20, 0, 10, 10]
+    );
 }
 
 /// A lane whose ACCD diverges (a stiff roll damping at a 0.1 s physics step, one physics step

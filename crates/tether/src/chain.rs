@@ -253,7 +253,8 @@ impl ChainState {
         self.kinematics_pass::<M>(time, l, q, qd)
     }
 
-    /// Whether the kinematics fields hold the pass of `(q, qd)` with flavour `M`.
+    /// Whether the kinematics fields hold the pass of `(q, qd)` with flavour `M` (for tests).
+    #[cfg(test)]
     pub fn holds_kinematics_of<M: Madd>(&self, q: &[f64], qd: &[f64]) -> bool {
         let n = self.n;
         self.held.holds::<M>(&q[..2 * n + 1], &qd[..2 * n + 1])

@@ -129,28 +129,15 @@ pub struct TetherModel {
     ws: Workspace,
 }
 
-/// The work space of [`TetherModel::accelerations_four`]: what the lockstep sweeps leave per
-/// segment for four chains. Sized on first use (per number of segments); one per thread that
-/// steps models four at a time.
-#[derive(Debug, Clone)]
+/// The work space of [`TetherModel::accelerations_four`]: the sweeps' inputs of four chains
+/// side by side and what the backward sweep leaves per segment. Sized on first use (per number
+/// of segments); one per thread that steps models four at a time.
+#[derive(Debug, Clone, Default)]
 pub struct LockstepWork {
     #[cfg(target_arch = "x86_64")]
     lanes: recursive::lockstep::Work4,
-    /// The chain the kinematics and loads of each model run in (sized on first use).
-    #[cfg(target_arch = "x86_64")]
-    chain: ChainState,
 }
 
-impl Default for LockstepWork {
-    fn default() -> Self {
-        LockstepWork {
-            #[cfg(target_arch = "x86_64")]
-            lanes: Default::default(),
-            #[cfg(target_arch = "x86_64")]
-            chain: ChainState::new(0),
-        }
-    }
-}
 
 #[derive(Debug, Clone)]
 struct Workspace {
@@ -692,26 +679,13 @@ impl TetherModel {
         let mut models = models;
         let n = models[0].n;
         work.lanes.ensure(n);
-        if work.chain.segments() != n {
-            work.chain = ChainState::new(n);
-        }
-        // Kinematics and loads per model, each copied into its lane at once. A model whose
-        // kinematics fail still has a chain of the right size: its lane runs on whatever it
-        // holds and its result is dropped. The passes run in the one scratch chain, which stays
-        // in the cache (four chains and the lanes do not fit in the first level), except for a
-        // model whose own chain holds the kinematics of its state (a walk left them there).
+        // Kinematics and loads per model, then the sweeps' inputs of the four into the lanes.
+        // A model whose kinematics fail still has a chain of the right size: its lane runs on
+        // whatever it holds and its result is dropped.
         let mut reports: [Option<Result<S::TipReport>>; 4] = Default::default();
         for (j, model) in models.iter_mut().enumerate() {
             let constants = model.load_constants();
-            let chain = if model
-                .ws
-                .chain
-                .holds_kinematics_of::<crate::arith::Fused>(q[j], qd[j])
-            {
-                &mut model.ws.chain
-            } else {
-                &mut work.chain
-            };
+            let chain = &mut model.ws.chain;
             reports[j] = Some(prepare_fused(
                 &constants,
                 chain,
@@ -720,8 +694,11 @@ impl TetherModel {
                 qd[j],
                 surroundings[j],
             ));
-            recursive::lockstep::load_lane(j, chain, &mut work.lanes);
         }
+        recursive::lockstep::load_lanes(
+            std::array::from_fn(|j| &models[j].ws.chain),
+            &mut work.lanes,
+        );
         let constants: [ChainConstants; 4] = std::array::from_fn(|j| models[j].chain_constants());
         let solved = recursive::lockstep::solve4(
             time,

@@ -206,43 +206,73 @@ fn load3(v: &[[f64; 4]]) -> V {
     [load(&v[0]), load(&v[1]), load(&v[2])]
 }
 
-/// Copies chain `j`'s inputs of the sweeps and the root into lane j of `work` (sized by
-/// [`Work4::ensure`]); [`solve4`] reads them from there. Best called right after the chain's
-/// kinematics and loads, while they are in the cache.
-#[inline(always)]
-pub(crate) fn load_lane(j: usize, chain: &ChainState, work: &mut Work4) {
-    let n = chain.segments();
+/// Copies the inputs of the sweeps and the root of four chains (of `n` segments each) into
+/// the lanes of `work` (sized by [`Work4::ensure`]), lane j from chain j; [`solve4`] reads them
+/// from there. Four segments of four chains at a time: four loads, a 4x4 transpose in
+/// registers, four stores.
+///
+/// # Safety
+/// The processor must have AVX2 ([`crate::arith::has_avx2_fma`]).
+#[target_feature(enable = "avx2,fma")]
+pub(crate) unsafe fn load_lanes(chains: [&ChainState; 4], work: &mut Work4) {
+    let n = chains[0].segments();
     let segments = &mut work.segments[..n];
-    let (ep, es, w) = (chain.e_phi.view(n), chain.e_psi.view(n), chain.w.view(n));
-    let (force, reduced) = (chain.force.view(n), chain.reduced.view(n));
-    let cos_psi = &chain.cos_psi[..n];
-    for (k, art) in segments.iter_mut().enumerate() {
-        let i = &mut art.inputs;
-        i[EP_X][j] = ep.x[k];
-        i[EP_Z][j] = ep.z[k];
-        i[ES][j] = es.x[k];
-        i[ES + 1][j] = es.y[k];
-        i[ES + 2][j] = es.z[k];
-        i[W][j] = w.x[k];
-        i[W + 1][j] = w.y[k];
-        i[W + 2][j] = w.z[k];
-        i[FORCE][j] = force.x[k];
-        i[FORCE + 1][j] = force.y[k];
-        i[FORCE + 2][j] = force.z[k];
-        i[REDUCED][j] = reduced.x[k];
-        i[REDUCED + 1][j] = reduced.y[k];
-        i[REDUCED + 2][j] = reduced.z[k];
-        i[COS_PSI][j] = cos_psi[k];
+    let sources: [(usize, [&[f64]; 4]); INPUTS] = [
+        (EP_X, chains.map(|c| &c.e_phi.x[..n])),
+        (EP_Z, chains.map(|c| &c.e_phi.z[..n])),
+        (ES, chains.map(|c| &c.e_psi.x[..n])),
+        (ES + 1, chains.map(|c| &c.e_psi.y[..n])),
+        (ES + 2, chains.map(|c| &c.e_psi.z[..n])),
+        (W, chains.map(|c| &c.w.x[..n])),
+        (W + 1, chains.map(|c| &c.w.y[..n])),
+        (W + 2, chains.map(|c| &c.w.z[..n])),
+        (FORCE, chains.map(|c| &c.force.x[..n])),
+        (FORCE + 1, chains.map(|c| &c.force.y[..n])),
+        (FORCE + 2, chains.map(|c| &c.force.z[..n])),
+        (REDUCED, chains.map(|c| &c.reduced.x[..n])),
+        (REDUCED + 1, chains.map(|c| &c.reduced.y[..n])),
+        (REDUCED + 2, chains.map(|c| &c.reduced.z[..n])),
+        (COS_PSI, chains.map(|c| &c.cos_psi[..n])),
+    ];
+    let whole = n / 4 * 4;
+    for (slot, [a, b, c, d]) in sources {
+        for k in (0..whole).step_by(4) {
+            let rows = [
+                _mm256_loadu_pd(a[k..k + 4].as_ptr()),
+                _mm256_loadu_pd(b[k..k + 4].as_ptr()),
+                _mm256_loadu_pd(c[k..k + 4].as_ptr()),
+                _mm256_loadu_pd(d[k..k + 4].as_ptr()),
+            ];
+            // Row j holds chain j's segments k .. k + 3; column i, segment k + i's four lanes.
+            let t0 = _mm256_unpacklo_pd(rows[0], rows[1]);
+            let t1 = _mm256_unpackhi_pd(rows[0], rows[1]);
+            let t2 = _mm256_unpacklo_pd(rows[2], rows[3]);
+            let t3 = _mm256_unpackhi_pd(rows[2], rows[3]);
+            let columns = [
+                _mm256_permute2f128_pd::<0x20>(t0, t2),
+                _mm256_permute2f128_pd::<0x20>(t1, t3),
+                _mm256_permute2f128_pd::<0x31>(t0, t2),
+                _mm256_permute2f128_pd::<0x31>(t1, t3),
+            ];
+            for (i, column) in columns.into_iter().enumerate() {
+                _mm256_storeu_pd(segments[k + i].inputs[slot].as_mut_ptr(), column);
+            }
+        }
+        for k in whole..n {
+            segments[k].inputs[slot] = [a[k], b[k], c[k], d[k]];
+        }
     }
     let root = &mut work.root;
-    let (e, e_dot, extra) = (chain.e.get(0), chain.e_dot.get(0), chain.extra.get(0));
-    for c in 0..3 {
-        root.e[c][j] = e[c];
-        root.e_dot[c][j] = e_dot[c];
-        root.extra[c][j] = extra[c];
-        root.tip_force[c][j] = chain.tip_force[c];
+    for (j, chain) in chains.iter().enumerate() {
+        let (e, e_dot, extra) = (chain.e.get(0), chain.e_dot.get(0), chain.extra.get(0));
+        for c in 0..3 {
+            root.e[c][j] = e[c];
+            root.e_dot[c][j] = e_dot[c];
+            root.extra[c][j] = extra[c];
+            root.tip_force[c][j] = chain.tip_force[c];
+        }
+        root.ep_y[j] = chain.e_phi.y[0];
     }
-    root.ep_y[j] = chain.e_phi.y[0];
 }
 
 /// What the root's 3x3 system reads of four chains besides segment 1's sweep inputs: segment
@@ -283,7 +313,7 @@ impl Work4 {
 }
 
 /// [`super::solve`] (without tensions) for four chains of `n` segments each, lane j for chain j,
-/// bit for bit the fused single-chain solve, from the inputs [`load_lane`] put into `work`
+/// bit for bit the fused single-chain solve, from the inputs [`load_lanes`] put into `work`
 /// (lane j from chain j). Writes `q''`
 /// into `qdd[j]` and returns per chain its effective axial mass or the error of its solve; the
 /// accelerations of a failed chain are unspecified.
