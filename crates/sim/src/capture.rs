@@ -10,7 +10,9 @@
 //! the tether as the tip force, and its moment drives Euler's equations. Once per step, before
 //! the RK4 stages: the flap actuators, the boom and the air disturbance advance, and the air
 //! density is taken from ISA at the aircraft's altitude (varying linearly with depth below it).
-//! The quaternion is renormalised after each step.
+//! The quaternion is renormalised after each step. [`CaptureSim::step_four`] steps four
+//! simulations with their tethers' recursions four AVX2 lanes wide, each bit for bit its own
+//! step.
 
 use std::sync::Arc;
 

@@ -138,7 +138,6 @@ pub struct LockstepWork {
     lanes: recursive::lockstep::Work4,
 }
 
-
 #[derive(Debug, Clone)]
 struct Workspace {
     /// Kinematics and loads of every segment.

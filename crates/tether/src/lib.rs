@@ -17,7 +17,9 @@
 //!   simulation above it);
 //! * [`Surroundings`] — what the caller supplies: air velocity and density at any point, the
 //!   aircraft's acceleration, the force on the tip;
-//! * [`Tether`] — the three together, for stepping.
+//! * [`Tether`] — the three together, for stepping; [`Tether::step_four`] steps four at once,
+//!   their recursions four AVX2 lanes wide ([`Lockstep`], [`LockstepWork`]), each bit for bit
+//!   its own step.
 //!
 //! Frames and units: SI; the towing-aircraft frame has x forward, y starboard, z down, origin at
 //! the attachment point.

@@ -83,6 +83,10 @@
 //! * Where the processor has AVX2 and FMA the backward sweep runs four lanes wide
 //!   (`recursive/avx2.rs`: a 3-vector per register, `B` by its columns), bit for bit the scalar
 //!   sweep with fused multiply-adds, which stays as its reference and as the portable path.
+//! * Four chains (four envs of a batch) can run the three steps together, one per AVX2 lane
+//!   (`recursive/lockstep.rs`, [`crate::TetherModel::accelerations_four`]): latency-bound for
+//!   one chain, the sweeps then fill each other's waits; lane j is bit for bit chain j's fused
+//!   solve.
 //! * Only the directions, loads and `K`, `W`, `y` live in the sweep; everything independent per
 //!   segment (trigonometry, directions, rates, loads) is done beforehand in structure-of-arrays
 //!   passes the compiler vectorizes. Multiply-adds are fused where the processor has FMA
