@@ -5,7 +5,7 @@
 use std::sync::Arc;
 
 mod support;
-use support::{episode, seeds};
+use support::{episode, seeds, stiff_roll};
 
 use accd_sim::{EnvConfig, Episode, Equilibrium, Outcome, OBS_BOUND};
 
@@ -186,18 +186,7 @@ fn overload_and_envelope_exit_end_the_episode_with_the_penalty() {
 
 #[test]
 fn a_diverging_simulation_ends_with_a_flag_and_the_last_good_observation() {
-    // RK4 at 0.1 s is far beyond the stability limit of the axial element (omega dt ~ 5); since
-    // issue 13 the tether substeps through that, so what diverges is the ACCD's roll: a roll
-    // damping far beyond any body's makes its rate equation stiff at 0.1 s.
-    let mut config = quick();
-    config.physics.tether.time_step = 0.1;
-    config.initial.settle_time = 0.0;
-    config.limits.max_distance = 1e4;
-    let mut table: serde_json::Value =
-        serde_json::from_str(&accd_sim::AeroModel::accd().to_json()).unwrap();
-    table["damping"]["clp"] = (-1e5).into();
-    config.physics.accd.aero_table = Some(table.to_string());
-    let config = Arc::new(config.validated().unwrap());
+    let config = Arc::new(stiff_roll(quick()).validated().unwrap());
     let eq = Arc::new(Equilibrium::settle(&config).unwrap());
     let mut ep = Episode::new(config, eq, seeds(1)).unwrap();
     let mut diverged = None;

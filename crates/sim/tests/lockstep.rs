@@ -9,7 +9,7 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 mod support;
-use support::{episode, seeds};
+use support::{episode, seeds, stiff_roll};
 
 use accd_sim::{EnvConfig, Episode, Equilibrium};
 use accd_tether::LockstepWork;
@@ -113,16 +113,8 @@ fn four_episodes_in_lockstep_step_as_each_alone() {
 /// per agent step against the others' ten) leaves the others as they would be alone.
 #[test]
 fn a_diverging_lane_and_uneven_physics_steps_leave_the_others_as_alone() {
-    let mut config = window(5.0);
-    config.physics.tether.time_step = 0.1;
-    config.initial.settle_time = 0.0;
-    config.limits.max_distance = 1e4;
-    let mut table: serde_json::Value =
-        serde_json::from_str(&accd_sim::AeroModel::accd().to_json()).unwrap();
-    table["damping"]["clp"] = (-1e5).into();
-    config.physics.accd.aero_table = Some(table.to_string());
     let stiff = {
-        let config = Arc::new(config.validated().unwrap());
+        let config = Arc::new(stiff_roll(window(5.0)).validated().unwrap());
         let eq = Arc::new(Equilibrium::settle(&config).unwrap());
         Episode::new(config, eq, seeds(9)).unwrap()
     };

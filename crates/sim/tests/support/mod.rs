@@ -28,3 +28,17 @@ pub fn episode_with_seeds(config: &EnvConfig, seeds: Seeds) -> Episode {
     let eq = Arc::new(Equilibrium::settle(&config).unwrap());
     Episode::new(config, eq, seeds).unwrap()
 }
+
+/// `config` made to diverge: RK4 at 0.1 s is far beyond the stability limit of the axial element
+/// (omega dt ~ 5); since issue 13 the tether substeps through that, so what diverges is the
+/// ACCD's roll: a roll damping far beyond any body's makes its rate equation stiff at 0.1 s.
+pub fn stiff_roll(mut config: EnvConfig) -> EnvConfig {
+    config.physics.tether.time_step = 0.1;
+    config.initial.settle_time = 0.0;
+    config.limits.max_distance = 1e4;
+    let mut table: serde_json::Value =
+        serde_json::from_str(&accd_sim::AeroModel::accd().to_json()).unwrap();
+    table["damping"]["clp"] = (-1e5).into();
+    config.physics.accd.aero_table = Some(table.to_string());
+    config
+}
