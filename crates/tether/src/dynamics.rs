@@ -628,7 +628,8 @@ impl TetherModel {
     /// `(time[j], q[j], qd[j])` in `surroundings[j]`, bit for bit what `accelerations` gives for
     /// it alone. Where [`TetherModel::lockstep_eligible`] holds, the kinematics and loads run per
     /// model and the recursion's sweeps run for the four together, one per AVX2 lane
-    /// ([`crate::recursive`]'s `lockstep`), at about the cost of one; otherwise one after another.
+    /// ([`crate::recursive`]'s `lockstep`), at about 1.3 times one chain's sweeps (the right-hand
+    /// side per chain 1.3x faster at n = 30, BENCHMARKS.md); otherwise one after another.
     /// A model's error leaves the other lanes' results unchanged. Allocates nothing once `work`
     /// has been used at this number of segments.
     #[allow(clippy::too_many_arguments)]
