@@ -5,8 +5,8 @@
 //! One chain's sweeps are a chain of dependent operations (`B_{k+1}` -> `B E` -> `K` -> `det`
 //! -> `1/det` -> `B_k`, then `a_k` -> `a_{k+1}` forward): about 28 ns a segment on a Zen 3 core,
 //! bound by latency, not by the instruction count. Four chains in lockstep fill those waits with
-//! each other's work: about 10 ns per chain and segment, packing the inputs into lanes included
-//! in neither (`load_lanes`, 4x4 transposes; BENCHMARKS.md, ninth session).
+//! each other's work: about 10 ns per chain and segment against 28 alone, plus about 5 for
+//! packing the inputs into lanes (`load_lanes`, 4x4 transposes; BENCHMARKS.md, ninth session).
 //!
 //! Bit for bit: lane j computes exactly the operations of [`super::solve`] with fused
 //! multiply-adds ([`crate::arith::Fused`], what the single-chain path runs on a processor with
