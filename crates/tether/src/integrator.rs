@@ -398,21 +398,11 @@ impl Rk4 {
         let [q0, q1, q2, q3] = q;
         let [qd0, qd1, qd2, qd3] = qd;
         let [x0, x1, x2, x3] = x;
-        let sizes: [Result<()>; 4] = std::array::from_fn(|j| {
-            let rk4 = [&*r0, &*r1, &*r2, &*r3][j];
-            let (q, qd, x) = (
-                [&*q0, &*q1, &*q2, &*q3][j],
-                [&*qd0, &*qd1, &*qd2, &*qd3][j],
-                [&*x0, &*x1, &*x2, &*x3][j],
-            );
-            rk4.check_sizes(&*systems[j], q, qd, x)
-        });
-        let [s0, s1, s2, s3] = sizes;
         let mut lanes = [
-            LaneRun::new(0, r0, s0, q0, qd0, x0),
-            LaneRun::new(1, r1, s1, q1, qd1, x1),
-            LaneRun::new(2, r2, s2, q2, qd2, x2),
-            LaneRun::new(3, r3, s3, q3, qd3, x3),
+            LaneRun::new(r0, &*systems[0], q0, qd0, x0),
+            LaneRun::new(r1, &*systems[1], q1, qd1, x1),
+            LaneRun::new(r2, &*systems[2], q2, qd2, x2),
+            LaneRun::new(r3, &*systems[3], q3, qd3, x3),
         ];
         if (0..4).any(|j| lanes[j].sizes.is_err()) {
             return std::array::from_fn(|j| {
@@ -492,8 +482,8 @@ impl Rk4 {
             let t: [f64; 4] = std::array::from_fn(|j| time[j] + sub as f64 * h[j]);
             for stage in 0..4 {
                 if stage > 0 {
-                    for lane in lanes.iter_mut() {
-                        lane.set_input(stage, sub, h[lane.index]);
+                    for (j, lane) in lanes.iter_mut().enumerate() {
+                        lane.set_input(stage, sub, h[j]);
                     }
                 }
                 if stage > 0 || sub > 0 {
@@ -520,7 +510,7 @@ impl Rk4 {
 
 /// One lane of [`Rk4::advance_adaptive_four`]: its integrator's buffers and its state.
 struct LaneRun<'a> {
-    index: usize,
+    /// Whether its state and buffers have the system's sizes.
     sizes: Result<()>,
     rk4: &'a mut Rk4,
     q: &'a mut Vec<f64>,
@@ -539,7 +529,7 @@ struct Stages<'a> {
     xd_k: &'a mut [Vec<f64>; 4],
 }
 
-impl Stages<'_> {
+impl<'a> Stages<'a> {
     /// The time of RK4 stage `stage` (0 to 3) of a step of length `dt` from `t`.
     #[inline(always)]
     fn stage_time(t: f64, stage: usize, dt: f64) -> f64 {
@@ -569,17 +559,36 @@ impl Stages<'_> {
     /// where its derivatives go.
     #[inline(always)]
     #[allow(clippy::type_complexity)]
-    fn args<'s>(
-        &'s mut self,
+    fn args(
+        self,
         stage: usize,
-        start: [&'s [f64]; 3],
-    ) -> ([&'s [f64]; 3], &'s mut [f64], &'s mut [f64]) {
+        start: [&'a [f64]; 3],
+    ) -> ([&'a [f64]; 3], &'a mut [f64], &'a mut [f64]) {
+        let Stages {
+            q_stage,
+            qd_k,
+            a_k,
+            x_stage,
+            xd_k,
+        } = self;
         let inputs = if stage == 0 {
             start
         } else {
-            [&*self.q_stage, &self.qd_k[stage - 1][..], &*self.x_stage]
+            [&*q_stage, &qd_k[stage - 1][..], &*x_stage]
         };
-        (inputs, &mut self.a_k[stage], &mut self.xd_k[stage])
+        (inputs, &mut a_k[stage][..], &mut xd_k[stage][..])
+    }
+
+    /// The same buffers, borrowed anew for a shorter time.
+    #[inline(always)]
+    fn reborrow(&mut self) -> Stages<'_> {
+        Stages {
+            q_stage: &mut *self.q_stage,
+            qd_k: &mut *self.qd_k,
+            a_k: &mut *self.a_k,
+            x_stage: &mut *self.x_stage,
+            xd_k: &mut *self.xd_k,
+        }
     }
 
     /// RK4's combination of the four stages into `out`, its check for divergence and the
@@ -641,7 +650,7 @@ impl Stages<'_> {
             }
             if stage > 0 || !evaluated {
                 let time = Self::stage_time(t, stage, dt);
-                let ([q, qd, x], qdd, xd) = self.args(stage, [q0, qd0, x0]);
+                let ([q, qd, x], qdd, xd) = self.reborrow().args(stage, [q0, qd0, x0]);
                 system.derivatives(time, q, qd, x, qdd, xd)?;
             }
         }
@@ -650,17 +659,15 @@ impl Stages<'_> {
 }
 
 impl<'a> LaneRun<'a> {
-    fn new(
-        index: usize,
+    fn new<Y: System + ?Sized>(
         rk4: &'a mut Rk4,
-        system_sizes: Result<()>,
+        system: &Y,
         q: &'a mut Vec<f64>,
         qd: &'a mut Vec<f64>,
         x: &'a mut [f64],
     ) -> Self {
         LaneRun {
-            index,
-            sizes: system_sizes,
+            sizes: rk4.check_sizes(system, q, qd, x),
             rk4,
             q,
             qd,
@@ -699,19 +706,7 @@ impl<'a> LaneRun<'a> {
     #[allow(clippy::type_complexity)]
     fn args(&mut self, stage: usize, sub: usize) -> ([&[f64]; 3], &mut [f64], &mut [f64]) {
         let (stages, start, _) = self.split(sub);
-        let Stages {
-            q_stage,
-            qd_k,
-            a_k,
-            x_stage,
-            xd_k,
-        } = stages;
-        let inputs = if stage == 0 {
-            start
-        } else {
-            [&*q_stage, &qd_k[stage - 1][..], &*x_stage]
-        };
-        (inputs, &mut a_k[stage][..], &mut xd_k[stage][..])
+        stages.args(stage, start)
     }
 
     fn set_input(&mut self, stage: usize, sub: usize, dt: f64) {
