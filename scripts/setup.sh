@@ -16,17 +16,8 @@ if [ ! -x "$VENV/bin/python" ]; then
 fi
 PIP=("$VENV/bin/python" -m pip --disable-pip-version-check -q)
 "${PIP[@]}" install --upgrade pip >/dev/null
-"${PIP[@]}" install "maturin>=1.5,<2"
-# The project's own dependencies (from pyproject.toml), then the extension, built in release mode.
-"${PIP[@]}" install $(cd "$ROOT" && "$VENV/bin/python" - "$EXTRAS" <<'PY'
-import sys, tomllib
-meta = tomllib.load(open("pyproject.toml", "rb"))["project"]
-deps = list(meta["dependencies"])
-for extra in filter(None, sys.argv[1].split(",")):
-    deps += meta["optional-dependencies"][extra]
-print(" ".join(deps))
-PY
-)
-echo "setup: building the Rust extension (release)"
-(cd "$ROOT" && VIRTUAL_ENV="$VENV" PATH="$VENV/bin:$PATH" "$VENV/bin/maturin" develop --release --quiet)
+# The README's install command: the package in editable mode with its extras. pip builds the Rust
+# extension through maturin (release profile, pyproject.toml) and installs the dependencies.
+echo "setup: pip install -e \".[$EXTRAS]\" (builds the Rust extension, release)"
+(cd "$ROOT" && "${PIP[@]}" install -e ".[$EXTRAS]")
 export ACCD_PY="$VENV/bin/python"
