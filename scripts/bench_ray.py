@@ -29,8 +29,8 @@ def _eval_child(workers: int, episodes: int, policy: str) -> dict:
     code = f"""
 import json, time
 import accd_gym
-from accd_gym.evaluation import load_policy, run_episodes, summarize
-from accd_gym import distributed
+from accd_gym.evals.evaluation import load_policy, run_episodes, summarize
+from accd_gym.evals import distributed
 seeds = list(accd_gym.HELD_OUT_WAKE_SEEDS[:{episodes}])
 policy = load_policy({policy!r})
 if {workers} == 0:

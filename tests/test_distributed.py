@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import accd_gym
-from accd_gym.baselines import GuidancePolicy, RandomPolicy
-from accd_gym.evaluation import run_episode_range, run_episodes
-from accd_gym.sweep import bootstrap_interval, iqm
+from accd_gym.control.baselines import GuidancePolicy, RandomPolicy
+from accd_gym.evals.evaluation import run_episode_range, run_episodes
+from accd_gym.evals.sweep import bootstrap_interval, iqm
 
 SHORT = {"capture_window": 6.0}
 WAKE = list(accd_gym.HELD_OUT_WAKE_SEEDS[:40])
@@ -75,7 +75,7 @@ def test_a_pytorch_mlp_policy_gives_the_same_episodes_whatever_the_split():
     pytest.importorskip("stable_baselines3")
     from stable_baselines3 import PPO
 
-    from accd_gym.sb3 import AccdVecEnv
+    from accd_gym.envs.sb3 import AccdVecEnv
 
     model = PPO("MlpPolicy", AccdVecEnv(4, **SHORT), seed=0, device="cpu", n_steps=8, batch_size=8)
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import accd_gym
-from accd_gym import fidelity, study
+from accd_gym.studies import fidelity, study
 
 
 def test_python_tether_takes_the_distributed_elasticity():

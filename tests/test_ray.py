@@ -24,9 +24,10 @@ ray = pytest.importorskip("ray")
 pytest.importorskip("ray.rllib")
 
 import accd_gym  # noqa: E402
-from accd_gym import distributed, rllib, sweep  # noqa: E402
-from accd_gym.baselines import GuidancePolicy, RandomPolicy  # noqa: E402
-from accd_gym.evaluation import evaluate, load_policy, run_episodes  # noqa: E402
+from accd_gym.evals import distributed, sweep
+from accd_gym.learning import rllib  # noqa: E402
+from accd_gym.control.baselines import GuidancePolicy, RandomPolicy  # noqa: E402
+from accd_gym.evals.evaluation import evaluate, load_policy, run_episodes  # noqa: E402
 
 SHORT = {"capture_window": 6.0}
 WAKE = list(accd_gym.HELD_OUT_WAKE_SEEDS[:40])
@@ -95,7 +96,7 @@ def _same(a, b):
 
 def _tiny_sb3_run(tmp_path):
     """A PPO run folder trained for 64 steps (for evaluation through Ray)."""
-    from accd_gym import training
+    from accd_gym.learning import training
 
     cfg = training.validate_config({"algo": "ppo", "total_timesteps": 64, "num_envs": 4, "num_threads": 1, "seed": 1,
                                     "env": SHORT, "algo_kwargs": {"n_steps": 16, "batch_size": 32, "n_epochs": 1},
@@ -273,7 +274,7 @@ def test_two_nodes_on_one_machine_run_the_tasks_and_give_the_same_report(tmp_pat
 def test_benchmark_training_jobs_as_ray_tasks_equal_the_local_run(cluster, tmp_path):
     """`accd-gym benchmark --ray`: the jobs run as Ray tasks (one CPU each) and give the local
     run's results episode for episode (training seeds, thread counts and placement change nothing)."""
-    from accd_gym import benchmark
+    from accd_gym.evals import benchmark
 
     cfg = benchmark.validate_config(
         {"tiers": ["precision"], "learners": {"ppo": {"train_config": "training/ppo.json", "seeds": [0, 1], "timesteps": 512}},

@@ -10,7 +10,7 @@ import math
 import pytest
 
 import accd_gym
-from accd_gym import study
+from accd_gym.studies import study
 from accd_gym.cli import main
 
 #: design.md section 7: "settles about 50 m below" / "about 70 m below", within 15 %.

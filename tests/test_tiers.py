@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import accd_gym
-from accd_gym.tiers import TIERS, merge, tiers_markdown
+from accd_gym.envs.tiers import TIERS, merge, tiers_markdown
 
 
 def test_every_tier_is_registered_with_its_config_and_episode_length():
@@ -81,8 +81,8 @@ def test_randomized_parameters_are_a_function_of_the_wake_seed_and_reported():
 
 
 def test_held_out_evaluation_meets_held_out_parameters_whatever_the_batch():
-    from accd_gym.baselines import ZeroPolicy
-    from accd_gym.evaluation import run_episodes
+    from accd_gym.control.baselines import ZeroPolicy
+    from accd_gym.evals.evaluation import run_episodes
 
     wake = list(accd_gym.HELD_OUT_WAKE_SEEDS[:6])
     a = run_episodes(ZeroPolicy(), 6, wake_seeds=wake, num_envs=2, config={"tier": "randomized", "capture_window": 2.0})
@@ -137,8 +137,8 @@ def test_evaluation_metrics_are_the_true_geometry_under_sensors():
     # Zero flaps ignore the observation, and sensors never change the physics: with sensors on and
     # off the evaluated episodes (trajectories, miss distances) must be identical, because the
     # metrics come from the true state, not from the sensed observation.
-    from accd_gym.baselines import ZeroPolicy
-    from accd_gym.evaluation import run_episodes
+    from accd_gym.control.baselines import ZeroPolicy
+    from accd_gym.evals.evaluation import run_episodes
 
     wake = list(accd_gym.HELD_OUT_WAKE_SEEDS[:3])
     runs = [run_episodes(ZeroPolicy(), 3, wake_seeds=wake, num_envs=3,

@@ -47,14 +47,14 @@ from accd_gym._core import (
 )
 from accd_gym._core import reward_bounds as _core_reward_bounds
 from accd_gym.errors import AccdError, ConfigError, SimulationError, StateError
-from accd_gym.config import EXACT_AIR_SCHEME, default_config, env_config
-from accd_gym.task import HELD_OUT_WAKE_SEEDS, PARAMETER_NAMES, TRAINING_WAKE_SEEDS
-from accd_gym.env import InAirCaptureEnv
-from accd_gym.vector import InAirCaptureVectorEnv
-from accd_gym.recording import Recording, RecordEpisode, record_episodes
-from accd_gym.tiers import TIERS
-from accd_gym.tiers import register_tiers as _register_tiers
-from accd_gym.lqr import LqrPolicy, linearize
+from accd_gym.envs.config import EXACT_AIR_SCHEME, default_config, env_config
+from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, PARAMETER_NAMES, TRAINING_WAKE_SEEDS
+from accd_gym.envs.env import InAirCaptureEnv
+from accd_gym.envs.vector import InAirCaptureVectorEnv
+from accd_gym.replays.recording import Recording, RecordEpisode, record_episodes
+from accd_gym.envs.tiers import TIERS
+from accd_gym.envs.tiers import register_tiers as _register_tiers
+from accd_gym.control.lqr import LqrPolicy, linearize
 
 
 
@@ -66,13 +66,13 @@ _register_tiers()
 
 def reward_bounds(config: Optional[dict[str, Any]] = None, **overrides: Any) -> tuple[float, float]:
     """Lowest and highest reward of one agent step under a configuration (keyword overrides)."""
-    from accd_gym.config import config_json
+    from accd_gym.envs.config import config_json
 
     return _core_reward_bounds(config_json(env_config(config, **overrides)))
 
 
 if TYPE_CHECKING:
-    from accd_gym.sb3 import AccdVecEnv
+    from accd_gym.envs.sb3 import AccdVecEnv
 else:
 
     def __getattr__(name: str) -> Any:
@@ -80,7 +80,7 @@ else:
         type checkers, which see the import above and nothing else."""
         if name == "AccdVecEnv":
             try:
-                from accd_gym.sb3 import AccdVecEnv
+                from accd_gym.envs.sb3 import AccdVecEnv
             except ModuleNotFoundError as e:
                 raise ModuleNotFoundError(
                     f"accd_gym.AccdVecEnv needs stable-baselines3 ({e}): pip install 'accd-gym[sb3]'", name=e.name

@@ -842,7 +842,7 @@ def run_study(
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     if study in ("fig9", *EXTRA_STUDIES):
-        from accd_gym import fidelity
+        from accd_gym.studies import fidelity
 
         doc, md = fidelity.run_study(study, out_dir, dpi=dpi, progress=progress)
     elif study == "max-tension":

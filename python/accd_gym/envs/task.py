@@ -159,7 +159,7 @@ def wake_options(core: Any, options: dict[str, Any] | None) -> None:
 
 def episode_steps(config: dict[str, Any]) -> int:
     """Agent steps of one episode under a full configuration (``capture_window / agent_step``)."""
-    from accd_gym.config import config_json
+    from accd_gym.envs.config import config_json
 
     return int(_core.episode_steps(config_json(config)))
 

@@ -335,7 +335,7 @@ def guidance_episode(seed: int = CAPTURE_SEED) -> dict[str, Any]:
     attachment tension per agent step (N) and whether it captured."""
     import gymnasium as gym
 
-    from accd_gym.baselines import GuidancePolicy
+    from accd_gym.control.baselines import GuidancePolicy
 
     env = gym.make(accd_gym.ENV_ID)
     policy = GuidancePolicy()
@@ -425,7 +425,7 @@ def run_tension(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[di
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from accd_gym import study
+    from accd_gym.studies import study
 
     base = study.MaxTensionCase()
     fig, axes = plt.subplots(1, 2, figsize=(12, 3.8), constrained_layout=True)
@@ -564,7 +564,7 @@ class TensionReading:
 
     def case(self) -> Any:
         """The :class:`accd_gym.study.MaxTensionCase` of this reading."""
-        from accd_gym import study
+        from accd_gym.studies import study
 
         base = study.MaxTensionCase()
         sigma = accd_gym.isa(base.altitude)["density"] / accd_gym.isa(0.0)["density"]
@@ -592,7 +592,7 @@ def implied_ta_mass() -> float:
     125 kN mean: ``m = (F sigma - D_RLV - a* m_RLV) / (a* + g / (L/D))`` with
     ``a* = (125 kN - D_RLV) / m_RLV``. The one unknown fitted from the paper's mean; the peak is
     then a prediction."""
-    from accd_gym import study
+    from accd_gym.studies import study
 
     base = study.MaxTensionCase()
     sigma = accd_gym.isa(base.altitude)["density"] / accd_gym.isa(0.0)["density"]
@@ -604,7 +604,7 @@ def implied_ta_mass() -> float:
 def tension_readings() -> list[TensionReading]:
     """The grid of :class:`TensionReading` (24): thrust x TA mass (MLW, :func:`implied_ta_mass`,
     MTOW) x TA drag x start."""
-    from accd_gym import study
+    from accd_gym.studies import study
 
     return [
         TensionReading(lapsed, mass, drag, pre)
@@ -619,7 +619,7 @@ def sweep_max_tension() -> list[dict[str, Any]]:
     """Runs every :func:`tension_readings` case (attachment model, n = 30, the study's step) and
     returns per reading its inputs, mean and peak tension (N) and whether both are within
     :data:`PAPER_TOLERANCE` of the paper's."""
-    from accd_gym import study
+    from accd_gym.studies import study
 
     rows = []
     for reading in tension_readings():
@@ -703,7 +703,7 @@ def sweep_settling(progress: bool = False) -> list[dict[str, Any]]:
     release and after the pitch and yaw commands, s), first swing and settled depth (m), and
     whether 300 m settles slower than 150 m after release and after the pitch command (the claim
     of ``test_length_300_m_settles_slower_than_150_m``). A run that diverges is reported as such."""
-    from accd_gym import study
+    from accd_gym.studies import study
 
     cases = {c.key: c for c in study.study_cases("length")["length"]}
     rows = []
@@ -759,7 +759,7 @@ def run_sweep(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[dict
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from accd_gym import study
+    from accd_gym.studies import study
 
     settling = sweep_settling(progress=progress)
     tension = sweep_max_tension()

@@ -260,8 +260,8 @@ def iter_recordings(
     the episodes end; ``rec.meta["episode"]`` is its index), so that callers can write and drop
     them one at a time."""
     from accd_gym import _core
-    from accd_gym.evaluation import EVAL_BASE_SEED, load_policy
-    from accd_gym.task import HELD_OUT_WAKE_SEEDS, INFO_NAMES, check_actions, check_seed
+    from accd_gym.evals.evaluation import EVAL_BASE_SEED, load_policy
+    from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, INFO_NAMES, check_actions, check_seed
 
     if episodes is None:
         episodes = len(wake_seeds) if wake_seeds is not None else 1
@@ -285,8 +285,8 @@ def iter_recordings(
     label = _policy_label(policy)
     if isinstance(policy, str):
         policy = load_policy(policy, seed=policy_seed, config=config)
-    from accd_gym.evaluation import _policy_starts
-    from accd_gym.vector import InAirCaptureVectorEnv
+    from accd_gym.evals.evaluation import _policy_starts
+    from accd_gym.envs.vector import InAirCaptureVectorEnv
 
     batch = max(1, min(int(num_envs), episodes))  # the evaluation's batch: the policy sees the same rows
     env = InAirCaptureVectorEnv(batch, autoreset_mode="disabled", num_threads=num_threads, **(config or {}))

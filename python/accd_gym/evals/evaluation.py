@@ -27,7 +27,7 @@ from typing import Any, Optional, Sequence
 import numpy as np
 
 from accd_gym.errors import ConfigError
-from accd_gym.task import EVENT_NAMES, HELD_OUT_WAKE_SEEDS, INFO_NAMES
+from accd_gym.envs.task import EVENT_NAMES, HELD_OUT_WAKE_SEEDS, INFO_NAMES
 
 #: Base seed of evaluation episodes (initial conditions and RLV motion); fixed so runs compare.
 EVAL_BASE_SEED: int = 20_240_607
@@ -67,7 +67,7 @@ class SB3Policy:
         if p.is_dir():
             model_path, stats_path = p / "final_model.zip", p / "vecnormalize.pkl"
             if not model_path.is_file():
-                from accd_gym.training import latest_checkpoint
+                from accd_gym.learning.training import latest_checkpoint
 
                 ckpt = latest_checkpoint(p)
                 status = _run_status(p)
@@ -179,18 +179,18 @@ def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False, c
     :class:`SB3Policy` for ``allow_unnormalized``; an RLlib run or checkpoint folder gives an
     :class:`accd_gym.rllib.RLlibPolicy`). ``config``: the env configuration (overrides) the
     policy will run on; the LQR is designed for it."""
-    from accd_gym.baselines import BASELINES, guidance_from_tuning, make_baseline
+    from accd_gym.control.baselines import BASELINES, guidance_from_tuning, make_baseline
 
     if spec in BASELINES:
         return make_baseline(spec, seed, config)
     if spec.endswith(".json") and Path(spec).is_file():
-        from accd_gym.lqr import is_lqr_tuning, lqr_from_tuning
+        from accd_gym.control.lqr import is_lqr_tuning, lqr_from_tuning
 
         if is_lqr_tuning(spec):
             return lqr_from_tuning(spec, config)
         return guidance_from_tuning(spec)
     if Path(spec).exists():
-        from accd_gym.rllib import RLlibPolicy, is_rllib_run
+        from accd_gym.learning.rllib import RLlibPolicy, is_rllib_run
 
         if is_rllib_run(spec):
             return RLlibPolicy(spec)
@@ -274,7 +274,7 @@ def run_episode_range(
     (``tests/test_distributed.py`` checks both; PyTorch gives other last bits for batches of
     1-3 rows than for 4 or more, which is why the batch size is fixed).
     """
-    from accd_gym.vector import InAirCaptureVectorEnv
+    from accd_gym.envs.vector import InAirCaptureVectorEnv
 
     start, stop, batch = int(start), int(stop), int(batch)
     if not 0 <= start < stop:
@@ -502,7 +502,7 @@ def evaluate(
     }
     runs: dict[str, list[Episode]] = {}
     if ray_address is not None:
-        from accd_gym import distributed
+        from accd_gym.evals import distributed
 
         runs, ray_info = distributed.run_policies(dict(loaded), episodes, seed=seed, wake_seeds=seeds, num_envs=num_envs,
                                                   config=config, address=ray_address, chunk=ray_chunk,
@@ -518,7 +518,7 @@ def evaluate(
             results["policies"][spec]["note"] = policy.note
     results["paired"] = paired_comparisons(runs)
     if replay:
-        from accd_gym.replay import write_evaluation_replays
+        from accd_gym.replays.replay import write_evaluation_replays
 
         results["replays"] = {
             spec: write_evaluation_replays(spec, _label(spec), eps, replay, out / "replays", seed=seed,
@@ -529,7 +529,7 @@ def evaluate(
     (out / "results.json").write_text(json.dumps(results, indent=1))
     np.savez_compressed(out / "trajectories.npz", **{f"{_label(s)}__{e.index}": e.trajectory for s, eps in runs.items() for e in eps})
     plot_trajectories(runs, out / "trajectories.png", dpi=dpi)
-    from accd_gym.config import env_config
+    from accd_gym.envs.config import env_config
 
     radius = env_config(config or {})["boom"]["capture_radius"]
     plot_miss_cdf(runs, out / "miss_distance_cdf.png", dpi=dpi, capture_radius=radius)
@@ -540,12 +540,12 @@ def evaluate(
 def _label(spec: str) -> str:
     """A short name for a policy spec (a path's run folder or file stem)."""
     p = Path(spec)
-    from accd_gym.baselines import BASELINES
+    from accd_gym.control.baselines import BASELINES
 
     if spec in BASELINES or not p.exists():
         return spec
     if p.suffix == ".json":
-        from accd_gym.lqr import is_lqr_tuning
+        from accd_gym.control.lqr import is_lqr_tuning
 
         return f"{'lqr' if is_lqr_tuning(spec) else 'guidance'} ({p.stem})"
     return p.name if p.is_dir() else f"{p.parent.name}/{p.stem}"

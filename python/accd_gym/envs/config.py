@@ -74,7 +74,7 @@ def valid_config(
     merged: dict[str, Any] = dict(config or {})
     merged.update(overrides)
     if "tier" in merged:
-        from accd_gym.tiers import merge, tier
+        from accd_gym.envs.tiers import merge, tier
 
         name = merged.pop("tier")
         merged = merge(tier(name).overrides, merged)

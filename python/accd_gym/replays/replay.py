@@ -38,7 +38,7 @@ from typing import Any, Optional
 
 import numpy as np
 
-from accd_gym.recording import Recording
+from accd_gym.replays.recording import Recording
 
 #: Largest number of 3D frames a page holds (more samples are decimated).
 MAX_FRAMES = 1000
@@ -166,7 +166,7 @@ def write_video(rec: Recording, path: str | Path, *, fps: Optional[float] = None
         import imageio_ffmpeg
     except ModuleNotFoundError as e:
         raise ModuleNotFoundError(f"videos need imageio-ffmpeg ({e}): pip install 'accd-gym[replay]'", name=e.name) from e
-    from accd_gym.render import render_frame
+    from accd_gym.envs.render import render_frame
 
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
@@ -187,7 +187,7 @@ def screenshot_replay(html: str | Path, png: str | Path, time: Optional[float] =
     """A screenshot of a replay page at ``time`` (s; default the capture, or for an episode
     without one the closest approach) taken with headless Chromium (:mod:`accd_gym.browser`);
     returns the page's JavaScript errors."""
-    from accd_gym.browser import screenshot
+    from accd_gym.replays.browser import screenshot
 
     default = "accdReplay.meta.captured_at !== null ? accdReplay.meta.captured_at : accdReplay.meta.time_of_min_distance"
     setup = f"accdReplay.setTime({default})" if time is None else f"accdReplay.setTime({float(time)!r})"
@@ -504,8 +504,8 @@ def write_evaluation_replays(spec: str, label: str, episodes: Any, count: int, o
     records the :func:`pick_episodes` ones and writes ``out/<label>/<pick>_ep<k>.html`` and
     ``.npz``. Checks that each recording reproduces the evaluation's outcome and steps. Returns
     one entry per page (pick, episode, outcome, miss distance, files)."""
-    from accd_gym.evaluation import load_policy
-    from accd_gym.recording import record_episodes
+    from accd_gym.evals.evaluation import load_policy
+    from accd_gym.replays.recording import record_episodes
 
     picks = pick_episodes(episodes, count)
     policy = load_policy(spec, allow_unnormalized=allow_unnormalized, config=config)
@@ -538,8 +538,8 @@ def run_replay(policy: str, episodes: int, out: str | Path, *, seed: Optional[in
     run unrecorded) and writes per episode ``episode_<k>.npz``,
     ``episode_<k>.html`` and, on request, ``episode_<k>.mp4`` and ``episode_<k>.png`` (a screenshot
     of the page at the capture or the closest approach, by headless Chromium). Returns one entry per episode."""
-    from accd_gym.evaluation import load_policy
-    from accd_gym.recording import iter_recordings
+    from accd_gym.evals.evaluation import load_policy
+    from accd_gym.replays.recording import iter_recordings
 
     loaded = load_policy(policy, seed=0, allow_unnormalized=allow_unnormalized, config=config)
     if getattr(loaded, "note", None):

@@ -18,7 +18,7 @@ import copy
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Optional
 
-from accd_gym.config import SENSORS_TIER
+from accd_gym.envs.config import SENSORS_TIER
 from accd_gym.errors import ConfigError
 
 
@@ -149,7 +149,7 @@ def differences(name: str) -> list[tuple[str, Any, Any, str, str]]:
     default, unit, description)`` per key, from the tier's declaration and the Rust field
     declarations."""
     from accd_gym import _core
-    from accd_gym.config import default_config
+    from accd_gym.envs.config import default_config
 
     fields = {key: (unit, description) for key, unit, _, description, _, _ in _core.config_fields()}
     defaults = default_config()
@@ -186,8 +186,8 @@ def tiers_markdown() -> str:
 
 
 def _episode_steps(t: Tier) -> int:
-    from accd_gym.config import env_config
-    from accd_gym.task import episode_steps
+    from accd_gym.envs.config import env_config
+    from accd_gym.envs.task import episode_steps
 
     return episode_steps(env_config(t.overrides))
 
@@ -202,8 +202,8 @@ def register_tiers() -> None:
             continue
         gym.register(
             id=t.id,
-            entry_point="accd_gym.env:InAirCaptureEnv",
-            vector_entry_point="accd_gym.vector:InAirCaptureVectorEnv",
+            entry_point="accd_gym.envs.env:InAirCaptureEnv",
+            vector_entry_point="accd_gym.envs.vector:InAirCaptureVectorEnv",
             max_episode_steps=_episode_steps(t),
             kwargs={} if t.name == "nominal" else {"tier": t.name},
         )

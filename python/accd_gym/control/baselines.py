@@ -24,7 +24,7 @@ from typing import Any, Callable, Optional
 import numpy as np
 
 from accd_gym.errors import ConfigError
-from accd_gym.task import ACT_DIM, OBS_DIM, OBSERVATION_SCALE, observation_indices
+from accd_gym.envs.task import ACT_DIM, OBS_DIM, OBSERVATION_SCALE, observation_indices
 
 #: Observation scales, from the core's observation table.
 _POS_SCALE = OBSERVATION_SCALE["boom_rel_y"]  # 1/m
@@ -216,7 +216,7 @@ class GuidancePolicy:
 
 def _lqr(config: Any) -> Any:
     """The LQR baseline designed for ``config`` (:meth:`accd_gym.lqr.LqrPolicy.for_config`)."""
-    from accd_gym.lqr import LqrPolicy
+    from accd_gym.control.lqr import LqrPolicy
 
     return LqrPolicy.for_config(config)
 
