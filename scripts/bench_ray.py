@@ -40,7 +40,7 @@ if {workers} == 0:
 else:
     distributed.connect("local", num_cpus={workers})
     t = time.perf_counter()
-    runs, info = distributed.run_policies({{"p": policy}}, {episodes}, seed=accd_gym.evaluation.EVAL_BASE_SEED,
+    runs, info = distributed.run_policies({{"p": policy}}, {episodes}, seed=accd_gym.evals.episodes.EVAL_BASE_SEED,
                                           wake_seeds=seeds, num_envs=16)
     wall, eps = time.perf_counter() - t, runs["p"]
 s = summarize(eps)

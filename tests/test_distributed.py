@@ -123,7 +123,7 @@ def test_without_ray_everything_else_works_and_ray_options_say_which_extra(tmp_p
     code = f"""
 import sys, json
 sys.modules['ray'] = None  # any `import ray` now raises ModuleNotFoundError
-import accd_gym, accd_gym.distributed, accd_gym.rllib, accd_gym.sweep
+import accd_gym, accd_gym.evals.distributed, accd_gym.learning.rllib, accd_gym.evals.sweep
 from accd_gym.cli import main
 args = ['evaluate', '--policy', 'zero', '--episodes', '2', '--num-envs', '2', '--num-threads', '1',
         '--env', json.dumps({SHORT!r}), '--quiet', '--out', {str(tmp_path / 'e')!r}]

@@ -24,7 +24,7 @@ ray = pytest.importorskip("ray")
 pytest.importorskip("ray.rllib")
 
 import accd_gym  # noqa: E402
-from accd_gym.evals import distributed, sweep
+from accd_gym.evals import distributed, sweep  # noqa: E402
 from accd_gym.learning import rllib  # noqa: E402
 from accd_gym.control.baselines import GuidancePolicy, RandomPolicy  # noqa: E402
 from accd_gym.evals.evaluation import evaluate, load_policy, run_episodes  # noqa: E402
@@ -110,7 +110,7 @@ def test_distributed_evaluation_equals_local_whatever_the_tasks(cluster, tmp_pat
     policies = {"guidance": GuidancePolicy(), "random": RandomPolicy(0), "ppo": load_policy(str(_tiny_sb3_run(tmp_path)))}
     local = {k: run_episodes(p, 10, wake_seeds=WAKE, num_envs=4, num_threads=1, config=SHORT) for k, p in policies.items()}
     for chunk in (4, 10, 7):
-        runs, info = distributed.run_policies(policies, 10, seed=accd_gym.evaluation.EVAL_BASE_SEED, wake_seeds=WAKE,
+        runs, info = distributed.run_policies(policies, 10, seed=accd_gym.evals.episodes.EVAL_BASE_SEED, wake_seeds=WAKE,
                                               num_envs=4, config=SHORT, chunk=chunk)
         for k in policies:
             _same(local[k], runs[k])
@@ -120,7 +120,7 @@ def test_distributed_evaluation_equals_local_whatever_the_tasks(cluster, tmp_pat
 def test_a_lost_worker_is_retried_and_counted_once(cluster, tmp_path):
     marker = tmp_path / "crashed"
     local = run_episodes(GuidancePolicy(), 8, wake_seeds=WAKE, num_envs=4, num_threads=1, config=SHORT)
-    runs, info = distributed.run_policies({"g": GuidancePolicy()}, 8, seed=accd_gym.evaluation.EVAL_BASE_SEED,
+    runs, info = distributed.run_policies({"g": GuidancePolicy()}, 8, seed=accd_gym.evals.episodes.EVAL_BASE_SEED,
                                           wake_seeds=WAKE, num_envs=4, config=SHORT, chunk=4, crash_marker=str(marker))
     assert marker.is_file()  # one task's worker process died after running its episodes
     _same(local, runs["g"])
@@ -176,7 +176,7 @@ def test_rllib_ppo_trains_two_iterations_then_evaluates_like_an_sb3_run(cluster,
     assert a.shape == (4, 4) and np.all(np.abs(a) <= 1)
     # Evaluated locally and through Ray: the same episodes.
     local = run_episodes(policy, 6, wake_seeds=WAKE, num_envs=4, num_threads=1, config=SHORT)
-    runs, _ = distributed.run_policies({"rl": policy}, 6, seed=accd_gym.evaluation.EVAL_BASE_SEED, wake_seeds=WAKE,
+    runs, _ = distributed.run_policies({"rl": policy}, 6, seed=accd_gym.evals.episodes.EVAL_BASE_SEED, wake_seeds=WAKE,
                                        num_envs=4, config=SHORT, chunk=4)
     _same(local, runs["rl"])
     from accd_gym.cli import main

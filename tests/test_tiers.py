@@ -46,7 +46,7 @@ def test_tier_tables_are_generated_from_the_declaration():
     doc = (Path(__file__).resolve().parents[1] / "docs" / "environment.md").read_text()
     section = re.search(r"<!-- generated: accd_gym.tiers.tiers_markdown\(\) -->\n(.*?)\n<!-- end generated -->", doc, re.S)
     assert section and section.group(1) == tiers_markdown()
-    assert tiers_markdown() in accd_gym.tiers.__doc__
+    assert tiers_markdown() in accd_gym.envs.tiers.__doc__
     for t in TIERS.values():
         assert f"`{t.id}`" in tiers_markdown()
     # A tier's rows name what it changes, with the nominal value beside it.

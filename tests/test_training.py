@@ -25,7 +25,7 @@ def _obs(n=3, rel=(0.0, 0.0, 0.0)):
 
 @pytest.mark.parametrize("name", sorted(BASELINES))
 def test_baselines_give_bounded_actions_of_the_right_shape(name):
-    policy = accd_gym.baselines.make_baseline(name, seed=3)
+    policy = accd_gym.control.baselines.make_baseline(name, seed=3)
     obs = np.random.default_rng(0).uniform(-1, 1, (5, 25)).astype(np.float32)
     quat = observation_indices("quat_w", "quat_x", "quat_y", "quat_z")
     obs[:, quat] /= np.linalg.norm(obs[:, quat], axis=1, keepdims=True)

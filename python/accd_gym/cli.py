@@ -20,10 +20,10 @@ def _settle(args: argparse.Namespace) -> int:
 
 
 def _study(args: argparse.Namespace) -> int:
-    from accd_gym.studies import study
+    from accd_gym.studies import runner
 
     out = Path(args.out)
-    docs = study.run(args.studies, out, progress=not args.quiet, dpi=args.dpi)
+    docs = runner.run(args.studies, out, progress=not args.quiet, dpi=args.dpi)
     for name, doc in docs.items():
         print(f"{name}: wrote {', '.join(str(out / f) for f in doc['figures'])}, {out / (name + '.json')}, {out / (name + '.md')}")
     if len(docs) > 1:

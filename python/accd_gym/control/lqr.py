@@ -69,7 +69,7 @@ import numpy as np
 
 from accd_gym import _core
 from accd_gym.errors import ConfigError
-from accd_gym.envs.task import ACT_DIM, OBS_DIM, OBSERVATION_SCALE, observation_indices
+from accd_gym.envs.task import ACT_DIM, OBS_DIM, OBSERVATION_SCALE, check_observations, observation_indices
 
 
 def linearize(config: Optional[Mapping[str, Any]] = None, **overrides: Any) -> "_core.Linearization":
@@ -345,9 +345,7 @@ class LqrPolicy:
 
     def predict(self, obs: Any) -> np.ndarray:
         """Flap commands (N, 4) in [-1, 1] for observations (N, 25); advances the estimates."""
-        from accd_gym.control.baselines import _check_obs
-
-        o = _check_obs(obs)
+        o = check_observations(obs)
         d = self.design
         n_env = o.shape[0]
         if self._z is None or self._z.shape[0] != n_env:

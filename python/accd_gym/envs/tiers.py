@@ -1,5 +1,5 @@
 """The benchmark's task tiers: registered gymnasium ids, each a named set of configuration
-overrides on the nominal task, declared once in :data:`TIERS`.
+overrides on the nominal task, declared once in :data:`TIERS` (:mod:`accd_gym.envs.overrides`).
 
 {TIER_TABLES}
 
@@ -14,123 +14,12 @@ changes its episodes gets a new version (``-v1``); the old one stays registered 
 
 from __future__ import annotations
 
-import copy
-from dataclasses import dataclass, field
 from typing import Any, Mapping, Optional
 
-from accd_gym.envs.config import SENSORS_TIER
-from accd_gym.errors import ConfigError
-
-
-@dataclass(frozen=True)
-class Tier:
-    """One benchmark tier: its gymnasium id, what it stands for, and its configuration overrides
-    on the nominal task (sections as dicts, merged with the defaults like any keyword argument)."""
-
-    name: str
-    id: str
-    summary: str
-    overrides: Mapping[str, Any] = field(default_factory=dict)
-
-    def config(self, **overrides: Any) -> dict[str, Any]:
-        """The tier's overrides with ``overrides`` merged in section by section (a copy)."""
-        return merge(self.overrides, overrides)
-
-
-def merge(base: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict[str, Any]:
-    """``base`` with ``overrides`` merged in: a dict value merges into the base's dict at that
-    key (recursively), anything else replaces it. Copies; neither argument is changed."""
-    out = copy.deepcopy(dict(base))
-    for key, value in overrides.items():
-        if isinstance(value, Mapping) and isinstance(out.get(key), Mapping):
-            out[key] = merge(out[key], value)
-        else:
-            out[key] = copy.deepcopy(value)
-    return out
-
-
-#: The sensor suite of the sensors and hard tiers (``sensors`` section, docs/environment.md): the
-#: recommended suite :data:`accd_gym.config.SENSORS_TIER` (60 ms vision latency, 10 % dropouts).
-SENSORS: dict[str, Any] = copy.deepcopy(SENSORS_TIER)
-
-#: Formation uncertainty of the sensors, randomized and hard tiers: the boom's initial formation
-#: offset spread over +-8 m laterally and vertically (nominal +-3 m), so that a passive ACCD is met
-#: by the drifting boom less often (zero flaps on 200 training episodes of the randomized tier:
-#: 15 % at +-3 m, 10.5 % at +-6 m, 8 % at +-8 m; the tuned guidance controller 100 % at each).
-_FORMATION: dict[str, Any] = {"boom": {"initial_spread": [2.0, 8.0, 8.0]}}
-
-#: The precision scenario's soft capture: a 0.3 m radius, at most 1 m/s closing speed.
-_SOFT_CAPTURE: dict[str, Any] = {"boom": {"capture_radius": 0.3, "max_closing_speed": 1.0}}
-#: The precision scenario (design notes, item 14): the soft capture in severe ambient turbulence.
-_PRECISION: dict[str, Any] = merge({"turbulence": {"ambient": "severe"}}, _SOFT_CAPTURE)
-
-#: Randomized physics at the documented default ranges (crates/sim/src/randomization.rs), written
-#: out so that a change of the code's defaults cannot change the tier.
-_RANDOMIZATION: dict[str, Any] = {
-    "enabled": True,
-    "tether_length": [150.0, 300.0],
-    "tether_diameter": [0.016, 0.032],
-    "accd_mass": [40.0, 60.0],
-    "force_coefficient_scale": [0.85, 1.15],
-    "moment_coefficient_scale": [0.8, 1.2],
-    "wake_alpha_deg": [0.0, 8.0],
-    "wake_strength": [0.7, 1.3],
-    "airspeed": [170.0, 200.0],
-    "ambient_sigma_mps": [0.0, 2.8],
-}
-_RANDOMIZED: dict[str, Any] = merge({"randomization": _RANDOMIZATION}, _FORMATION)
-
-TIERS: dict[str, Tier] = {
-    t.name: t
-    for t in (
-        Tier(
-            "nominal",
-            "accd_gym/InAirCapture-v0",
-            "the mission's nominal case: 8 deg wake with its turbulence, perfect full-state "
-            "observations, the paper's tether and ACCD",
-        ),
-        Tier(
-            "precision",
-            "accd_gym/InAirCapturePrecision-v0",
-            "a soft capture in severe turbulence: MIL-F-8785C severe ambient turbulence (7 m/s), "
-            "a 0.3 m capture radius and a 1 m/s closing-speed limit",
-            _PRECISION,
-        ),
-        Tier(
-            "sensors",
-            "accd_gym/InAirCaptureSensors-v0",
-            "the nominal physics seen through sensors: a vision sensor for the boom (range-"
-            "dependent noise, 20 Hz, 60 ms latency, 10 % dropouts in bursts), IMU/AHRS noise and "
-            "bias, GNSS and load-cell noise; the formation uncertain by +-8 m",
-            merge({"sensors": SENSORS}, _FORMATION),
-        ),
-        Tier(
-            "randomized",
-            "accd_gym/InAirCaptureRandomized-v0",
-            "randomized physics per episode from its wake seed: tether length and diameter, ACCD "
-            "mass and aerodynamics, wake angle and strength, towing speed, ambient turbulence; the "
-            "formation uncertain by +-8 m",
-            _RANDOMIZED,
-        ),
-        Tier(
-            "hard",
-            "accd_gym/InAirCaptureHard-v0",
-            "everything at once: the precision scenario's soft capture, sensors, randomized "
-            "physics with light to severe ambient turbulence",
-            merge(
-                merge(_SOFT_CAPTURE, _RANDOMIZED),
-                {"sensors": SENSORS, "randomization": {"ambient_sigma_mps": [1.7, 7.0]}},
-            ),
-        ),
-    )
-}
-
-
-def tier(name: str) -> Tier:
-    """The tier ``name`` (one of :data:`TIERS`); ConfigError naming the tiers otherwise."""
-    if not isinstance(name, str) or name not in TIERS:
-        raise ConfigError(f"invalid config: `tier` = {name!r} is outside the allowed values: one of {', '.join(TIERS)}")
-    return TIERS[name]
+from accd_gym import _core
+from accd_gym.envs.config import default_config, env_config
+from accd_gym.envs.overrides import SENSORS, TIERS, Tier, merge, tier
+from accd_gym.envs.task import episode_steps
 
 
 def _flatten(d: Mapping[str, Any], prefix: str = "") -> list[tuple[str, Any]]:
@@ -148,9 +37,6 @@ def differences(name: str) -> list[tuple[str, Any, Any, str, str]]:
     """What tier ``name`` sets differently from the nominal task: ``(dotted key, value, nominal
     default, unit, description)`` per key, from the tier's declaration and the Rust field
     declarations."""
-    from accd_gym import _core
-    from accd_gym.envs.config import default_config
-
     fields = {key: (unit, description) for key, unit, _, description, _, _ in _core.config_fields()}
     defaults = default_config()
     rows = []
@@ -186,9 +72,6 @@ def tiers_markdown() -> str:
 
 
 def _episode_steps(t: Tier) -> int:
-    from accd_gym.envs.config import env_config
-    from accd_gym.envs.task import episode_steps
-
     return episode_steps(env_config(t.overrides))
 
 

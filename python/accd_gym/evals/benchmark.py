@@ -198,7 +198,7 @@ def _episode_record(eps: Sequence[Any]) -> dict[str, Any]:
 
 def evaluate_policy(policy: Any, tier: str, episodes: int, num_envs: int, num_threads: int = 0) -> dict[str, Any]:
     """``policy`` on the tier's first ``episodes`` held-out episodes: the per-episode record."""
-    from accd_gym.evals.evaluation import run_episodes
+    from accd_gym.evals.episodes import run_episodes
     from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS
 
     eps = run_episodes(policy, episodes, wake_seeds=list(HELD_OUT_WAKE_SEEDS[:episodes]), num_envs=num_envs,
@@ -259,7 +259,7 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
     else starts the run afresh."""
     from accd_gym.learning import training
     from accd_gym.envs.config import read_json_object
-    from accd_gym.evals.evaluation import load_policy
+    from accd_gym.evals.policies import load_policy
 
     run = Path(out) / "runs" / job.name
     key = job_key(job, episodes, num_envs)

@@ -101,7 +101,7 @@ def _run_part(
     lost worker would, so Ray must retry it."""
     import ray
 
-    from accd_gym.evals.evaluation import run_episode_range
+    from accd_gym.evals.episodes import run_episode_range
 
     t0 = time.perf_counter()
     policy = copy.deepcopy(policy)  # Ray hands arguments over read-only; the policy keeps per-env state

@@ -185,7 +185,9 @@ def _trial(params: dict[str, Any]) -> None:
     from ray import tune
 
     from accd_gym.learning import rllib, training
-    from accd_gym.evals.evaluation import load_policy, run_episodes, summarize
+    from accd_gym.evals.episodes import run_episodes
+    from accd_gym.evals.evaluation import summarize
+    from accd_gym.evals.policies import load_policy
     from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS
 
     sweep, point, seed = params["sweep"], params["point"], params["seed"]

@@ -504,7 +504,7 @@ def write_evaluation_replays(spec: str, label: str, episodes: Any, count: int, o
     records the :func:`pick_episodes` ones and writes ``out/<label>/<pick>_ep<k>.html`` and
     ``.npz``. Checks that each recording reproduces the evaluation's outcome and steps. Returns
     one entry per page (pick, episode, outcome, miss distance, files)."""
-    from accd_gym.evals.evaluation import load_policy
+    from accd_gym.evals.policies import load_policy
     from accd_gym.replays.recording import record_episodes
 
     picks = pick_episodes(episodes, count)
@@ -538,7 +538,7 @@ def run_replay(policy: str, episodes: int, out: str | Path, *, seed: Optional[in
     run unrecorded) and writes per episode ``episode_<k>.npz``,
     ``episode_<k>.html`` and, on request, ``episode_<k>.mp4`` and ``episode_<k>.png`` (a screenshot
     of the page at the capture or the closest approach, by headless Chromium). Returns one entry per episode."""
-    from accd_gym.evals.evaluation import load_policy
+    from accd_gym.evals.policies import load_policy
     from accd_gym.replays.recording import iter_recordings
 
     loaded = load_policy(policy, seed=0, allow_unnormalized=allow_unnormalized, config=config)
