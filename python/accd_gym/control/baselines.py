@@ -1,7 +1,7 @@
 """Built-in baseline policies: zero flaps, random flaps, a classical guidance controller and an
-LQR with a disturbance observer (:class:`accd_gym.lqr.LqrPolicy`, designed for the env's config).
+LQR with a disturbance observer (:class:`accd_gym.control.lqr.LqrPolicy`, designed for the env's config).
 
-Every policy here (and :class:`accd_gym.evaluation.SB3Policy`) has the same interface:
+Every policy here (and :class:`accd_gym.evals.evaluation.SB3Policy`) has the same interface:
 ``predict(obs_batch) -> actions`` with ``obs_batch`` of shape (N, 25) (the observation of
 :class:`accd_gym.InAirCaptureEnv`) and actions of shape (N, 4) in [-1, 1] (flaps right, left,
 top, bottom); ``reset(mask)`` clears the internal state of the envs whose episode just ended
@@ -54,7 +54,7 @@ class RandomPolicy:
     """Uniform random flap commands in [-1, 1], drawn from seeded numpy generators.
 
     Outside an evaluation one generator (``seed``) draws every row. In an evaluation
-    (:func:`accd_gym.evaluation.run_episode_range` calls :meth:`start_episodes`) each episode
+    (:func:`accd_gym.evals.evaluation.run_episode_range` calls :meth:`start_episodes`) each episode
     ``k`` draws from its own generator seeded ``(seed, k)``, so its actions do not depend on
     which env of which batch runs it.
     """
@@ -205,7 +205,7 @@ class GuidancePolicy:
 
 
 def _lqr(config: Any) -> Any:
-    """The LQR baseline designed for ``config`` (:meth:`accd_gym.lqr.LqrPolicy.for_config`)."""
+    """The LQR baseline designed for ``config`` (:meth:`accd_gym.control.lqr.LqrPolicy.for_config`)."""
     from accd_gym.control.lqr import LqrPolicy
 
     return LqrPolicy.for_config(config)

@@ -66,7 +66,7 @@ def valid_config(
 ) -> _core.EnvConfig:
     """The validated configuration object the envs are built from (``accd_gym._core.EnvConfig``):
     ``config`` and keyword overrides merged (over the overrides of a benchmark tier named by the
-    key ``tier``, :mod:`accd_gym.tiers`, section by section), a string ``tether`` taken as a preset, a user
+    key ``tier``, :mod:`accd_gym.envs.tiers`, section by section), a string ``tether`` taken as a preset, a user
     aerodynamic table given by path replaced by its contents (with ``self_contained_tables``, so
     that pickles and saved states need no file), then sent to the core as one JSON document and
     validated there once. The envs take it as it is; ``.to_json()`` gives it back. Picklable.

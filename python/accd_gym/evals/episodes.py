@@ -91,7 +91,7 @@ def run_episode_range(
     vector env (:meth:`~accd_gym.InAirCaptureVectorEnv.start_episode` starts the next episode in
     whichever env finished), and an env with no episode left runs a repeat of its last one,
     whose result is dropped, so the policy always sees batches of exactly ``batch`` rows. A
-    split of the index range into parts (:mod:`accd_gym.distributed`) therefore gives the same
+    split of the index range into parts (:mod:`accd_gym.evals.distributed`) therefore gives the same
     episodes bit for bit, provided each part uses the same ``batch`` and the policy's action for
     a row depends on that row alone at a fixed batch size: true of the baselines (``random``
     draws from a stream per episode index) and, as measured here, of PyTorch's MLPs on CPU

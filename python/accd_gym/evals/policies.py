@@ -149,7 +149,7 @@ def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False, c
     (``training/guidance_tuning*.json``: the guidance controller with its winning gains;
     ``training/lqr_tuning.json``: the LQR with its winning tuning) or a model path (see
     :class:`SB3Policy` for ``allow_unnormalized``; an RLlib run or checkpoint folder gives an
-    :class:`accd_gym.rllib.RLlibPolicy`). ``config``: the env configuration (overrides) the
+    :class:`accd_gym.learning.rllib.RLlibPolicy`). ``config``: the env configuration (overrides) the
     policy will run on; the LQR is designed for it."""
     from accd_gym.control.baselines import BASELINES, guidance_from_tuning, make_baseline
 

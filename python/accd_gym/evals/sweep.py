@@ -4,7 +4,7 @@
 Tune trial per training seed (times each point of an optional grid), each training with either
 trainer (the ``train_config`` decides: a stable-baselines3 config, or an RLlib one with
 ``"trainer": "rllib"``), then evaluating its final model on the first ``episodes`` held-out
-wake seeds (:func:`accd_gym.evaluation.run_episodes`, the episodes every trial shares). The
+wake seeds (:func:`accd_gym.evals.evaluation.run_episodes`, the episodes every trial shares). The
 same command runs on one machine (``"ray_address": "local"``) and on a cluster (``"auto"`` or
 ``HOST:PORT``): Tune places the trials.
 

@@ -27,7 +27,7 @@ num_envs_per_env_runner  envs of each runner's native vector env
 num_threads        threads stepping each runner's envs (default 1)
 torch_threads      threads PyTorch uses in the driver (learner) (default 1)
 seed               base seed (see above) and RLlib's ``debugging(seed=...)``
-env                environment config overrides (see :mod:`accd_gym.config`)
+env                environment config overrides (see :mod:`accd_gym.envs.config`)
 algo_kwargs        keyword arguments of ``PPOConfig.training`` (``lr``, ``gamma``, ``lambda_``,
                    ``clip_param``, ``entropy_coeff``, ``train_batch_size_per_learner``,
                    ``minibatch_size``, ``num_epochs``, ``vf_loss_coeff``, ``grad_clip``...)

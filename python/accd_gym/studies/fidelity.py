@@ -1,9 +1,9 @@
-"""Fidelity past the paper (issue 18, items 3-5): Fig. 9 reproduced, the tension under both
+"""Fidelity past the paper: Fig. 9 reproduced, the tension under both
 elasticities, and the sweeps behind the two open claims of ``docs/paper-reproduction.md``.
 
 Run by ``accd-gym study fig9`` (part of ``all``), ``accd-gym study tension`` and ``accd-gym study
 sweep`` (both longer, not part of ``all``). Each writes a PNG, ``<study>.json`` and ``<study>.md``
-like the other studies (:mod:`accd_gym.study`). SI units in the towing-aircraft frame (x forward,
+like the other studies (:mod:`accd_gym.studies.study`). SI units in the towing-aircraft frame (x forward,
 z down) unless a name says otherwise.
 
 **Fig. 9 (paper 2.3.6).** Table 1's 10 m chain (n = 4, m_tot = 5 kg, k = 10 000 N/m, c1 = 20 N m s/kg
@@ -173,7 +173,7 @@ def fig9_closed_forms() -> dict[str, float]:
 
 def run_fig9(out_dir: Path, dpi: int = 90, duration_s: float = FIG9_DURATION_S) -> tuple[dict[str, Any], str]:
     """Runs Fig. 9 (both cases, every model), plots it side by side as the paper does, and returns
-    (the JSON document, the markdown) for :func:`accd_gym.study.run_study` to write."""
+    (the JSON document, the markdown) for :func:`accd_gym.studies.study.run_study` to write."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -269,7 +269,7 @@ def fig9_verdict(results: dict[str, dict[str, Any]]) -> str:
 
 
 # ----------------------------------------------------------------------------------------------
-# Item 4: the tension under both elasticities
+# The tension under both elasticities
 
 
 @dataclass(frozen=True)
@@ -330,7 +330,7 @@ CAPTURE_RUNS = (
 
 
 def guidance_episode(seed: int = CAPTURE_SEED) -> dict[str, Any]:
-    """One episode of the default env flown by :class:`accd_gym.baselines.GuidancePolicy`: its
+    """One episode of the default env flown by :class:`accd_gym.control.baselines.GuidancePolicy`: its
     flap commands (deg, shape (k, 4), one per agent step), agent step (s), wake seed, the peak
     attachment tension per agent step (N) and whether it captured."""
     import gymnasium as gym
@@ -415,7 +415,7 @@ def tension_ratios(max_runs: dict[str, Any], cap_runs: dict[str, Any]) -> dict[s
 
 
 def run_tension(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[dict[str, Any], str]:
-    """Item 4: the maximum-tension case (:func:`accd_gym.study.simulate_max_tension`) and one
+    """The maximum-tension case (:func:`accd_gym.studies.study.simulate_max_tension`) and one
     capture episode's tension (:func:`replay_capture`) under both elasticities, the peak ratios,
     and what they say about the paper's factor of safety of 3. Writes ``tension.png``."""
     import time as clock
@@ -538,7 +538,7 @@ def run_tension(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[di
 
 
 # ----------------------------------------------------------------------------------------------
-# Item 5: sweeps over readings of the paper behind the two open claims
+# Sweeps over readings of the paper behind the two open claims
 
 
 #: The paper's numbers for Fig. 14 count as reproduced within this fraction (read off a figure:
@@ -563,7 +563,7 @@ class TensionReading:
     pre_stretched: bool
 
     def case(self) -> Any:
-        """The :class:`accd_gym.study.MaxTensionCase` of this reading."""
+        """The :class:`accd_gym.studies.study.MaxTensionCase` of this reading."""
         from accd_gym.studies import study
 
         base = study.MaxTensionCase()
@@ -751,7 +751,7 @@ def sweep_settling(progress: bool = False) -> list[dict[str, Any]]:
 
 
 def run_sweep(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[dict[str, Any], str]:
-    """Item 5: both sweeps (:func:`sweep_settling`, :func:`sweep_max_tension`); writes
+    """Both sweeps (:func:`sweep_settling`, :func:`sweep_max_tension`); writes
     ``sweep.png`` (settling times of 150 m against 300 m per reading, and mean / peak tension per
     reading against the paper's)."""
     import matplotlib
@@ -856,7 +856,7 @@ def run_sweep(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[dict
 
 def run_study(study: str, out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[dict[str, Any], str]:
     """Runs ``fig9``, ``tension`` or ``sweep`` into ``out_dir`` (its PNGs); returns (the JSON
-    document, the markdown) for :func:`accd_gym.study.run_study` to write."""
+    document, the markdown) for :func:`accd_gym.studies.study.run_study` to write."""
     if study == "fig9":
         return run_fig9(out_dir, dpi=dpi)
     if study == "tension":

@@ -54,8 +54,8 @@ the towed cruise equilibrium (tension = RLV drag) and steps the thrust to maximu
 own small share), and the step makes the RLV's mass ring on the tether's axial spring
 (``sqrt(k / m_RLV)``, about 1.4 rad/s). The air stays at 185 m/s (the speed gained over the window
 changes only the tether's own drag, about 1 % of the tension). At several hundred kN the tether's
-stiffest transverse mode is beyond RK4's stability limit at 0.01 s; the tether now substeps such
-steps automatically (issue 13), so 0.01 s runs too and agrees with :data:`MAX_TENSION_TIME_STEP_S`
+stiffest transverse mode is beyond RK4's stability limit at 0.01 s; the tether substeps such
+steps automatically, so 0.01 s runs too and agrees with :data:`MAX_TENSION_TIME_STEP_S`
 (kept, and giving the same tensions as 0.0025 s) to 1e-7 in the peak. :func:`max_tension_readings` lists what other readings of the paper would give.
 """
 
@@ -122,7 +122,7 @@ PAPER_MAX_TENSION_MEAN_N = 125e3
 PAPER_MAX_TENSION_PEAK_N = 225e3
 
 STUDIES = ("material", "length", "diameter", "selected", "max-tension", "fig9")
-#: Longer studies, run by name only (not by ``all``): :mod:`accd_gym.fidelity`.
+#: Longer studies, run by name only (not by ``all``): :mod:`accd_gym.studies.fidelity`.
 EXTRA_STUDIES = ("tension", "sweep")
 
 
