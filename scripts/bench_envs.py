@@ -100,7 +100,7 @@ def side_by_side(n: int, seconds: float, threads: int, rounds: int = 20) -> dict
     machine other load only ever slows a round, so short rounds and the best of many), all with
     the criterion benchmark's fixed actions."""
     from accd_gym import _core
-    from accd_gym.config import valid_config
+    from accd_gym.envs.config import valid_config
 
     actions = _criterion_actions(n)
     rust = _core.BatchEnv(valid_config(dict(CONFIG)), n, 0, "same_step", threads)

@@ -29,8 +29,8 @@ def _eval_child(workers: int, episodes: int, policy: str) -> dict:
     code = f"""
 import json, time
 import accd_gym
-from accd_gym.evaluation import load_policy, run_episodes, summarize
-from accd_gym import distributed
+from accd_gym.evals.evaluation import load_policy, run_episodes, summarize
+from accd_gym.evals import distributed
 seeds = list(accd_gym.HELD_OUT_WAKE_SEEDS[:{episodes}])
 policy = load_policy({policy!r})
 if {workers} == 0:
@@ -40,7 +40,7 @@ if {workers} == 0:
 else:
     distributed.connect("local", num_cpus={workers})
     t = time.perf_counter()
-    runs, info = distributed.run_policies({{"p": policy}}, {episodes}, seed=accd_gym.evaluation.EVAL_BASE_SEED,
+    runs, info = distributed.run_policies({{"p": policy}}, {episodes}, seed=accd_gym.evals.episodes.EVAL_BASE_SEED,
                                           wake_seeds=seeds, num_envs=16)
     wall, eps = time.perf_counter() - t, runs["p"]
 s = summarize(eps)

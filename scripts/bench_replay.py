@@ -2,9 +2,9 @@
 episodes (neutral flaps, 2 threads, best of 3), a 70 s episode's page, MP4 and .npz, and one
 headless-Chromium screenshot. Prints one line each. Usage: python scripts/bench_replay.py"""
 import time, os
-from accd_gym.evaluation import run_episodes, load_policy
-from accd_gym.recording import record_episodes
-from accd_gym.replay import write_replay, write_video
+from accd_gym.evals.evaluation import run_episodes, load_policy
+from accd_gym.replays.recording import record_episodes
+from accd_gym.replays.replay import write_replay, write_video
 def best(f, n=3):
     ts=[]
     for _ in range(n):
@@ -21,5 +21,5 @@ print(f"write_replay {r.steps} steps: {tw:.2f} s, {os.path.getsize('/tmp/br/benc
 tv,_=best(lambda: write_video(r, "/tmp/br/bench.mp4"), 1)
 print(f"write_video {r.steps+1} frames: {tv:.2f} s ({(r.steps+1)/tv:.0f} frames/s), {os.path.getsize('/tmp/br/bench.mp4')/1e6:.2f} MB")
 t=time.perf_counter(); r.save("/tmp/br/bench.npz"); print(f"save npz {time.perf_counter()-t:.2f} s, {os.path.getsize('/tmp/br/bench.npz')/1e6:.2f} MB")
-from accd_gym.replay import screenshot_replay
+from accd_gym.replays.replay import screenshot_replay
 t=time.perf_counter(); e=screenshot_replay("/tmp/br/bench.html", "/tmp/br/bench.png"); print(f"screenshot (browser start, load, render): {time.perf_counter()-t:.1f} s errors={e}")

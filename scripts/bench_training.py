@@ -31,7 +31,7 @@ def _zero_env(num_envs: int):
     """A VecEnv with our spaces whose step costs nothing (constant observations, zero reward)."""
     from stable_baselines3.common.vec_env import VecEnv
 
-    from accd_gym.task import action_space, observation_space
+    from accd_gym.envs.task import action_space, observation_space
 
     class ZeroVecEnv(VecEnv):
         """Constant observations, zero rewards, episodes of 700 steps."""
@@ -82,8 +82,8 @@ def run(timesteps: int, env_config: dict, torch_threads: int, num_threads: int, 
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    from accd_gym.sb3 import AccdVecEnv
-    from accd_gym.training import _policy_kwargs, _thread_split, load_config
+    from accd_gym.envs.sb3 import AccdVecEnv
+    from accd_gym.learning.training import _policy_kwargs, _thread_split, load_config
 
     cfg = load_config("training/ppo.json")
     if update_threads is None:

@@ -18,10 +18,10 @@ import json
 
 import numpy as np
 
-from accd_gym.baselines import GuidancePolicy
-from accd_gym.evaluation import EVAL_BASE_SEED
-from accd_gym.sb3 import AccdVecEnv
-from accd_gym.task import EVENT_NAMES, HELD_OUT_WAKE_SEEDS, OBSERVATION_INDEX, OBSERVATION_SCALE
+from accd_gym.control.baselines import GuidancePolicy
+from accd_gym.evals.evaluation import EVAL_BASE_SEED
+from accd_gym.envs.sb3 import AccdVecEnv
+from accd_gym.envs.task import EVENT_NAMES, HELD_OUT_WAKE_SEEDS, OBSERVATION_INDEX, OBSERVATION_SCALE
 
 POSITION = [OBSERVATION_INDEX[k] for k in ("accd_dx", "accd_dy", "accd_dz")]
 SCALE = OBSERVATION_SCALE["accd_dx"]

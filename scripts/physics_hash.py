@@ -22,7 +22,7 @@ import pathlib
 import numpy as np
 
 import accd_gym
-from accd_gym.baselines import GuidancePolicy
+from accd_gym.control.baselines import GuidancePolicy
 
 # The exact air scheme, the default until the fast one became it (BENCHMARKS.md, "the fast air
 # scheme"): its hashes are the ones recorded at a3be75f for the default and precision configs.

@@ -8,8 +8,8 @@ import re
 import sys
 from pathlib import Path
 
-from accd_gym.config import config_table_markdown
-from accd_gym.tiers import tiers_markdown
+from accd_gym.envs.config import config_table_markdown
+from accd_gym.envs.tiers import tiers_markdown
 
 GENERATORS = {
     "accd_gym.config.config_table_markdown()": config_table_markdown,

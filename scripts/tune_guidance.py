@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from accd_gym.baselines import GuidancePolicy
-from accd_gym.evaluation import run_episodes, summarize
-from accd_gym.task import TRAINING_WAKE_SEEDS
+from accd_gym.control.baselines import GuidancePolicy
+from accd_gym.evals.evaluation import run_episodes, summarize
+from accd_gym.envs.task import TRAINING_WAKE_SEEDS
 
 GRID = {"kp": [0.08, 0.15, 0.25], "kd": [0.15, 0.25, 0.4], "ki": [0.0, 0.02, 0.05], "kq": [0.05]}
 

@@ -19,9 +19,9 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from accd_gym.evaluation import run_episodes, summarize
-from accd_gym.lqr import LqrPolicy, LqrTuning
-from accd_gym.task import TRAINING_WAKE_SEEDS
+from accd_gym.evals.evaluation import run_episodes, summarize
+from accd_gym.control.lqr import LqrPolicy, LqrTuning
+from accd_gym.envs.task import TRAINING_WAKE_SEEDS
 
 GRID = {"q_velocity": [0.3, 1.0, 3.0], "r_flap": [0.3, 1.0, 3.0]}
 FIRST_SEED = 2000

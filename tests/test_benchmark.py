@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from accd_gym import ConfigError, benchmark
+from accd_gym import ConfigError
+from accd_gym.evals import benchmark
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -92,7 +93,7 @@ def test_quick_benchmark_runs_the_whole_pipeline(tmp_path, monkeypatch):
     assert doc["tiers"]["nominal"]["policies"]["zero"]["rate"] == sum(zero) / len(zero)
     # Every policy of a tier met the same episodes: the baselines' outcomes per episode are those
     # a fresh evaluation gives.
-    from accd_gym.baselines import ZeroPolicy
+    from accd_gym.control.baselines import ZeroPolicy
 
     again = benchmark.evaluate_policy(ZeroPolicy(), "nominal", cfg["episodes"], cfg["num_envs"])
     assert again["captured"] == zero
@@ -101,7 +102,7 @@ def test_quick_benchmark_runs_the_whole_pipeline(tmp_path, monkeypatch):
 
     # Resumable: a rerun into the same folder reuses every finished job (training is not called)
     # and reports the same episodes; a job whose key differs (other episodes) is run afresh.
-    from accd_gym import training
+    from accd_gym.learning import training
 
     def no_training(*_a, **_k):
         raise AssertionError("a finished job was trained again")
@@ -119,7 +120,7 @@ def test_quick_benchmark_runs_the_whole_pipeline(tmp_path, monkeypatch):
 def test_an_interrupted_job_continues_from_its_checkpoint(tmp_path, monkeypatch):
     # No training runs here: training.train and training.resume are replaced by probes that
     # record which one run_job chose.
-    from accd_gym import training
+    from accd_gym.learning import training
 
     class Chosen(Exception):
         pass
@@ -157,7 +158,7 @@ def test_a_job_with_a_cpu_budget_keeps_its_gradient_updates_within_it(tmp_path, 
     """A recipe's ``update_threads`` (2 here) is capped at a Ray job's ``cpus_per_job``; without a
     budget (num_threads 0, one process on the machine) the recipe's value stands."""
     import dataclasses
-    from accd_gym import training
+    from accd_gym.learning import training
 
     class Chosen(Exception):
         pass

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from accd_gym import settle
+from accd_gym.studies import settle
 from accd_gym.cli import main
 
 

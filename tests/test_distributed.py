@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import accd_gym
-from accd_gym.baselines import GuidancePolicy, RandomPolicy
-from accd_gym.evaluation import run_episode_range, run_episodes
-from accd_gym.sweep import bootstrap_interval, iqm
+from accd_gym.control.baselines import GuidancePolicy, RandomPolicy
+from accd_gym.evals.evaluation import run_episode_range, run_episodes
+from accd_gym.evals.sweep import bootstrap_interval, iqm
 
 SHORT = {"capture_window": 6.0}
 WAKE = list(accd_gym.HELD_OUT_WAKE_SEEDS[:40])
@@ -75,7 +75,7 @@ def test_a_pytorch_mlp_policy_gives_the_same_episodes_whatever_the_split():
     pytest.importorskip("stable_baselines3")
     from stable_baselines3 import PPO
 
-    from accd_gym.sb3 import AccdVecEnv
+    from accd_gym.envs.sb3 import AccdVecEnv
 
     model = PPO("MlpPolicy", AccdVecEnv(4, **SHORT), seed=0, device="cpu", n_steps=8, batch_size=8)
 
@@ -123,7 +123,7 @@ def test_without_ray_everything_else_works_and_ray_options_say_which_extra(tmp_p
     code = f"""
 import sys, json
 sys.modules['ray'] = None  # any `import ray` now raises ModuleNotFoundError
-import accd_gym, accd_gym.distributed, accd_gym.rllib, accd_gym.sweep
+import accd_gym, accd_gym.evals.distributed, accd_gym.learning.rllib, accd_gym.evals.sweep
 from accd_gym.cli import main
 args = ['evaluate', '--policy', 'zero', '--episodes', '2', '--num-envs', '2', '--num-threads', '1',
         '--env', json.dumps({SHORT!r}), '--quiet', '--out', {str(tmp_path / 'e')!r}]

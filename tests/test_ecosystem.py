@@ -38,7 +38,7 @@ def test_zoo_hyperparameters_are_the_training_recipes_for_every_registered_id(al
         assert recipe[key] == value, key
     hyperparams = importlib.import_module(f"accd_gym.zoo.{algo}").hyperparams
     ours = [env_id for env_id in gym.registry if env_id.startswith("accd_gym/")]
-    from accd_gym.tiers import TIERS
+    from accd_gym.envs.tiers import TIERS
 
     assert sorted(hyperparams) == sorted(ours) == sorted(t.id for t in TIERS.values())
     assert all(hyperparams[i] == hyperparams[ENV_ID] for i in ours)  # one recipe for every tier

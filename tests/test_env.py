@@ -15,7 +15,7 @@ import pytest
 from gymnasium.vector import AutoresetMode
 
 import accd_gym
-from accd_gym.task import EVENT_NAMES, OBS_DIM, OBSERVATION_TABLE
+from accd_gym.envs.task import EVENT_NAMES, OBS_DIM, OBSERVATION_TABLE
 
 ENV_ID = "accd_gym/InAirCapture-v0"
 #: Short episodes (2 s = 20 agent steps) and a quick equilibrium, for tests.
@@ -310,7 +310,7 @@ def test_a_diverging_episode_ends_with_a_flag_not_nan():
 def test_environment_doc_carries_the_cores_observation_table():
     from pathlib import Path
 
-    from accd_gym.task import observation_table_markdown
+    from accd_gym.envs.task import observation_table_markdown
 
     doc = (Path(__file__).resolve().parents[1] / "docs" / "environment.md").read_text()
     assert observation_table_markdown() in doc
@@ -324,7 +324,7 @@ def test_config_docs_are_generated_from_the_declarations():
     from pathlib import Path
 
     from accd_gym import _core
-    from accd_gym.config import config_table_markdown, default_config
+    from accd_gym.envs.config import config_table_markdown, default_config
 
     table = config_table_markdown()
     doc = (Path(__file__).resolve().parents[1] / "docs" / "environment.md").read_text()
@@ -361,7 +361,7 @@ def test_the_id_loads_through_gymnasiums_module_syntax():
 
 def test_observation_is_read_by_name():
     """The Python index constants come from the one Rust table; unknown names are refused."""
-    from accd_gym.task import OBSERVATION_INDEX, OBSERVATION_TABLE, observation_indices
+    from accd_gym.envs.task import OBSERVATION_INDEX, OBSERVATION_TABLE, observation_indices
 
     names = [row[0] for row in OBSERVATION_TABLE]
     assert list(observation_indices(*names)) == list(range(len(names)))
@@ -391,8 +391,8 @@ def test_an_env_construction_validates_its_config_once(make):
     """Issue 11: the configuration is validated once per env construction (it used to be eight
     times), from one crossing of the keyword arguments into Rust."""
     from accd_gym import _core
-    from accd_gym.sb3 import AccdVecEnv
-    from accd_gym.vector import InAirCaptureVectorEnv
+    from accd_gym.envs.sb3 import AccdVecEnv
+    from accd_gym.envs.vector import InAirCaptureVectorEnv
 
     kwargs = {"capture_window": 1.0, "initial": {"settle_time": 1.0}}
     before = _core.validation_passes()
@@ -409,7 +409,7 @@ def test_an_env_construction_validates_its_config_once(make):
 def test_the_validated_config_object_pickles_and_compares():
     import pickle
 
-    from accd_gym.config import valid_config
+    from accd_gym.envs.config import valid_config
 
     a = valid_config(capture_window=5.0)
     b = pickle.loads(pickle.dumps(a))

@@ -124,7 +124,7 @@ def test_state_restores_and_env_pickles():
 
 def _reference_info_dict(row: np.ndarray, wake_seed: int) -> dict:
     """The info dict as the Python layer built it before the native builder (the reference)."""
-    from accd_gym.task import EVENT_NAMES, INFO_NAMES
+    from accd_gym.envs.task import EVENT_NAMES, INFO_NAMES
 
     out = {name: (bool(v) if name in EVENT_NAMES else v) for name, v in zip(INFO_NAMES, row.tolist())}
     out["episode_steps"] = int(out["episode_steps"])
@@ -133,7 +133,7 @@ def _reference_info_dict(row: np.ndarray, wake_seed: int) -> dict:
 
 
 def test_native_info_dicts_equal_the_python_construction_in_keys_order_types_and_values():
-    from accd_gym.task import INFO_NAMES, info_dicts
+    from accd_gym.envs.task import INFO_NAMES, info_dicts
 
     rng = np.random.default_rng(5)
     info = rng.normal(0, 1e3, (7, len(INFO_NAMES)))

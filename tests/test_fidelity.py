@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import accd_gym
-from accd_gym import fidelity, study
+from accd_gym.studies import fidelity, runner, study
 
 
 def test_python_tether_takes_the_distributed_elasticity():
@@ -52,7 +52,7 @@ def test_attachment_tether_stretches_are_its_one_element():
 def fig9(tmp_path_factory):
     """`accd-gym study fig9` run once, its JSON as written."""
     folder = tmp_path_factory.mktemp("fig9")
-    study.run(["fig9"], folder, progress=False)
+    runner.run(["fig9"], folder, progress=False)
     return folder, json.loads((folder / "fig9.json").read_text())
 
 
@@ -194,7 +194,7 @@ def test_cli_runs_fig9_and_all_leaves_the_long_studies_out(tmp_path):
     assert main(["study", "fig9", "--out", str(tmp_path), "--quiet"]) == 0
     assert json.loads((tmp_path / "fig9.json").read_text())["cases"]["swing"]["full-k"]["amplitude_m"] > 0
     with pytest.raises(ValueError, match="tension, sweep or all"):
-        study.run(["fig10"], tmp_path)
+        runner.run(["fig10"], tmp_path)
 
 
 def test_tension_and_sweep_studies_write_their_outputs_on_shortened_inputs(tmp_path, monkeypatch):
@@ -211,14 +211,14 @@ def test_tension_and_sweep_studies_write_their_outputs_on_shortened_inputs(tmp_p
     short = {"flap_commands_deg": np.tile([4.0, 4.0, 0.0, 0.0], (5, 1)), "agent_step": 0.1, "wake_seed": 2,
              "peak_tension_N": np.ones(5), "captured": False, "seed": 0}
     monkeypatch.setattr(fidelity, "guidance_episode", lambda seed=0: short)
-    doc = study.run_study("tension", tmp_path, progress=False)
+    doc = runner.run_study("tension", tmp_path, progress=False)
     assert set(doc["peak_ratios"]) == {"max_tension_distributed_over_attachment_n5", "capture_distributed_over_attachment_n5"}
     assert doc["peak_ratios"]["max_tension_distributed_over_attachment_n5"] == pytest.approx(1.0, abs=0.01)
     assert doc["capture"]["runs"]["distributed-n5-dt0.005"]["simulated_s"] == pytest.approx(2.5)
     assert "| distributed-n5-dt0.005 | capture |" in (tmp_path / "tension.md").read_text()
     monkeypatch.setattr(fidelity, "settling_readings", lambda: [fidelity.SettlingReading("relative", "30", "per_mass", 0.35)])
     monkeypatch.setattr(fidelity, "tension_readings", lambda: [fidelity.TensionReading(True, fidelity.TA_MLW_KG, True, True)])
-    doc = study.run_study("sweep", tmp_path, progress=False)
+    doc = runner.run_study("sweep", tmp_path, progress=False)
     (row,) = doc["settling"]
     # The default reading is the study's own: the known deviation, 150 m settling slower.
     assert not row["reproduces_paper"] and row["150m"]["settling_time_s"] > row["300m"]["settling_time_s"]

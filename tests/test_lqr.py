@@ -14,9 +14,9 @@ import pytest
 
 import accd_gym
 from accd_gym import ConfigError
-from accd_gym.evaluation import load_policy, run_episodes, summarize
-from accd_gym.lqr import LqrPolicy, LqrTuning, design, linearize
-from accd_gym.task import OBS_DIM, OBSERVATION_SCALE, TRAINING_WAKE_SEEDS, observation_indices
+from accd_gym.evals.evaluation import load_policy, run_episodes, summarize
+from accd_gym.control.lqr import LqrPolicy, LqrTuning, design, linearize
+from accd_gym.envs.task import OBS_DIM, OBSERVATION_SCALE, TRAINING_WAKE_SEEDS, observation_indices
 
 
 @pytest.fixture(scope="module")
@@ -170,8 +170,8 @@ def test_designs_are_scheduled_by_config_and_cached():
 def test_configurations_with_one_plant_share_one_design(monkeypatch):
     """The capture limits and the turbulence do not enter the linearization: the precision
     tier's design is the nominal one's, designed once; another plant gets its own."""
-    from accd_gym import lqr
-    from accd_gym.tiers import TIERS
+    from accd_gym.control import lqr
+    from accd_gym.envs.tiers import TIERS
 
     monkeypatch.setattr(lqr, "_DESIGNS", {})
     monkeypatch.setattr(lqr, "_PLANT_DESIGNS", {})
@@ -225,7 +225,7 @@ def test_the_policy_pickles_with_its_estimates(policy):
 
 
 def test_evaluate_names_an_lqr_tuning_file_as_lqr(tmp_path):
-    from accd_gym.evaluation import evaluate
+    from accd_gym.evals.evaluation import evaluate
 
     results = evaluate(["training/lqr_tuning.json"], 2, tmp_path, num_envs=2, num_threads=1,
                        config={"capture_window": 1.0}, progress=False)

@@ -24,9 +24,10 @@ ray = pytest.importorskip("ray")
 pytest.importorskip("ray.rllib")
 
 import accd_gym  # noqa: E402
-from accd_gym import distributed, rllib, sweep  # noqa: E402
-from accd_gym.baselines import GuidancePolicy, RandomPolicy  # noqa: E402
-from accd_gym.evaluation import evaluate, load_policy, run_episodes  # noqa: E402
+from accd_gym.evals import distributed, sweep  # noqa: E402
+from accd_gym.learning import rllib  # noqa: E402
+from accd_gym.control.baselines import GuidancePolicy, RandomPolicy  # noqa: E402
+from accd_gym.evals.evaluation import evaluate, load_policy, run_episodes  # noqa: E402
 
 SHORT = {"capture_window": 6.0}
 WAKE = list(accd_gym.HELD_OUT_WAKE_SEEDS[:40])
@@ -95,7 +96,7 @@ def _same(a, b):
 
 def _tiny_sb3_run(tmp_path):
     """A PPO run folder trained for 64 steps (for evaluation through Ray)."""
-    from accd_gym import training
+    from accd_gym.learning import training
 
     cfg = training.validate_config({"algo": "ppo", "total_timesteps": 64, "num_envs": 4, "num_threads": 1, "seed": 1,
                                     "env": SHORT, "algo_kwargs": {"n_steps": 16, "batch_size": 32, "n_epochs": 1},
@@ -109,7 +110,7 @@ def test_distributed_evaluation_equals_local_whatever_the_tasks(cluster, tmp_pat
     policies = {"guidance": GuidancePolicy(), "random": RandomPolicy(0), "ppo": load_policy(str(_tiny_sb3_run(tmp_path)))}
     local = {k: run_episodes(p, 10, wake_seeds=WAKE, num_envs=4, num_threads=1, config=SHORT) for k, p in policies.items()}
     for chunk in (4, 10, 7):
-        runs, info = distributed.run_policies(policies, 10, seed=accd_gym.evaluation.EVAL_BASE_SEED, wake_seeds=WAKE,
+        runs, info = distributed.run_policies(policies, 10, seed=accd_gym.evals.episodes.EVAL_BASE_SEED, wake_seeds=WAKE,
                                               num_envs=4, config=SHORT, chunk=chunk)
         for k in policies:
             _same(local[k], runs[k])
@@ -119,7 +120,7 @@ def test_distributed_evaluation_equals_local_whatever_the_tasks(cluster, tmp_pat
 def test_a_lost_worker_is_retried_and_counted_once(cluster, tmp_path):
     marker = tmp_path / "crashed"
     local = run_episodes(GuidancePolicy(), 8, wake_seeds=WAKE, num_envs=4, num_threads=1, config=SHORT)
-    runs, info = distributed.run_policies({"g": GuidancePolicy()}, 8, seed=accd_gym.evaluation.EVAL_BASE_SEED,
+    runs, info = distributed.run_policies({"g": GuidancePolicy()}, 8, seed=accd_gym.evals.episodes.EVAL_BASE_SEED,
                                           wake_seeds=WAKE, num_envs=4, config=SHORT, chunk=4, crash_marker=str(marker))
     assert marker.is_file()  # one task's worker process died after running its episodes
     _same(local, runs["g"])
@@ -175,7 +176,7 @@ def test_rllib_ppo_trains_two_iterations_then_evaluates_like_an_sb3_run(cluster,
     assert a.shape == (4, 4) and np.all(np.abs(a) <= 1)
     # Evaluated locally and through Ray: the same episodes.
     local = run_episodes(policy, 6, wake_seeds=WAKE, num_envs=4, num_threads=1, config=SHORT)
-    runs, _ = distributed.run_policies({"rl": policy}, 6, seed=accd_gym.evaluation.EVAL_BASE_SEED, wake_seeds=WAKE,
+    runs, _ = distributed.run_policies({"rl": policy}, 6, seed=accd_gym.evals.episodes.EVAL_BASE_SEED, wake_seeds=WAKE,
                                        num_envs=4, config=SHORT, chunk=4)
     _same(local, runs["rl"])
     from accd_gym.cli import main
@@ -273,7 +274,7 @@ def test_two_nodes_on_one_machine_run_the_tasks_and_give_the_same_report(tmp_pat
 def test_benchmark_training_jobs_as_ray_tasks_equal_the_local_run(cluster, tmp_path):
     """`accd-gym benchmark --ray`: the jobs run as Ray tasks (one CPU each) and give the local
     run's results episode for episode (training seeds, thread counts and placement change nothing)."""
-    from accd_gym import benchmark
+    from accd_gym.evals import benchmark
 
     cfg = benchmark.validate_config(
         {"tiers": ["precision"], "learners": {"ppo": {"train_config": "training/ppo.json", "seeds": [0, 1], "timesteps": 512}},

@@ -12,11 +12,11 @@ import pytest
 
 import accd_gym
 from accd_gym import ENV_ID, ConfigError
-from accd_gym.baselines import make_baseline
-from accd_gym.evaluation import run_episodes
-from accd_gym.recording import SAMPLE_FIELDS, STEP_FIELDS, Recording, RecordEpisode, record_episodes
-from accd_gym.render import render_frame
-from accd_gym.task import INFO_NAMES, OBSERVATION_SCALE
+from accd_gym.control.baselines import make_baseline
+from accd_gym.evals.evaluation import run_episodes
+from accd_gym.replays.recording import SAMPLE_FIELDS, STEP_FIELDS, Recording, RecordEpisode, record_episodes
+from accd_gym.envs.render import render_frame
+from accd_gym.envs.task import INFO_NAMES, OBSERVATION_SCALE
 
 SHORT = dict(capture_window=12.0, initial={"settle_time": 20.0})
 FAST = {"wake": {"sampling": "per_step"}, "turbulence": {"normal_sampler": "ziggurat", "lane_streams": "per_lane"}}
@@ -187,7 +187,7 @@ def test_bad_arguments_name_the_field():
 def test_every_public_name_of_the_replay_modules_has_a_docstring():
     import inspect
 
-    from accd_gym import browser, recording, replay
+    from accd_gym.replays import browser, recording, replay
 
     for module in (recording, replay, browser):
         assert inspect.getdoc(module)
@@ -203,7 +203,7 @@ def test_every_public_name_of_the_replay_modules_has_a_docstring():
 def test_format_doc_lists_every_array_as_recorded():
     from pathlib import Path
 
-    from accd_gym.recording import fields_markdown
+    from accd_gym.replays.recording import fields_markdown
 
     doc = (Path(__file__).parents[1] / "docs" / "recording-format.md").read_text()
     table = fields_markdown()

@@ -387,7 +387,7 @@ def test_env_config_errors_name_the_field(overrides, words):
 
 
 def test_a_config_with_a_user_aero_table_can_carry_the_table(tmp_path):
-    from accd_gym.config import self_contained
+    from accd_gym.envs.config import self_contained
 
     path = tmp_path / "table.json"
     path.write_text(accd_gym.default_aero_table_json())

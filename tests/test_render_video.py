@@ -12,7 +12,7 @@ import gymnasium as gym
 
 import accd_gym
 from accd_gym import ENV_ID
-from accd_gym.render import render_frame
+from accd_gym.envs.render import render_frame
 
 pytest.importorskip("moviepy", reason="video recording needs moviepy (the test extra installs it)")
 
@@ -44,7 +44,7 @@ def test_a_frame_shows_every_item_in_its_colour():
     env = accd_gym.InAirCaptureVectorEnv(1, render_mode="rgb_array", **SHORT)
     env.reset(seed=3)
     frame = env.render()[0]
-    from accd_gym.render import COLOURS
+    from accd_gym.envs.render import COLOURS
 
     for name, colour in COLOURS.items():
         assert (frame == colour).all(axis=-1).sum() >= 4, f"{name} not drawn"

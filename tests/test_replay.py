@@ -17,11 +17,11 @@ import sys
 import numpy as np
 import pytest
 
-from accd_gym.recording import Recording, record_episodes
+from accd_gym.replays.recording import Recording, record_episodes
 
 pytest.importorskip("plotly", reason="replay pages need plotly (the replay and test extras install it)")
 
-from accd_gym.replay import (  # noqa: E402
+from accd_gym.replays.replay import (  # noqa: E402
     MAX_FRAMES,
     frame_indices,
     pick_episodes,
@@ -73,7 +73,7 @@ def test_long_recordings_are_decimated_in_3d_and_stay_under_10_mb(full_episode):
 
 
 def test_pick_episodes_orders_captures_first_then_miss_distance():
-    from accd_gym.evaluation import Episode
+    from accd_gym.evals.evaluation import Episode
 
     def ep(i, captured, t, miss):
         return Episode(i, 0, "captured" if captured else "truncated", captured, 10, t, t if captured else None,
@@ -88,7 +88,7 @@ def test_pick_episodes_orders_captures_first_then_miss_distance():
 
 def test_video_has_one_frame_per_sample(tmp_path):
     imageio_ffmpeg = pytest.importorskip("imageio_ffmpeg")
-    from accd_gym.render import render_frame
+    from accd_gym.envs.render import render_frame
 
     (rec,) = record_episodes("guidance", 1, config=dict(SHORT, capture_window=3.0), num_envs=1)
     path = write_video(rec, tmp_path / "episode.mp4")
@@ -136,7 +136,7 @@ def test_replay_and_evaluate_replay_commands(tmp_path):
 
 @pytest.fixture(scope="module")
 def browser():
-    from accd_gym.browser import Browser, find_chromium
+    from accd_gym.replays.browser import Browser, find_chromium
 
     if find_chromium() is None:
         if os.environ.get("CI") == "true":

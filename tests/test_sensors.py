@@ -19,8 +19,8 @@ from gymnasium.utils.env_checker import data_equivalence
 
 import accd_gym
 from accd_gym import ENV_ID, ConfigError
-from accd_gym.config import SENSORS_TIER, default_config, env_config
-from accd_gym.task import OBSERVATION_INDEX, OBSERVATION_SCALE
+from accd_gym.envs.config import SENSORS_TIER, default_config, env_config
+from accd_gym.envs.task import OBSERVATION_INDEX, OBSERVATION_SCALE
 
 N = 3
 # Short episodes and a tight envelope so that random flaps end episodes at different steps.

@@ -10,7 +10,7 @@ import pytest
 
 import accd_gym
 from accd_gym import StateError
-from accd_gym.sb3 import AccdVecEnv
+from accd_gym.envs.sb3 import AccdVecEnv
 
 QUICK = dict(capture_window=2.0, initial={"settle_time": 5.0})
 HEADER_LEN = 68

@@ -10,7 +10,7 @@ import math
 import pytest
 
 import accd_gym
-from accd_gym import study
+from accd_gym.studies import runner, study
 from accd_gym.cli import main
 
 #: design.md section 7: "settles about 50 m below" / "about 70 m below", within 15 %.
@@ -21,7 +21,7 @@ DEPTH_TOLERANCE = 0.15
 def out(tmp_path_factory):
     """A folder with every study's output, run once (the command's ``all``)."""
     folder = tmp_path_factory.mktemp("study")
-    study.run(["all"], folder, progress=False)
+    runner.run(["all"], folder, progress=False)
     return folder
 
 
@@ -157,4 +157,4 @@ def test_outputs_and_cli(out, docs, tmp_path, capsys):
         main(["study", "wingspan", "--out", str(tmp_path)])
     assert e.value.code == 2 and "invalid choice" in capsys.readouterr().err
     with pytest.raises(ValueError, match="unknown study"):
-        study.run(["wingspan"], tmp_path)
+        runner.run(["wingspan"], tmp_path)

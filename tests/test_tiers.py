@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import accd_gym
-from accd_gym.tiers import TIERS, merge, tiers_markdown
+from accd_gym.envs.tiers import TIERS, merge, tiers_markdown
 
 
 def test_every_tier_is_registered_with_its_config_and_episode_length():
@@ -46,7 +46,7 @@ def test_tier_tables_are_generated_from_the_declaration():
     doc = (Path(__file__).resolve().parents[1] / "docs" / "environment.md").read_text()
     section = re.search(r"<!-- generated: accd_gym.tiers.tiers_markdown\(\) -->\n(.*?)\n<!-- end generated -->", doc, re.S)
     assert section and section.group(1) == tiers_markdown()
-    assert tiers_markdown() in accd_gym.tiers.__doc__
+    assert tiers_markdown() in accd_gym.envs.tiers.__doc__
     for t in TIERS.values():
         assert f"`{t.id}`" in tiers_markdown()
     # A tier's rows name what it changes, with the nominal value beside it.
@@ -81,8 +81,8 @@ def test_randomized_parameters_are_a_function_of_the_wake_seed_and_reported():
 
 
 def test_held_out_evaluation_meets_held_out_parameters_whatever_the_batch():
-    from accd_gym.baselines import ZeroPolicy
-    from accd_gym.evaluation import run_episodes
+    from accd_gym.control.baselines import ZeroPolicy
+    from accd_gym.evals.evaluation import run_episodes
 
     wake = list(accd_gym.HELD_OUT_WAKE_SEEDS[:6])
     a = run_episodes(ZeroPolicy(), 6, wake_seeds=wake, num_envs=2, config={"tier": "randomized", "capture_window": 2.0})
@@ -137,8 +137,8 @@ def test_evaluation_metrics_are_the_true_geometry_under_sensors():
     # Zero flaps ignore the observation, and sensors never change the physics: with sensors on and
     # off the evaluated episodes (trajectories, miss distances) must be identical, because the
     # metrics come from the true state, not from the sensed observation.
-    from accd_gym.baselines import ZeroPolicy
-    from accd_gym.evaluation import run_episodes
+    from accd_gym.control.baselines import ZeroPolicy
+    from accd_gym.evals.evaluation import run_episodes
 
     wake = list(accd_gym.HELD_OUT_WAKE_SEEDS[:3])
     runs = [run_episodes(ZeroPolicy(), 3, wake_seeds=wake, num_envs=3,

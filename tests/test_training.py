@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 import accd_gym
-from accd_gym import training
-from accd_gym.baselines import BASELINES, GuidancePolicy, RandomPolicy, ZeroPolicy, quaternion_to_euler
+from accd_gym.learning import training
+from accd_gym.control.baselines import BASELINES, GuidancePolicy, RandomPolicy, ZeroPolicy, quaternion_to_euler
 from accd_gym.cli import main
-from accd_gym.evaluation import mcnemar_exact, paired_comparisons, run_episodes, summarize, wilson_interval
-from accd_gym.task import OBS_DIM, OBSERVATION_SCALE, observation_indices
+from accd_gym.evals.evaluation import mcnemar_exact, paired_comparisons, run_episodes, summarize, wilson_interval
+from accd_gym.envs.task import OBS_DIM, OBSERVATION_SCALE, observation_indices
 
 SHORT = {"capture_window": 5.0}  # 50 agent steps per episode
 
@@ -25,7 +25,7 @@ def _obs(n=3, rel=(0.0, 0.0, 0.0)):
 
 @pytest.mark.parametrize("name", sorted(BASELINES))
 def test_baselines_give_bounded_actions_of_the_right_shape(name):
-    policy = accd_gym.baselines.make_baseline(name, seed=3)
+    policy = accd_gym.control.baselines.make_baseline(name, seed=3)
     obs = np.random.default_rng(0).uniform(-1, 1, (5, 25)).astype(np.float32)
     quat = observation_indices("quat_w", "quat_x", "quat_y", "quat_z")
     obs[:, quat] /= np.linalg.norm(obs[:, quat], axis=1, keepdims=True)
@@ -197,7 +197,7 @@ def test_short_ppo_training_then_held_out_evaluation(tmp_path):
 
 
 def test_a_guidance_tuning_file_is_a_policy_with_its_winning_gains(tmp_path):
-    from accd_gym.evaluation import _label, load_policy
+    from accd_gym.evals.evaluation import _label, load_policy
 
     path = tmp_path / "tuning_x.json"
     path.write_text(json.dumps({"best": {"gains": {"kp": 0.3, "kd": 0.1, "ki": 0.0, "kq": 0.2}}}))
@@ -232,7 +232,7 @@ def test_ppo_updates_run_on_update_threads_and_the_envs_step_beside_torch_thread
         return train(self)
 
     monkeypatch.setattr(PPO, "train", recording_train)
-    from accd_gym.sb3 import AccdVecEnv
+    from accd_gym.envs.sb3 import AccdVecEnv
 
     step_wait = AccdVecEnv.step_wait
 

@@ -13,9 +13,9 @@ import time
 import pytest
 
 import accd_gym
-from accd_gym import training
+from accd_gym.learning import training
 from accd_gym.cli import main
-from accd_gym.evaluation import SB3Policy
+from accd_gym.evals.evaluation import SB3Policy
 
 SHORT = {"capture_window": 5.0}
 TOTAL = 1024

@@ -20,7 +20,7 @@ Public API:
 * :class:`CaptureSim` -- one capture episode's physics (tether, 6-DoF capturing device, towing
   aircraft, RLV boom) for scripted runs; :func:`mix_flaps` turns pitch/yaw/roll into flaps.
 * :func:`record_episodes`, :class:`RecordEpisode`, :class:`Recording` -- recorded episodes
-  (``.npz``, :mod:`accd_gym.recording`); :mod:`accd_gym.replay` -- their self-contained 3D replay
+  (``.npz``, :mod:`accd_gym.replays.recording`); :mod:`accd_gym.replays.replay` -- their self-contained 3D replay
   pages and MP4 videos (``accd-gym replay``).
 * :class:`Tether` -- the tether model alone, for design studies and validation.
 * :func:`tether_config` -- validated tether configurations from the paper's presets.
@@ -46,46 +46,51 @@ from accd_gym._core import (
     towed_tether,
 )
 from accd_gym._core import reward_bounds as _core_reward_bounds
+from accd_gym import _aliases
 from accd_gym.errors import AccdError, ConfigError, SimulationError, StateError
-from accd_gym.config import EXACT_AIR_SCHEME, default_config, env_config
-from accd_gym.task import HELD_OUT_WAKE_SEEDS, PARAMETER_NAMES, TRAINING_WAKE_SEEDS
-from accd_gym.env import InAirCaptureEnv
-from accd_gym.vector import InAirCaptureVectorEnv
-from accd_gym.recording import Recording, RecordEpisode, record_episodes
-from accd_gym.tiers import TIERS
-from accd_gym.tiers import register_tiers as _register_tiers
-from accd_gym.lqr import LqrPolicy, linearize
+from accd_gym.envs.config import EXACT_AIR_SCHEME, default_config, env_config
+from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, PARAMETER_NAMES, TRAINING_WAKE_SEEDS
+from accd_gym.envs.env import InAirCaptureEnv
+from accd_gym.envs.vector import InAirCaptureVectorEnv
+from accd_gym.replays.recording import Recording, RecordEpisode, record_episodes
+from accd_gym.envs.tiers import TIERS
+from accd_gym.envs.tiers import register_tiers as _register_tiers
+from accd_gym.control.lqr import LqrPolicy, linearize
 
-
+_aliases.register()
 
 #: The registered id of the nominal env (``gymnasium.make(ENV_ID)``, ``gymnasium.make_vec(ENV_ID, n)``);
-#: the benchmark tiers' ids are in :data:`accd_gym.tiers.TIERS`.
+#: the benchmark tiers' ids are in :data:`accd_gym.envs.tiers.TIERS`.
 ENV_ID = "accd_gym/InAirCapture-v0"
 _register_tiers()
 
 
 def reward_bounds(config: Optional[dict[str, Any]] = None, **overrides: Any) -> tuple[float, float]:
     """Lowest and highest reward of one agent step under a configuration (keyword overrides)."""
-    from accd_gym.config import config_json
+    from accd_gym.envs.config import config_json
 
     return _core_reward_bounds(config_json(env_config(config, **overrides)))
 
 
 if TYPE_CHECKING:
-    from accd_gym.sb3 import AccdVecEnv
+    from accd_gym.envs.sb3 import AccdVecEnv
 else:
 
     def __getattr__(name: str) -> Any:
-        """Imports :class:`AccdVecEnv` (and with it stable-baselines3) on first use; hidden from
+        """Imports :class:`AccdVecEnv` (and with it stable-baselines3) on first use, and the modules
+        of the deprecated flat paths (``accd_gym.vector``: :mod:`accd_gym._aliases`); hidden from
         type checkers, which see the import above and nothing else."""
         if name == "AccdVecEnv":
             try:
-                from accd_gym.sb3 import AccdVecEnv
+                from accd_gym.envs.sb3 import AccdVecEnv
             except ModuleNotFoundError as e:
                 raise ModuleNotFoundError(
                     f"accd_gym.AccdVecEnv needs stable-baselines3 ({e}): pip install 'accd-gym[sb3]'", name=e.name
                 ) from e
             return AccdVecEnv
+        module = _aliases.old_module(name)
+        if module is not None:
+            return module
         raise AttributeError(f"module 'accd_gym' has no attribute {name!r}")
 
 

@@ -10,7 +10,7 @@ from typing import Optional, Sequence
 
 
 def _settle(args: argparse.Namespace) -> int:
-    from accd_gym import settle
+    from accd_gym.studies import settle
 
     summary = settle.run(Path(args.out), preset=args.preset, duration=args.duration, progress=not args.quiet)
     keys = ["final_depth_m", "final_trail_m", "settling_time_s", "final_attachment_tension_N"]
@@ -20,10 +20,10 @@ def _settle(args: argparse.Namespace) -> int:
 
 
 def _study(args: argparse.Namespace) -> int:
-    from accd_gym import study
+    from accd_gym.studies import runner
 
     out = Path(args.out)
-    docs = study.run(args.studies, out, progress=not args.quiet, dpi=args.dpi)
+    docs = runner.run(args.studies, out, progress=not args.quiet, dpi=args.dpi)
     for name, doc in docs.items():
         print(f"{name}: wrote {', '.join(str(out / f) for f in doc['figures'])}, {out / (name + '.json')}, {out / (name + '.md')}")
     if len(docs) > 1:
@@ -42,13 +42,13 @@ def _export_aero(args: argparse.Namespace) -> int:
 
 
 def _train(args: argparse.Namespace) -> int:
-    from accd_gym import training
+    from accd_gym.learning import training
 
     if args.resume:
         if args.config is not None or args.timesteps is not None or args.seed is not None or args.tier:
             raise _usage("--resume continues a run with its own config; drop --config, --timesteps, --seed and --tier")
         out = Path(args.resume)
-        from accd_gym.rllib import is_rllib_run
+        from accd_gym.learning.rllib import is_rllib_run
 
         if is_rllib_run(out):
             raise _usage(f"--resume {str(out)!r}: resuming an RLlib run is not supported; its checkpoints/ restore with "
@@ -59,7 +59,7 @@ def _train(args: argparse.Namespace) -> int:
             raise _usage("train needs --out RUN (or --resume RUN)")
         out = Path(args.out)
         if _is_rllib_config(args.config):
-            from accd_gym import rllib
+            from accd_gym.learning import rllib
 
             meta = rllib.train(rllib.load_config(args.config, seed=args.seed), out, timesteps=args.timesteps,
                                progress=not args.quiet)
@@ -86,7 +86,7 @@ def _train(args: argparse.Namespace) -> int:
 def _is_rllib_config(path: Optional[str]) -> bool:
     """Whether the training config file at ``path`` asks for the RLlib trainer (a file that cannot
     be read is left to the loader's error)."""
-    from accd_gym.rllib import is_rllib_config
+    from accd_gym.learning.rllib import is_rllib_config
 
     try:
         return path is not None and is_rllib_config(json.loads(Path(path).read_text()))
@@ -95,7 +95,7 @@ def _is_rllib_config(path: Optional[str]) -> bool:
 
 
 def _benchmark(args: argparse.Namespace) -> int:
-    from accd_gym import benchmark
+    from accd_gym.evals import benchmark
 
     cfg = benchmark.load_config(args.config, quick=args.quick)
     docs = Path(args.docs) if args.docs else None
@@ -110,7 +110,7 @@ def _benchmark(args: argparse.Namespace) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from accd_gym import sweep
+    from accd_gym.evals import sweep
 
     doc = sweep.run(args.config, args.out, progress=not args.quiet)
     print((Path(args.out) / "summary.md").read_text())
@@ -215,7 +215,7 @@ def _env_overrides(text: Optional[str]) -> dict:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    from accd_gym import evaluation
+    from accd_gym.evals import evaluation
 
     if args.ray_chunk is not None and args.ray is None:
         raise _usage("--ray-chunk sets the episodes per Ray task; it needs --ray")
@@ -236,7 +236,7 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from accd_gym import replay
+    from accd_gym.replays import replay
 
     written = replay.run_replay(args.policy, args.episodes, args.out, seed=args.seed, config=_env_of(args),
                                 num_envs=args.num_envs, num_threads=args.num_threads, video=args.video,
@@ -249,7 +249,7 @@ def _replay(args: argparse.Namespace) -> int:
 
 
 def _rollout(args: argparse.Namespace) -> int:
-    from accd_gym import evaluation
+    from accd_gym.evals import evaluation
 
     config = _env_of(args)
     policy = evaluation.load_policy(args.policy, seed=args.seed, allow_unnormalized=args.allow_unnormalized, config=config)
@@ -269,7 +269,7 @@ def _rollout(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``accd-gym`` and its subcommands."""
-    from accd_gym.tiers import TIERS
+    from accd_gym.envs.tiers import TIERS
 
     parser = _Parser(prog="accd-gym", description="accd-gym: In-Air Capturing simulation tools.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -280,7 +280,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="simulated time in seconds (default 120)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_settle)
-    from accd_gym.study import EXTRA_STUDIES, STUDIES
+    from accd_gym.studies.study import EXTRA_STUDIES, STUDIES
 
     p = sub.add_parser("study", help="run the paper's section-4 tether design studies: plots, JSON, markdown tables")
     p.add_argument("studies", nargs="+", choices=[*STUDIES, *EXTRA_STUDIES, "all"], metavar="STUDY",

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from accd_gym.tiers import TIERS
+from accd_gym.envs.tiers import TIERS
 
 #: ``accd-gym train``'s recipes, as (algo -> training config fields) for rl-zoo3.
 RECIPES: dict[str, dict[str, Any]] = {

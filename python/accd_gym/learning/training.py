@@ -79,7 +79,7 @@ _ACTIVATIONS = ("tanh", "relu", "elu")
 
 def load_config(path: str | Path, **overrides: Any) -> dict[str, Any]:
     """A complete, validated training config from a JSON file plus overrides (None values ignored)."""
-    from accd_gym.config import read_json_object
+    from accd_gym.envs.config import read_json_object
 
     raw = read_json_object(path, "training config")
     raw.update({k: v for k, v in overrides.items() if v is not None})
@@ -151,10 +151,10 @@ def _check_net_arch(policy_kwargs: dict[str, Any]) -> None:
 def check_training_env(env: dict[str, Any]) -> None:
     """ConfigError for a bad env override or one that fixes a held-out wake seed (training may
     only draw training wake seeds); shared by every trainer."""
-    from accd_gym.config import env_config
+    from accd_gym.envs.config import env_config
 
     full = env_config(env)  # raises ConfigError naming the bad env field
-    from accd_gym.task import HELD_OUT_WAKE_SEEDS
+    from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS
 
     fixed = ([full["wake_seed"]] if full["wake_seed"] is not None else []) + list(full["wake_seeds"] or [])
     leaked = sorted({s for s in fixed if s in HELD_OUT_WAKE_SEEDS})
@@ -199,7 +199,7 @@ def make_training_env(cfg: dict[str, Any]):
     """The AccdVecEnv (training wake seeds) wrapped in VecMonitor and VecNormalize per the config."""
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    from accd_gym.sb3 import AccdVecEnv
+    from accd_gym.envs.sb3 import AccdVecEnv
 
     env = AccdVecEnv(num_envs=cfg["num_envs"], seed=cfg["seed"], num_threads=cfg["num_threads"], **cfg["env"])
     env = VecMonitor(env, info_keywords=("captured",))
@@ -472,7 +472,7 @@ def resume(run: str | Path, *, progress: bool = True) -> dict[str, Any]:
     torch.set_num_threads(cfg["torch_threads"])
     from stable_baselines3.common.vec_env import VecMonitor
 
-    from accd_gym.sb3 import AccdVecEnv
+    from accd_gym.envs.sb3 import AccdVecEnv
 
     base = AccdVecEnv(num_envs=cfg["num_envs"], seed=cfg["seed"], num_threads=cfg["num_threads"], **cfg["env"])
     if ckpt["env_state"] is not None:

@@ -4,7 +4,7 @@
 Tune trial per training seed (times each point of an optional grid), each training with either
 trainer (the ``train_config`` decides: a stable-baselines3 config, or an RLlib one with
 ``"trainer": "rllib"``), then evaluating its final model on the first ``episodes`` held-out
-wake seeds (:func:`accd_gym.evaluation.run_episodes`, the episodes every trial shares). The
+wake seeds (:func:`accd_gym.evals.evaluation.run_episodes`, the episodes every trial shares). The
 same command runs on one machine (``"ray_address": "local"``) and on a cluster (``"auto"`` or
 ``HOST:PORT``): Tune places the trials.
 
@@ -92,7 +92,7 @@ def bootstrap_interval(values: Sequence[float], stat: Any = iqm, *, resamples: i
 
 def load_config(path: str | Path) -> dict[str, Any]:
     """A complete, validated sweep config from a JSON file."""
-    from accd_gym.config import read_json_object
+    from accd_gym.envs.config import read_json_object
 
     return validate_config(read_json_object(path, "sweep config"))
 
@@ -117,7 +117,7 @@ def validate_config(raw: Any) -> dict[str, Any]:
         v = cfg[key]
         if not isinstance(v, int) or isinstance(v, bool) or v < low:
             raise ConfigError(f"invalid config: `{key}` = {v!r} is outside the allowed range: an integer >= {low}")
-    from accd_gym.task import HELD_OUT_WAKE_SEEDS
+    from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS
 
     if cfg["episodes"] > len(HELD_OUT_WAKE_SEEDS):
         raise ConfigError(f"invalid config: `episodes` = {cfg['episodes']} is outside the allowed range 1..{len(HELD_OUT_WAKE_SEEDS)} (held-out wake seeds)")
@@ -157,9 +157,9 @@ def _set_dotted(cfg: dict[str, Any], key: str, value: Any) -> None:
 def train_config(sweep: dict[str, Any], point: dict[str, Any], seed: int) -> dict[str, Any]:
     """The validated training config of one trial: the sweep's ``train_config`` with the grid
     point, the seed and ``timesteps`` applied (RLlib trials sample in-process)."""
-    from accd_gym import rllib, training
+    from accd_gym.learning import rllib, training
 
-    from accd_gym.config import read_json_object
+    from accd_gym.envs.config import read_json_object
 
     raw = read_json_object(sweep["train_config"], "`train_config` (training config)")
     for key, value in point.items():
@@ -184,9 +184,11 @@ def _trial(params: dict[str, Any]) -> None:
     """One Tune trial: trains into its own run folder, evaluates on the held-out seeds, reports."""
     from ray import tune
 
-    from accd_gym import rllib, training
-    from accd_gym.evaluation import load_policy, run_episodes, summarize
-    from accd_gym.task import HELD_OUT_WAKE_SEEDS
+    from accd_gym.learning import rllib, training
+    from accd_gym.evals.episodes import run_episodes
+    from accd_gym.evals.evaluation import summarize
+    from accd_gym.evals.policies import load_policy
+    from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS
 
     sweep, point, seed = params["sweep"], params["point"], params["seed"]
     cfg = train_config(sweep, point, seed)
@@ -282,8 +284,8 @@ def _restore_signal_handlers(kept: dict[int, Any]) -> None:
 def run(config: dict[str, Any] | str | Path, out: str | Path, *, progress: bool = True) -> dict[str, Any]:
     """Runs a sweep (a validated config or its file) into ``out``; returns the sweep document
     (also ``out/sweep.json``; the table in ``out/summary.md``)."""
-    from accd_gym import distributed
-    from accd_gym.evaluation import wilson_interval
+    from accd_gym.evals import distributed
+    from accd_gym.evals.evaluation import wilson_interval
 
     cfg = config if isinstance(config, dict) else load_config(config)
     cfg = validate_config(cfg)

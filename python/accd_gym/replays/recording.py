@@ -260,8 +260,9 @@ def iter_recordings(
     the episodes end; ``rec.meta["episode"]`` is its index), so that callers can write and drop
     them one at a time."""
     from accd_gym import _core
-    from accd_gym.evaluation import EVAL_BASE_SEED, load_policy
-    from accd_gym.task import HELD_OUT_WAKE_SEEDS, INFO_NAMES, check_actions, check_seed
+    from accd_gym.evals.episodes import EVAL_BASE_SEED
+    from accd_gym.evals.policies import load_policy
+    from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, INFO_NAMES, check_actions, check_seed
 
     if episodes is None:
         episodes = len(wake_seeds) if wake_seeds is not None else 1
@@ -285,8 +286,8 @@ def iter_recordings(
     label = _policy_label(policy)
     if isinstance(policy, str):
         policy = load_policy(policy, seed=policy_seed, config=config)
-    from accd_gym.evaluation import _policy_starts
-    from accd_gym.vector import InAirCaptureVectorEnv
+    from accd_gym.evals.episodes import start_policy_episodes
+    from accd_gym.envs.vector import InAirCaptureVectorEnv
 
     batch = max(1, min(int(num_envs), episodes))  # the evaluation's batch: the policy sees the same rows
     env = InAirCaptureVectorEnv(batch, autoreset_mode="disabled", num_threads=num_threads, **(config or {}))
@@ -340,7 +341,7 @@ def iter_recordings(
     try:
         for i in range(batch):
             obs = start(i)
-        _policy_starts(policy, np.ones(batch, dtype=bool), ep_of, last)
+        start_policy_episodes(policy, np.ones(batch, dtype=bool), ep_of, last)
         remaining = set(wanted)
         while remaining:
             actions = check_actions(np.asarray(policy.predict(obs), dtype=np.float32), batch)
@@ -365,7 +366,7 @@ def iter_recordings(
                 break
             for i in np.flatnonzero(dones):
                 obs = start(int(i))
-            _policy_starts(policy, dones, ep_of, last)
+            start_policy_episodes(policy, dones, ep_of, last)
     finally:
         env.close()
 

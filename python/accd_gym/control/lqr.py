@@ -69,7 +69,7 @@ import numpy as np
 
 from accd_gym import _core
 from accd_gym.errors import ConfigError
-from accd_gym.task import ACT_DIM, OBS_DIM, OBSERVATION_SCALE, observation_indices
+from accd_gym.envs.task import ACT_DIM, OBS_DIM, OBSERVATION_SCALE, check_observations, observation_indices
 
 
 def linearize(config: Optional[Mapping[str, Any]] = None, **overrides: Any) -> "_core.Linearization":
@@ -86,7 +86,7 @@ def linearize(config: Optional[Mapping[str, Any]] = None, **overrides: Any) -> "
     step it came from (``step(dx, u, wind)``, ``observe(dx)``). Raises
     :class:`~accd_gym.ConfigError` for a bad configuration.
     """
-    from accd_gym.config import valid_config
+    from accd_gym.envs.config import valid_config
 
     if isinstance(config, _core.EnvConfig) and not overrides:
         cfg = config
@@ -239,7 +239,7 @@ def design(lin: Any, tuning: LqrTuning) -> LqrDesign:
     qn[n:n + 2, n:n + 2] = t.wind_walk**2 * np.eye(2)
     qn[n + 2:n + 5, n + 2:n + 5] = 1e-6 * np.eye(3)
     qn[n + 5:, n + 5:] = t.boom_accel**2 * np.eye(3)
-    from accd_gym.task import OBSERVATION_TABLE
+    from accd_gym.envs.task import OBSERVATION_TABLE
 
     sigma = np.array([_MEAS_SIGMA[OBSERVATION_TABLE[i][0]] * OBSERVATION_TABLE[i][2] for i in _MEASURED])
     rn = np.diag((t.meas_noise * sigma) ** 2)
@@ -314,7 +314,7 @@ class LqrPolicy:
         ``accd_gym._core.EnvConfig`` or None for the defaults, plus keyword overrides) with
         ``tuning`` (default :func:`default_tuning`). Raises ConfigError for a bad configuration
         or one with no stabilizing design."""
-        from accd_gym.config import valid_config
+        from accd_gym.envs.config import valid_config
 
         if isinstance(config, _core.EnvConfig):
             cfg = config if not overrides else valid_config(json.loads(config.to_json()), **overrides)
@@ -345,9 +345,7 @@ class LqrPolicy:
 
     def predict(self, obs: Any) -> np.ndarray:
         """Flap commands (N, 4) in [-1, 1] for observations (N, 25); advances the estimates."""
-        from accd_gym.baselines import _check_obs
-
-        o = _check_obs(obs)
+        o = check_observations(obs)
         d = self.design
         n_env = o.shape[0]
         if self._z is None or self._z.shape[0] != n_env:

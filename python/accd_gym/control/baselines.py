@@ -1,7 +1,7 @@
 """Built-in baseline policies: zero flaps, random flaps, a classical guidance controller and an
-LQR with a disturbance observer (:class:`accd_gym.lqr.LqrPolicy`, designed for the env's config).
+LQR with a disturbance observer (:class:`accd_gym.control.lqr.LqrPolicy`, designed for the env's config).
 
-Every policy here (and :class:`accd_gym.evaluation.SB3Policy`) has the same interface:
+Every policy here (and :class:`accd_gym.evals.evaluation.SB3Policy`) has the same interface:
 ``predict(obs_batch) -> actions`` with ``obs_batch`` of shape (N, 25) (the observation of
 :class:`accd_gym.InAirCaptureEnv`) and actions of shape (N, 4) in [-1, 1] (flaps right, left,
 top, bottom); ``reset(mask)`` clears the internal state of the envs whose episode just ended
@@ -24,7 +24,7 @@ from typing import Any, Callable, Optional
 import numpy as np
 
 from accd_gym.errors import ConfigError
-from accd_gym.task import ACT_DIM, OBS_DIM, OBSERVATION_SCALE, observation_indices
+from accd_gym.envs.task import ACT_DIM, OBSERVATION_SCALE, check_observations, observation_indices
 
 #: Observation scales, from the core's observation table.
 _POS_SCALE = OBSERVATION_SCALE["boom_rel_y"]  # 1/m
@@ -37,16 +37,6 @@ _QUATERNION = observation_indices("quat_w", "quat_x", "quat_y", "quat_z")
 _BODY_RATES = observation_indices("rate_p", "rate_q", "rate_r")
 
 
-def _check_obs(obs: Any) -> np.ndarray:
-    """Observations as a float64 array of shape (N, OBS_DIM); raises ValueError otherwise."""
-    o = np.asarray(obs, dtype=np.float64)
-    if o.ndim == 1:
-        o = o.reshape(1, -1)
-    if o.ndim != 2 or o.shape[1] != OBS_DIM:
-        raise ValueError(f"observations have shape {np.shape(obs)}, expected (N, {OBS_DIM})")
-    return o
-
-
 class ZeroPolicy:
     """Neutral flaps throughout: the open-loop ACCD drifting in the wake (the 'do nothing' floor)."""
 
@@ -54,7 +44,7 @@ class ZeroPolicy:
 
     def predict(self, obs: Any) -> np.ndarray:
         """Zero flap commands for every row of ``obs`` (shape (N, 4))."""
-        return np.zeros((_check_obs(obs).shape[0], ACT_DIM), dtype=np.float32)
+        return np.zeros((check_observations(obs).shape[0], ACT_DIM), dtype=np.float32)
 
     def reset(self, mask: Optional[np.ndarray] = None) -> None:
         """Stateless: nothing to reset."""
@@ -64,7 +54,7 @@ class RandomPolicy:
     """Uniform random flap commands in [-1, 1], drawn from seeded numpy generators.
 
     Outside an evaluation one generator (``seed``) draws every row. In an evaluation
-    (:func:`accd_gym.evaluation.run_episode_range` calls :meth:`start_episodes`) each episode
+    (:func:`accd_gym.evals.evaluation.run_episode_range` calls :meth:`start_episodes`) each episode
     ``k`` draws from its own generator seeded ``(seed, k)``, so its actions do not depend on
     which env of which batch runs it.
     """
@@ -78,7 +68,7 @@ class RandomPolicy:
 
     def predict(self, obs: Any) -> np.ndarray:
         """Independent uniform commands per env and flap (shape (N, 4))."""
-        n = _check_obs(obs).shape[0]
+        n = check_observations(obs).shape[0]
         if self._rows is not None and len(self._rows) == n:
             return np.stack([g.uniform(-1.0, 1.0, size=ACT_DIM) for g in self._rows]).astype(np.float32)
         return self._rng.uniform(-1.0, 1.0, size=(n, ACT_DIM)).astype(np.float32)
@@ -192,7 +182,7 @@ class GuidancePolicy:
 
     def predict(self, obs: Any) -> np.ndarray:
         """Flap commands (N, 4) in [-1, 1] for observations (N, 25); advances the integrators."""
-        o = _check_obs(obs)
+        o = check_observations(obs)
         g = self.gains
         n = o.shape[0]
         if self._integral is None or self._integral.shape[0] != n:
@@ -215,8 +205,8 @@ class GuidancePolicy:
 
 
 def _lqr(config: Any) -> Any:
-    """The LQR baseline designed for ``config`` (:meth:`accd_gym.lqr.LqrPolicy.for_config`)."""
-    from accd_gym.lqr import LqrPolicy
+    """The LQR baseline designed for ``config`` (:meth:`accd_gym.control.lqr.LqrPolicy.for_config`)."""
+    from accd_gym.control.lqr import LqrPolicy
 
     return LqrPolicy.for_config(config)
 

@@ -21,7 +21,8 @@ tension        both elasticities: max-tension and a capture episode (by name)  4
 sweep          readings behind the two open claims (by name)                   4.1, 4.2
 =============  ==============================================================  ===========
 
-``fig9``, ``tension`` and ``sweep`` live in :mod:`accd_gym.fidelity` (issue 18, items 3-5).
+``fig9``, ``tension`` and ``sweep`` live in :mod:`accd_gym.studies.fidelity`; :mod:`accd_gym.studies.runner`
+runs any of them.
 
 **The Fig. 12 commands, reconstructed.** Fig. 12 ("open loop control rates for sensitivity study")
 is an image the text does not tabulate. The text says what it contains: "a simple set of open-loop
@@ -53,8 +54,8 @@ the towed cruise equilibrium (tension = RLV drag) and steps the thrust to maximu
 own small share), and the step makes the RLV's mass ring on the tether's axial spring
 (``sqrt(k / m_RLV)``, about 1.4 rad/s). The air stays at 185 m/s (the speed gained over the window
 changes only the tether's own drag, about 1 % of the tension). At several hundred kN the tether's
-stiffest transverse mode is beyond RK4's stability limit at 0.01 s; the tether now substeps such
-steps automatically (issue 13), so 0.01 s runs too and agrees with :data:`MAX_TENSION_TIME_STEP_S`
+stiffest transverse mode is beyond RK4's stability limit at 0.01 s; the tether substeps such
+steps automatically, so 0.01 s runs too and agrees with :data:`MAX_TENSION_TIME_STEP_S`
 (kept, and giving the same tensions as 0.0025 s) to 1e-7 in the peak. :func:`max_tension_readings` lists what other readings of the paper would give.
 """
 
@@ -121,7 +122,7 @@ PAPER_MAX_TENSION_MEAN_N = 125e3
 PAPER_MAX_TENSION_PEAK_N = 225e3
 
 STUDIES = ("material", "length", "diameter", "selected", "max-tension", "fig9")
-#: Longer studies, run by name only (not by ``all``): :mod:`accd_gym.fidelity`.
+#: Longer studies, run by name only (not by ``all``): :mod:`accd_gym.studies.fidelity`.
 EXTRA_STUDIES = ("tension", "sweep")
 
 
@@ -216,14 +217,6 @@ class CaseResult:
     position: np.ndarray
     tension: np.ndarray
     command_deg: np.ndarray
-
-
-def _bar(total: int, desc: str, progress: bool) -> Any:
-    if not progress:
-        return None
-    from tqdm import tqdm
-
-    return tqdm(total=total, desc=desc, unit="sample", leave=False)
 
 
 def simulate_case(case: Case, sample_interval: float = SAMPLE_INTERVAL_S, bar: Any = None) -> CaseResult:
@@ -801,117 +794,3 @@ def plot_max_tension(result: MaxTensionResult, metrics: dict[str, Any], path: Pa
     )
     fig.savefig(path, dpi=dpi)
     plt.close(fig)
-
-
-_TITLES = {
-    "material": "Fig. 15: tether material (250 m, 24 mm, no flap deflection)",
-    "length": "Fig. 16: tether length (24 mm UHMWPE, Fig. 12 commands, no wake)",
-    "length-wake": "Fig. 17: tether length in the aircraft's wake (8 deg, turbulence; Fig. 12 commands)",
-    "diameter": "Fig. 18: tether diameter (250 m UHMWPE, Fig. 12 commands)",
-    "selected": "Fig. 19: the selected tether (Table 3), no flap deflection",
-}
-
-
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
-def run_study(
-    study: str,
-    out_dir: Path,
-    progress: bool = True,
-    commands: Optional[Sequence[CommandPhase]] = None,
-    dpi: int = 90,
-    max_tension: MaxTensionCase = MaxTensionCase(),
-) -> dict[str, Any]:
-    """Runs one study and writes ``<figure>.png``, ``<study>.json`` and ``<study>.md`` into ``out_dir``.
-
-    Args:
-        study: one of :data:`STUDIES` or :data:`EXTRA_STUDIES`.
-        out_dir: output folder (created).
-        progress: show a tqdm progress bar on stderr.
-        commands: flap commands for the commanded studies (default :func:`fig12_commands`).
-        dpi: resolution of the PNGs.
-        max_tension: inputs of the ``max-tension`` study.
-
-    Returns:
-        The JSON document written: per figure, per case, the metrics and the paper's numbers.
-    """
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    if study in ("fig9", *EXTRA_STUDIES):
-        from accd_gym import fidelity
-
-        doc, md = fidelity.run_study(study, out_dir, dpi=dpi, progress=progress)
-    elif study == "max-tension":
-        case = max_tension
-        samples = round(case.duration_s / (max(1, round(SAMPLE_INTERVAL_S / case.time_step)) * case.time_step))
-        bar = _bar(samples, study, progress)
-        result = simulate_max_tension(case, bar=bar)
-        if bar is not None:
-            bar.close()
-        metrics = max_tension_metrics(result)
-        readings = max_tension_readings(case)
-        plot_max_tension(result, metrics, out_dir / "max-tension.png", dpi=dpi)
-        doc = {
-            "study": study,
-            "inputs": {k: getattr(case, k) for k in case.__dataclass_fields__},
-            "metrics": {k: _jsonable(v) for k, v in metrics.items()},
-            "paper": {"mean_tension_N": "about 125e3 (Fig. 14)", "peak_tension_N": "about 225e3 (Fig. 14)"},
-            "readings": readings,
-            "figures": ["max-tension.png"],
-        }
-        md = f"## max-tension (Fig. 14)\n\n![max-tension](max-tension.png)\n\n{max_tension_markdown(metrics, readings)}"
-    else:
-        groups = study_cases(study, commands)
-        total = 0
-        for cases in groups.values():
-            total += sum(round(c.duration_s / SAMPLE_INTERVAL_S) for c in cases)
-        bar = _bar(total, study, progress)
-        doc = {"study": study, "figures": [], "cases": {}}
-        md = f"## {study}\n"
-        for figure, cases in groups.items():
-            results = [simulate_case(c, bar=bar) for c in cases]
-            plot_cases(results, out_dir / f"{figure}.png", _TITLES[figure], dpi=dpi)
-            rows = [(r.case, case_metrics(r)) for r in results]
-            doc["figures"].append(f"{figure}.png")
-            for case, m in rows:
-                doc["cases"][case.key] = {
-                    "label": case.label,
-                    "preset": case.preset,
-                    "wake": case.wake,
-                    "duration_s": case.duration_s,
-                    "commands": [vars(p) for p in case.commands],
-                    "metrics": m,
-                    "paper": case.paper,
-                }
-            md += f"\n### {_TITLES[figure]}\n\n![{figure}]({figure}.png)\n\n{markdown_table(rows)}"
-        if bar is not None:
-            bar.close()
-    (out_dir / f"{study}.json").write_text(json.dumps(doc, indent=2))
-    (out_dir / f"{study}.md").write_text(md)
-    return doc
-
-
-def run(
-    studies: Sequence[str],
-    out_dir: Path,
-    progress: bool = True,
-    dpi: int = 90,
-) -> dict[str, dict[str, Any]]:
-    """Runs ``studies`` (names from :data:`STUDIES` or :data:`EXTRA_STUDIES`, or ``all`` for every
-    one of :data:`STUDIES`) into ``out_dir``; with more than one, also writes ``summary.md`` (every
-    study's tables). Returns {study: its JSON document}."""
-    names = list(dict.fromkeys([*(STUDIES if "all" in studies else ()), *(s for s in studies if s != "all")]))
-    for name in names:
-        if name not in STUDIES + EXTRA_STUDIES:
-            raise ValueError(f"unknown study {name!r}; choose from {', '.join(STUDIES + EXTRA_STUDIES)} or all")
-    docs = {}
-    for name in names:
-        docs[name] = run_study(name, out_dir, progress=progress, dpi=dpi)
-    if len(names) > 1:
-        parts = [(Path(out_dir) / f"{n}.md").read_text() for n in names]
-        (Path(out_dir) / "summary.md").write_text("# Design studies (paper section 4)\n\n" + "\n".join(parts))
-    return docs

@@ -21,6 +21,7 @@ from typing import Any, Mapping, Optional
 import numpy as np
 
 from accd_gym import _core
+from accd_gym.envs.overrides import EXACT_AIR_SCHEME, SENSORS_TIER, merge, tier
 from accd_gym.errors import ConfigError
 
 
@@ -54,7 +55,7 @@ def env_config(config: Optional[Mapping[str, Any]] = None, **overrides: Any) -> 
     """A complete, validated environment configuration from ``config`` and keyword overrides.
 
     A string ``tether`` is taken as a tether preset; ``tier`` names a benchmark tier
-    (:mod:`accd_gym.tiers`) whose overrides the others are merged into. Raises :class:`~accd_gym.ConfigError`
+    (:mod:`accd_gym.envs.tiers`) whose overrides the others are merged into. Raises :class:`~accd_gym.ConfigError`
     naming the field, the value and the allowed range (unknown keys included).
     """
     return json.loads(valid_config(config, self_contained_tables=False, **overrides).to_json())
@@ -65,7 +66,7 @@ def valid_config(
 ) -> _core.EnvConfig:
     """The validated configuration object the envs are built from (``accd_gym._core.EnvConfig``):
     ``config`` and keyword overrides merged (over the overrides of a benchmark tier named by the
-    key ``tier``, :mod:`accd_gym.tiers`, section by section), a string ``tether`` taken as a preset, a user
+    key ``tier``, :mod:`accd_gym.envs.tiers`, section by section), a string ``tether`` taken as a preset, a user
     aerodynamic table given by path replaced by its contents (with ``self_contained_tables``, so
     that pickles and saved states need no file), then sent to the core as one JSON document and
     validated there once. The envs take it as it is; ``.to_json()`` gives it back. Picklable.
@@ -74,8 +75,6 @@ def valid_config(
     merged: dict[str, Any] = dict(config or {})
     merged.update(overrides)
     if "tier" in merged:
-        from accd_gym.tiers import merge, tier
-
         name = merged.pop("tier")
         merged = merge(tier(name).overrides, merged)
     tether = merged.get("tether")
@@ -196,27 +195,3 @@ __all__ = [
     "EXACT_AIR_SCHEME",
     "SENSORS_TIER",
 ]
-
-
-#: The exact air scheme, the default before the fast one (BENCHMARKS.md, "the fast air scheme"):
-#: the segments sample the wake and its turbulence at every RK4 stage, Box-Muller normals, one
-#: stream for every turbulence lane. Pass it to reproduce results of the first releases bit for
-#: bit, e.g. ``InAirCaptureEnv(**EXACT_AIR_SCHEME)`` (merge your own ``wake``/``turbulence``
-#: keys into its dicts). It is about 2x slower per physics step.
-EXACT_AIR_SCHEME: dict[str, Any] = {
-    "wake": {"sampling": "per_stage"},
-    "turbulence": {"normal_sampler": "box_muller", "lane_streams": "shared"},
-}
-
-
-#: The recommended "sensors" benchmark setting (issue 16): the sensor model on with the defaults
-#: of its declarations (a 20 Hz vision sensor with 2 cm + 1e-3 r^2 range and 1 mrad bearing
-#: noise; an uncalibrated MEMS IMU/AHRS; relative GNSS at 5 cm; a 100 N load cell), a vision
-#: latency of 60 ms and 10 % of the vision measurements lost in bursts of 5 (0.25 s) on average,
-#: no whole-vector delay. Pass it as the ``sensors`` key: ``InAirCaptureEnv(sensors=SENSORS_TIER)``
-#: or ``--env '{"sensors": {...}}'``. On 100 held-out episodes the tuned guidance controller
-#: captures 43 (100 without sensors) and zero flaps 17 (README, "Sensors"). It registers no id.
-SENSORS_TIER: dict[str, Any] = {
-    "enabled": True,
-    "vision": {"latency": 0.06, "dropout": 0.1, "dropout_burst": 5.0},
-}

@@ -9,7 +9,7 @@ from typing import Any, Optional, Sequence, Union
 import numpy as np
 
 from accd_gym.errors import StateError
-from accd_gym.task import random_seed, wake_options
+from accd_gym.envs.task import random_seed, wake_options
 
 
 class CoreEnvMixin:

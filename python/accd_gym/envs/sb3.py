@@ -10,10 +10,10 @@ import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
 from accd_gym import _core
-from accd_gym.config import valid_config, with_arguments
-from accd_gym.core_env import CoreEnvMixin
+from accd_gym.envs.config import valid_config, with_arguments
+from accd_gym.envs.core_env import CoreEnvMixin
 from accd_gym.errors import ConfigError
-from accd_gym.task import (
+from accd_gym.envs.task import (
     DIVERGED_COLUMN,
     action_space,
     check_actions,
@@ -157,7 +157,7 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         """An RGB picture of every env (``render_mode="rgb_array"``)."""
         if self.render_mode != "rgb_array":
             return [None for _ in range(self.num_envs)]
-        from accd_gym.render import render_frame
+        from accd_gym.envs.render import render_frame
 
         return [render_frame(self._core.render_data(i)) for i in range(self.num_envs)]
 

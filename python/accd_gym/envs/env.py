@@ -10,9 +10,9 @@ import gymnasium as gym
 import numpy as np
 
 from accd_gym import _core
-from accd_gym.config import valid_config, with_arguments
-from accd_gym.core_env import CoreEnvMixin
-from accd_gym.task import (
+from accd_gym.envs.config import valid_config, with_arguments
+from accd_gym.envs.core_env import CoreEnvMixin
+from accd_gym.envs.task import (
     action_space,
     check_actions,
     check_seed,
@@ -227,7 +227,7 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
             return None
-        from accd_gym.render import HumanViewer, render_frame
+        from accd_gym.envs.render import HumanViewer, render_frame
 
         frame = render_frame(self._core.render_data(0))
         if self.render_mode == "rgb_array":

@@ -1,7 +1,7 @@
 """Replays of recorded episodes: a self-contained HTML page with a 3D view and time plots, and an
 MP4 video.
 
-:func:`replay_html` turns a :class:`~accd_gym.recording.Recording` into one HTML file that opens
+:func:`replay_html` turns a :class:`~accd_gym.replays.recording.Recording` into one HTML file that opens
 offline: plotly.js (from the ``plotly`` package, which ships it) and the episode's data are
 inside it; the page requests nothing. It shows
 
@@ -25,7 +25,7 @@ Size: plotly.js is 4.8 MB; the data of a 70 s episode at the agent rate (701 sam
 joints) about 1.5 MB. Samples beyond ``max_frames`` (1000) are decimated for the 3D views
 (every k-th sample and the last); the time plots keep every sample.
 
-:func:`write_video` draws the recording's frames with :func:`accd_gym.render.render_frame` and
+:func:`write_video` draws the recording's frames with :func:`accd_gym.envs.render.render_frame` and
 encodes an H.264 MP4 with imageio-ffmpeg (which ships its ffmpeg binary).
 """
 
@@ -38,7 +38,7 @@ from typing import Any, Optional
 
 import numpy as np
 
-from accd_gym.recording import Recording
+from accd_gym.replays.recording import Recording
 
 #: Largest number of 3D frames a page holds (more samples are decimated).
 MAX_FRAMES = 1000
@@ -166,7 +166,7 @@ def write_video(rec: Recording, path: str | Path, *, fps: Optional[float] = None
         import imageio_ffmpeg
     except ModuleNotFoundError as e:
         raise ModuleNotFoundError(f"videos need imageio-ffmpeg ({e}): pip install 'accd-gym[replay]'", name=e.name) from e
-    from accd_gym.render import render_frame
+    from accd_gym.envs.render import render_frame
 
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
@@ -185,9 +185,9 @@ def write_video(rec: Recording, path: str | Path, *, fps: Optional[float] = None
 def screenshot_replay(html: str | Path, png: str | Path, time: Optional[float] = None,
                       width: int = 1400, height: int = 900) -> list[str]:
     """A screenshot of a replay page at ``time`` (s; default the capture, or for an episode
-    without one the closest approach) taken with headless Chromium (:mod:`accd_gym.browser`);
+    without one the closest approach) taken with headless Chromium (:mod:`accd_gym.replays.browser`);
     returns the page's JavaScript errors."""
-    from accd_gym.browser import screenshot
+    from accd_gym.replays.browser import screenshot
 
     default = "accdReplay.meta.captured_at !== null ? accdReplay.meta.captured_at : accdReplay.meta.time_of_min_distance"
     setup = f"accdReplay.setTime({default})" if time is None else f"accdReplay.setTime({float(time)!r})"
@@ -476,7 +476,7 @@ def pick_episodes(episodes: Any, count: int) -> list[tuple[str, int]]:
     Ranking: captured episodes first, sooner captures better; then the others by their miss
     distance (minimum distance to the boom tip), smaller better. ``count`` = 1 gives the median,
     2 the best and the worst, 3 best, median and worst; more add evenly spaced ranks
-    (``rank<r>``, 1 = best). ``episodes`` are :class:`accd_gym.evaluation.Episode` objects.
+    (``rank<r>``, 1 = best). ``episodes`` are :class:`accd_gym.evals.evaluation.Episode` objects.
     """
     if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
         from accd_gym.errors import ConfigError
@@ -500,12 +500,12 @@ def write_evaluation_replays(spec: str, label: str, episodes: Any, count: int, o
                              wake_seeds: Any, num_envs: int, num_threads: int, config: Optional[dict[str, Any]],
                              allow_unnormalized: bool = False) -> list[dict[str, Any]]:
     """For ``accd-gym evaluate --replay K``: re-runs policy ``spec`` on the evaluation's episodes
-    (the same seeds, batch and policy calls, :func:`accd_gym.recording.record_episodes`),
+    (the same seeds, batch and policy calls, :func:`accd_gym.replays.recording.record_episodes`),
     records the :func:`pick_episodes` ones and writes ``out/<label>/<pick>_ep<k>.html`` and
     ``.npz``. Checks that each recording reproduces the evaluation's outcome and steps. Returns
     one entry per page (pick, episode, outcome, miss distance, files)."""
-    from accd_gym.evaluation import load_policy
-    from accd_gym.recording import record_episodes
+    from accd_gym.evals.policies import load_policy
+    from accd_gym.replays.recording import record_episodes
 
     picks = pick_episodes(episodes, count)
     policy = load_policy(spec, allow_unnormalized=allow_unnormalized, config=config)
@@ -538,8 +538,8 @@ def run_replay(policy: str, episodes: int, out: str | Path, *, seed: Optional[in
     run unrecorded) and writes per episode ``episode_<k>.npz``,
     ``episode_<k>.html`` and, on request, ``episode_<k>.mp4`` and ``episode_<k>.png`` (a screenshot
     of the page at the capture or the closest approach, by headless Chromium). Returns one entry per episode."""
-    from accd_gym.evaluation import load_policy
-    from accd_gym.recording import iter_recordings
+    from accd_gym.evals.policies import load_policy
+    from accd_gym.replays.recording import iter_recordings
 
     loaded = load_policy(policy, seed=0, allow_unnormalized=allow_unnormalized, config=config)
     if getattr(loaded, "note", None):

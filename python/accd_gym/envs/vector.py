@@ -12,10 +12,10 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from accd_gym import _core
-from accd_gym.config import valid_config, with_arguments
-from accd_gym.core_env import CoreEnvMixin
+from accd_gym.envs.config import valid_config, with_arguments
+from accd_gym.envs.core_env import CoreEnvMixin
 from accd_gym.errors import ConfigError
-from accd_gym.task import (
+from accd_gym.envs.task import (
     EVENT_NAMES,
     INFO_NAMES,
     action_space,
@@ -189,7 +189,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         """
         if not 0 <= int(i) < self.num_envs:
             raise ConfigError(f"invalid config: env index `i` = {i} is outside the allowed range 0..{self.num_envs - 1}")
-        from accd_gym.task import WAKE_SEED_BOUND
+        from accd_gym.envs.task import WAKE_SEED_BOUND
 
         seed = check_seed(seed)
         wake = None if wake_seed is None else check_seed(wake_seed, "wake_seed", WAKE_SEED_BOUND)
@@ -315,7 +315,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
             return None
-        from accd_gym.render import render_frame
+        from accd_gym.envs.render import render_frame
 
         return tuple(render_frame(self._core.render_data(i)) for i in range(self.num_envs))
 

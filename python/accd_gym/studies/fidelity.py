@@ -1,9 +1,9 @@
-"""Fidelity past the paper (issue 18, items 3-5): Fig. 9 reproduced, the tension under both
+"""Fidelity past the paper: Fig. 9 reproduced, the tension under both
 elasticities, and the sweeps behind the two open claims of ``docs/paper-reproduction.md``.
 
 Run by ``accd-gym study fig9`` (part of ``all``), ``accd-gym study tension`` and ``accd-gym study
 sweep`` (both longer, not part of ``all``). Each writes a PNG, ``<study>.json`` and ``<study>.md``
-like the other studies (:mod:`accd_gym.study`). SI units in the towing-aircraft frame (x forward,
+like the other studies (:mod:`accd_gym.studies.study`). SI units in the towing-aircraft frame (x forward,
 z down) unless a name says otherwise.
 
 **Fig. 9 (paper 2.3.6).** Table 1's 10 m chain (n = 4, m_tot = 5 kg, k = 10 000 N/m, c1 = 20 N m s/kg
@@ -173,7 +173,7 @@ def fig9_closed_forms() -> dict[str, float]:
 
 def run_fig9(out_dir: Path, dpi: int = 90, duration_s: float = FIG9_DURATION_S) -> tuple[dict[str, Any], str]:
     """Runs Fig. 9 (both cases, every model), plots it side by side as the paper does, and returns
-    (the JSON document, the markdown) for :func:`accd_gym.study.run_study` to write."""
+    (the JSON document, the markdown) for :func:`accd_gym.studies.study.run_study` to write."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -269,7 +269,7 @@ def fig9_verdict(results: dict[str, dict[str, Any]]) -> str:
 
 
 # ----------------------------------------------------------------------------------------------
-# Item 4: the tension under both elasticities
+# The tension under both elasticities
 
 
 @dataclass(frozen=True)
@@ -330,12 +330,12 @@ CAPTURE_RUNS = (
 
 
 def guidance_episode(seed: int = CAPTURE_SEED) -> dict[str, Any]:
-    """One episode of the default env flown by :class:`accd_gym.baselines.GuidancePolicy`: its
+    """One episode of the default env flown by :class:`accd_gym.control.baselines.GuidancePolicy`: its
     flap commands (deg, shape (k, 4), one per agent step), agent step (s), wake seed, the peak
     attachment tension per agent step (N) and whether it captured."""
     import gymnasium as gym
 
-    from accd_gym.baselines import GuidancePolicy
+    from accd_gym.control.baselines import GuidancePolicy
 
     env = gym.make(accd_gym.ENV_ID)
     policy = GuidancePolicy()
@@ -415,7 +415,7 @@ def tension_ratios(max_runs: dict[str, Any], cap_runs: dict[str, Any]) -> dict[s
 
 
 def run_tension(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[dict[str, Any], str]:
-    """Item 4: the maximum-tension case (:func:`accd_gym.study.simulate_max_tension`) and one
+    """The maximum-tension case (:func:`accd_gym.studies.study.simulate_max_tension`) and one
     capture episode's tension (:func:`replay_capture`) under both elasticities, the peak ratios,
     and what they say about the paper's factor of safety of 3. Writes ``tension.png``."""
     import time as clock
@@ -425,7 +425,7 @@ def run_tension(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[di
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from accd_gym import study
+    from accd_gym.studies import study
 
     base = study.MaxTensionCase()
     fig, axes = plt.subplots(1, 2, figsize=(12, 3.8), constrained_layout=True)
@@ -538,7 +538,7 @@ def run_tension(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[di
 
 
 # ----------------------------------------------------------------------------------------------
-# Item 5: sweeps over readings of the paper behind the two open claims
+# Sweeps over readings of the paper behind the two open claims
 
 
 #: The paper's numbers for Fig. 14 count as reproduced within this fraction (read off a figure:
@@ -563,8 +563,8 @@ class TensionReading:
     pre_stretched: bool
 
     def case(self) -> Any:
-        """The :class:`accd_gym.study.MaxTensionCase` of this reading."""
-        from accd_gym import study
+        """The :class:`accd_gym.studies.study.MaxTensionCase` of this reading."""
+        from accd_gym.studies import study
 
         base = study.MaxTensionCase()
         sigma = accd_gym.isa(base.altitude)["density"] / accd_gym.isa(0.0)["density"]
@@ -592,7 +592,7 @@ def implied_ta_mass() -> float:
     125 kN mean: ``m = (F sigma - D_RLV - a* m_RLV) / (a* + g / (L/D))`` with
     ``a* = (125 kN - D_RLV) / m_RLV``. The one unknown fitted from the paper's mean; the peak is
     then a prediction."""
-    from accd_gym import study
+    from accd_gym.studies import study
 
     base = study.MaxTensionCase()
     sigma = accd_gym.isa(base.altitude)["density"] / accd_gym.isa(0.0)["density"]
@@ -604,7 +604,7 @@ def implied_ta_mass() -> float:
 def tension_readings() -> list[TensionReading]:
     """The grid of :class:`TensionReading` (24): thrust x TA mass (MLW, :func:`implied_ta_mass`,
     MTOW) x TA drag x start."""
-    from accd_gym import study
+    from accd_gym.studies import study
 
     return [
         TensionReading(lapsed, mass, drag, pre)
@@ -619,7 +619,7 @@ def sweep_max_tension() -> list[dict[str, Any]]:
     """Runs every :func:`tension_readings` case (attachment model, n = 30, the study's step) and
     returns per reading its inputs, mean and peak tension (N) and whether both are within
     :data:`PAPER_TOLERANCE` of the paper's."""
-    from accd_gym import study
+    from accd_gym.studies import study
 
     rows = []
     for reading in tension_readings():
@@ -703,7 +703,7 @@ def sweep_settling(progress: bool = False) -> list[dict[str, Any]]:
     release and after the pitch and yaw commands, s), first swing and settled depth (m), and
     whether 300 m settles slower than 150 m after release and after the pitch command (the claim
     of ``test_length_300_m_settles_slower_than_150_m``). A run that diverges is reported as such."""
-    from accd_gym import study
+    from accd_gym.studies import study
 
     cases = {c.key: c for c in study.study_cases("length")["length"]}
     rows = []
@@ -751,7 +751,7 @@ def sweep_settling(progress: bool = False) -> list[dict[str, Any]]:
 
 
 def run_sweep(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[dict[str, Any], str]:
-    """Item 5: both sweeps (:func:`sweep_settling`, :func:`sweep_max_tension`); writes
+    """Both sweeps (:func:`sweep_settling`, :func:`sweep_max_tension`); writes
     ``sweep.png`` (settling times of 150 m against 300 m per reading, and mean / peak tension per
     reading against the paper's)."""
     import matplotlib
@@ -759,7 +759,7 @@ def run_sweep(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[dict
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from accd_gym import study
+    from accd_gym.studies import study
 
     settling = sweep_settling(progress=progress)
     tension = sweep_max_tension()
@@ -856,7 +856,7 @@ def run_sweep(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[dict
 
 def run_study(study: str, out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[dict[str, Any], str]:
     """Runs ``fig9``, ``tension`` or ``sweep`` into ``out_dir`` (its PNGs); returns (the JSON
-    document, the markdown) for :func:`accd_gym.study.run_study` to write."""
+    document, the markdown) for :func:`accd_gym.studies.study.run_study` to write."""
     if study == "fig9":
         return run_fig9(out_dir, dpi=dpi)
     if study == "tension":

@@ -1,10 +1,10 @@
 """Held-out evaluation fanned out over a Ray cluster (``pip install 'accd-gym[ray]'``).
 
 ``accd-gym evaluate ... --ray local`` (a Ray instance on this machine) or ``--ray ADDRESS``
-(``auto`` or ``HOST:PORT`` of a running cluster) runs :func:`accd_gym.evaluation.evaluate` with
+(``auto`` or ``HOST:PORT`` of a running cluster) runs :func:`accd_gym.evals.evaluation.evaluate` with
 the episodes split into contiguous index ranges, one Ray task per range. Each task builds its
 own native vector env of the evaluation's batch size and runs its range with
-:func:`accd_gym.evaluation.run_episode_range`; since episode ``k``'s seeds (``seed + k``,
+:func:`accd_gym.evals.evaluation.run_episode_range`; since episode ``k``'s seeds (``seed + k``,
 ``wake_seeds[k]``) and the policy's batch size do not depend on the split, the gathered episodes
 are bitwise those of the local evaluation, whatever the number of workers or tasks, and
 ``results.json`` and ``summary.md`` are byte for byte the same. Where each task ran and how long
@@ -16,7 +16,7 @@ must be identical), and a range that fails after its retries is an error naming 
 silent gap.
 
 Policies travel to the workers pickled: baselines as they are, trained models
-(:class:`~accd_gym.evaluation.SB3Policy`, :class:`accd_gym.rllib.RLlibPolicy`) as the contents
+(:class:`~accd_gym.evals.evaluation.SB3Policy`, :class:`accd_gym.learning.rllib.RLlibPolicy`) as the contents
 of their files, so the workers need no shared filesystem. Each task unpickles its own copy, so
 per-env state (the guidance integrators) never crosses ranges.
 
@@ -101,7 +101,7 @@ def _run_part(
     lost worker would, so Ray must retry it."""
     import ray
 
-    from accd_gym.evaluation import run_episode_range
+    from accd_gym.evals.episodes import run_episode_range
 
     t0 = time.perf_counter()
     policy = copy.deepcopy(policy)  # Ray hands arguments over read-only; the policy keeps per-env state
@@ -144,7 +144,7 @@ def run_policies(
     crash_marker: Optional[str] = None,
 ) -> tuple[dict[str, list[Any]], dict[str, Any]]:
     """Runs episodes ``0 .. episodes - 1`` of every policy as Ray tasks; returns ``(episodes by
-    policy spec, task log)``. The episodes are those of :func:`accd_gym.evaluation.run_episodes`
+    policy spec, task log)``. The episodes are those of :func:`accd_gym.evals.evaluation.run_episodes`
     with the same ``seed``, ``wake_seeds``, ``num_envs`` and ``config``, bit for bit.
 
     ``chunk``: episodes per task (default :func:`default_chunk`); ``cpus_per_task``: CPUs Ray

@@ -90,7 +90,7 @@ def validate_config(raw: Any, *, quick: bool = False, root: Optional[Path] = Non
     ``quick`` overrides on top), every key checked; ConfigError naming the key otherwise.
     Relative ``train_config`` paths are resolved against ``root`` (the config file's folder's
     parent, the repository, by default the working directory)."""
-    from accd_gym.tiers import TIERS, merge
+    from accd_gym.envs.tiers import TIERS, merge
 
     if not isinstance(raw, dict):
         raise ConfigError(f"invalid config: a benchmark config must be a JSON object, not {type(raw).__name__}")
@@ -141,7 +141,7 @@ def validate_config(raw: Any, *, quick: bool = False, root: Optional[Path] = Non
         v = cfg[key]
         if not isinstance(v, int) or isinstance(v, bool) or v < lo:
             raise ConfigError(f"invalid config: `{key}` = {v!r} is outside the allowed range >= {lo}")
-    from accd_gym.task import HELD_OUT_WAKE_SEEDS
+    from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS
 
     if cfg["episodes"] > len(HELD_OUT_WAKE_SEEDS):
         raise ConfigError(f"invalid config: `episodes` = {cfg['episodes']} is outside the allowed range [1, {len(HELD_OUT_WAKE_SEEDS)}] (the held-out wake seeds)")
@@ -151,7 +151,7 @@ def validate_config(raw: Any, *, quick: bool = False, root: Optional[Path] = Non
 def load_config(path: str | Path, *, quick: bool = False) -> dict[str, Any]:
     """A validated benchmark config from a JSON file (paths in it relative to the repository,
     the file's folder's parent)."""
-    from accd_gym.config import read_json_object
+    from accd_gym.envs.config import read_json_object
 
     p = Path(path).resolve()
     cfg = validate_config(read_json_object(p, "benchmark config"), quick=quick, root=p.parent.parent)
@@ -198,8 +198,8 @@ def _episode_record(eps: Sequence[Any]) -> dict[str, Any]:
 
 def evaluate_policy(policy: Any, tier: str, episodes: int, num_envs: int, num_threads: int = 0) -> dict[str, Any]:
     """``policy`` on the tier's first ``episodes`` held-out episodes: the per-episode record."""
-    from accd_gym.evaluation import run_episodes
-    from accd_gym.task import HELD_OUT_WAKE_SEEDS
+    from accd_gym.evals.episodes import run_episodes
+    from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS
 
     eps = run_episodes(policy, episodes, wake_seeds=list(HELD_OUT_WAKE_SEEDS[:episodes]), num_envs=num_envs,
                        num_threads=num_threads, config={"tier": tier})
@@ -232,7 +232,7 @@ def job_key(job: Job, episodes: int, num_envs: int) -> dict[str, Any]:
     stored result with another key is not reused."""
     import hashlib
 
-    from accd_gym.tiers import tier as _tier
+    from accd_gym.envs.tiers import tier as _tier
 
     return {"job": dict(job.__dict__), "train_config_sha256": hashlib.sha256(Path(job.train_config).read_bytes()).hexdigest(),
             "tier_config": _tier(job.tier).config(), "build": build_digest(), "episodes": episodes, "num_envs": num_envs}
@@ -257,9 +257,9 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
     (``"reused": true``); a run interrupted while training (Ctrl+C, a killed process) continues
     from its latest checkpoint (:func:`accd_gym.training.resume`) to the same total; anything
     else starts the run afresh."""
-    from accd_gym import training
-    from accd_gym.config import read_json_object
-    from accd_gym.evaluation import load_policy
+    from accd_gym.learning import training
+    from accd_gym.envs.config import read_json_object
+    from accd_gym.evals.policies import load_policy
 
     run = Path(out) / "runs" / job.name
     key = job_key(job, episodes, num_envs)
@@ -299,7 +299,7 @@ def _continues(run: Path, cfg: dict[str, Any]) -> bool:
     """``run`` holds an unfinished run of the training config ``cfg`` with a checkpoint, which
     :func:`accd_gym.training.resume` continues (it refuses finished runs and runs without a
     checkpoint; the config check is the benchmark's: another recipe starts afresh)."""
-    from accd_gym import training
+    from accd_gym.learning import training
 
     try:
         meta = json.loads((run / "run.json").read_text())
@@ -318,7 +318,7 @@ def _run_jobs(todo: list[Job], cfg: dict[str, Any], out: Path, ray_address: Opti
             progress(f"[{i + 1}/{len(todo)}] training {job.name} ({job.timesteps} steps)")
             results.append(run_job(job, str(out), cfg["episodes"], cfg["num_envs"]))
         return results
-    from accd_gym import distributed
+    from accd_gym.evals import distributed
 
     ray = distributed.connect(ray_address)
     task = ray.remote(num_cpus=cfg["cpus_per_job"], max_retries=1)(run_job)
@@ -340,14 +340,14 @@ def _run_jobs(todo: list[Job], cfg: dict[str, Any], out: Path, ray_address: Opti
 def _baseline_policy(name: str, tier: str) -> Any:
     """The baseline ``name`` built for the tier's configuration (the LQR is designed on the
     tier's physics: its base configuration, the nominal draw of a randomized tier)."""
-    from accd_gym.baselines import make_baseline
+    from accd_gym.control.baselines import make_baseline
 
     return make_baseline(name, 0, {"tier": tier})
 
 
 def iqm(values: Sequence[float]) -> float:
     """Interquartile mean (rliable's: ``scipy.stats.trim_mean(values, 0.25)``)."""
-    from accd_gym.sweep import iqm as _iqm
+    from accd_gym.evals.sweep import iqm as _iqm
 
     return _iqm(values)
 
@@ -377,7 +377,7 @@ def _medians(record: dict[str, Any]) -> tuple[float, Optional[float]]:
 def summarize(cfg: dict[str, Any], results: list[dict[str, Any]], baselines: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """The report's numbers per tier: learned algorithms (IQM, interval, per-seed rates),
     baselines (rate, Wilson interval), medians, and the McNemar comparison."""
-    from accd_gym.evaluation import mcnemar_exact, wilson_interval
+    from accd_gym.evals.evaluation import mcnemar_exact, wilson_interval
 
     tiers: dict[str, Any] = {}
     for tier in cfg["tiers"]:
@@ -469,7 +469,7 @@ def _reuse_note(doc: dict[str, Any]) -> str:
 
 def report_markdown(doc: dict[str, Any]) -> str:
     """The benchmark report (docs/benchmark.md)."""
-    from accd_gym.tiers import TIERS
+    from accd_gym.envs.tiers import TIERS
 
     cfg = doc["config"]
     learners = ", ".join(f"{a.upper()} {len(s['seeds'])} seeds x {s['timesteps']:,} steps"

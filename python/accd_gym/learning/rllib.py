@@ -27,7 +27,7 @@ num_envs_per_env_runner  envs of each runner's native vector env
 num_threads        threads stepping each runner's envs (default 1)
 torch_threads      threads PyTorch uses in the driver (learner) (default 1)
 seed               base seed (see above) and RLlib's ``debugging(seed=...)``
-env                environment config overrides (see :mod:`accd_gym.config`)
+env                environment config overrides (see :mod:`accd_gym.envs.config`)
 algo_kwargs        keyword arguments of ``PPOConfig.training`` (``lr``, ``gamma``, ``lambda_``,
                    ``clip_param``, ``entropy_coeff``, ``train_batch_size_per_learner``,
                    ``minibatch_size``, ``num_epochs``, ``vf_loss_coeff``, ``grad_clip``...)
@@ -94,7 +94,7 @@ def is_rllib_config(raw: Any) -> bool:
 
 def load_config(path: str | Path, **overrides: Any) -> dict[str, Any]:
     """A complete, validated RLlib training config from a JSON file plus overrides (None ignored)."""
-    from accd_gym.config import read_json_object
+    from accd_gym.envs.config import read_json_object
 
     raw = read_json_object(path, "training config")
     raw.update({k: v for k, v in overrides.items() if v is not None})
@@ -131,7 +131,7 @@ def validate_config(raw: dict[str, Any]) -> dict[str, Any]:
     if not isinstance(cfg["ray_address"], str):
         raise ConfigError(f"invalid config: `ray_address` = {cfg['ray_address']!r} is outside the allowed range: 'local', 'auto' or 'HOST:PORT'")
     _check_algo_kwargs(cfg["algo_kwargs"])
-    from accd_gym.training import check_training_env
+    from accd_gym.learning.training import check_training_env
 
     check_training_env(cfg["env"])
     return cfg
@@ -160,7 +160,7 @@ def runner_seed_base(seed: int, worker_index: int, num_envs: int) -> int:
 def _runner_env_class() -> type:
     """The vector env RLlib's runners build: an :class:`InAirCaptureVectorEnv` whose int-seeded
     reset uses the runner's own seeds (``runner_base + i``) once its worker index is known."""
-    from accd_gym.vector import InAirCaptureVectorEnv
+    from accd_gym.envs.vector import InAirCaptureVectorEnv
 
     class RunnerVectorEnv(InAirCaptureVectorEnv):
         """InAirCaptureVectorEnv of one RLlib env runner (see the module docstring for its seeds)."""
@@ -264,7 +264,7 @@ def train(cfg: dict[str, Any], out: str | Path, *, timesteps: Optional[int] = No
     (inside a Tune trial)."""
     import torch
 
-    from accd_gym import distributed
+    from accd_gym.evals import distributed
 
     if timesteps is not None:
         cfg = dict(cfg, total_timesteps=int(timesteps))

@@ -106,6 +106,16 @@ def check_actions(actions: Any, num_envs: int, *, single: bool = False) -> np.nd
     return np.ascontiguousarray(raw, dtype=np.float32).reshape(num_envs, ACT_DIM)
 
 
+def check_observations(obs: Any) -> np.ndarray:
+    """Observations as a float64 array of shape (N, OBS_DIM) (one observation of shape (OBS_DIM,)
+    becomes a batch of one); raises ValueError otherwise. What a policy's ``predict`` reads."""
+    o = np.asarray(obs, dtype=np.float64)
+    if o.ndim == 1:
+        o = o.reshape(1, -1)
+    if o.ndim != 2 or o.shape[1] != OBS_DIM:
+        raise ValueError(f"observations have shape {np.shape(obs)}, expected (N, {OBS_DIM})")
+    return o
+
 def check_seed(seed: Any, what: str = "seed", bound: int = 2**64) -> int:
     """``seed`` as a Python int in [0, bound): a Python or numpy integer (not a bool).
 
@@ -159,7 +169,7 @@ def wake_options(core: Any, options: dict[str, Any] | None) -> None:
 
 def episode_steps(config: dict[str, Any]) -> int:
     """Agent steps of one episode under a full configuration (``capture_window / agent_step``)."""
-    from accd_gym.config import config_json
+    from accd_gym.envs.config import config_json
 
     return int(_core.episode_steps(config_json(config)))
 

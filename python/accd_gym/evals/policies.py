@@ -1,0 +1,170 @@
+"""Policies by name or path (:func:`load_policy`): the built-in baselines
+(:mod:`accd_gym.control`), tuning files of the guidance controller and the LQR, trained
+stable-baselines3 models (:class:`SB3Policy`) and RLlib runs
+(:class:`accd_gym.learning.rllib.RLlibPolicy`).
+"""
+
+from __future__ import annotations
+
+import json
+import pickle
+import zipfile
+from pathlib import Path
+from typing import Any, Optional
+
+import numpy as np
+
+from accd_gym.errors import ConfigError
+
+class SB3Policy:
+    """A trained stable-baselines3 model (PPO or SAC) with its VecNormalize statistics, deterministic.
+
+    ``path``: a run folder (``final_model.zip`` and ``vecnormalize.pkl`` in it; for a run that was
+    interrupted or is still training, its latest checkpoint, which :attr:`note` and a warning
+    say), or a model ``.zip`` (its statistics: ``vecnormalize.pkl`` beside it, or for a
+    checkpoint ``<prefix>_vecnormalize_<steps>_steps.pkl``). The algorithm is read from the run's
+    ``run.json`` when there is one, else from the zip's stored policy class.
+
+    A model trained with VecNormalize acts on normalised observations: without its statistics it
+    would see raw ones and act wrongly, so a missing statistics file is a ConfigError unless
+    ``allow_unnormalized=True`` (then observations are passed raw, with a warning).
+    """
+
+    def __init__(self, path: str | Path, device: str = "cpu", *, allow_unnormalized: bool = False) -> None:
+        import warnings
+
+        p = Path(path)
+        #: How the model was found, e.g. that a run's latest checkpoint stands in for its final model.
+        self.note: Optional[str] = None
+        if p.is_dir():
+            model_path, stats_path = p / "final_model.zip", p / "vecnormalize.pkl"
+            if not model_path.is_file():
+                from accd_gym.learning.training import latest_checkpoint
+
+                ckpt = latest_checkpoint(p)
+                status = _run_status(p)
+                if ckpt is None:
+                    raise ConfigError(
+                        f"invalid config: policy path {str(path)!r}: no final model and no checkpoint in "
+                        f"{str(p / 'checkpoints')!r} (run status: {status})"
+                    )
+                model_path = ckpt["model"]
+                stats_path = ckpt["vecnormalize"] or model_path.with_name("vecnormalize.pkl")
+                self.note = (f"run {str(path)!r} has no final model (status: {status}); evaluating its latest "
+                             f"checkpoint {model_path.name} ({ckpt['steps']} steps)")
+                warnings.warn(self.note, stacklevel=2)
+        else:
+            model_path = p
+            stats_path = p.with_name("vecnormalize.pkl")
+            if "_steps" in p.stem:  # CheckpointCallback: <prefix>_<steps>_steps.zip
+                prefix, steps = p.stem.rsplit("_", 2)[0], p.stem.rsplit("_", 2)[1]
+                stats_path = p.with_name(f"{prefix}_vecnormalize_{steps}_steps.pkl")
+        if not model_path.is_file():
+            raise ConfigError(f"invalid config: policy path {str(path)!r}: no model file {str(model_path)!r}")
+        if not stats_path.is_file() and not allow_unnormalized:
+            raise ConfigError(
+                f"invalid config: policy {str(path)!r}: its VecNormalize statistics {str(stats_path)!r} are missing; "
+                "the model would see unnormalised observations (pass allow_unnormalized=True, or "
+                "--allow-unnormalized on the command line, if it was trained without VecNormalize)"
+            )
+        self.name = str(path)
+        self.algo = _algo_of(model_path)
+        try:
+            from stable_baselines3 import PPO, SAC
+        except ModuleNotFoundError as e:
+            raise ModuleNotFoundError(
+                f"loading the trained model {str(path)!r} needs stable-baselines3 ({e}): pip install 'accd-gym[sb3]'",
+                name=e.name,
+            ) from e
+
+        self._device = device
+        self._model_bytes = model_path.read_bytes()
+        self._stats_bytes = stats_path.read_bytes() if stats_path.is_file() else None
+        self._load()
+        if self._stats_bytes is None:
+            warnings.warn(f"policy {str(path)!r}: no VecNormalize statistics; observations are passed unnormalised",
+                          stacklevel=2)
+
+    def _load(self) -> None:
+        """Builds the model and the normalizer from the files' bytes (kept for pickling)."""
+        import io
+
+        from stable_baselines3 import PPO, SAC
+
+        cls = {"ppo": PPO, "sac": SAC}[self.algo]
+        self.model = cls.load(io.BytesIO(self._model_bytes), device=self._device)
+        self.normalizer = None
+        if self._stats_bytes is not None:
+            self.normalizer = pickle.loads(self._stats_bytes)
+            self.normalizer.training = False
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickles as the model's and statistics' file contents (for Ray tasks): a copy acts bit for bit alike."""
+        return {k: v for k, v in self.__dict__.items() if k not in ("model", "normalizer")}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._load()
+
+    def predict(self, obs: Any) -> np.ndarray:
+        """Deterministic actions (N, 4) for raw observations (N, 25), normalised as in training."""
+        o = np.asarray(obs, dtype=np.float32)
+        if self.normalizer is not None and self.normalizer.norm_obs:
+            o = self.normalizer.normalize_obs(o)
+        actions, _ = self.model.predict(o, deterministic=True)
+        return np.clip(np.asarray(actions, dtype=np.float32), -1.0, 1.0)
+
+    def reset(self, mask: Optional[np.ndarray] = None) -> None:
+        """Feed-forward policies keep no state."""
+
+
+def _run_status(run: Path) -> str:
+    """The ``status`` of a run folder's run.json ("unknown" without one)."""
+    try:
+        return str(json.loads((run / "run.json").read_text()).get("status", "unknown"))
+    except (OSError, ValueError, AttributeError):
+        return "unknown"
+
+
+def _algo_of(model_path: Path) -> str:
+    """'ppo' or 'sac' for a saved model: from run.json beside or above it, else the zip's data."""
+    for folder in (model_path.parent, model_path.parent.parent):
+        meta = folder / "run.json"
+        if meta.is_file():
+            return json.loads(meta.read_text())["algo"]
+    try:
+        with zipfile.ZipFile(model_path) as z:
+            data = z.read("data").decode()
+    except (zipfile.BadZipFile, KeyError) as e:
+        raise ConfigError(f"invalid config: {str(model_path)!r} is not a stable-baselines3 model ({e})") from None
+    if "sac.policies" in data:
+        return "sac"
+    if "policies.ActorCriticPolicy" in data or "ppo" in data.lower():
+        return "ppo"
+    raise ConfigError(f"invalid config: cannot tell the algorithm of {str(model_path)!r} (allowed: PPO, SAC)")
+
+
+def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False, config: Optional[Any] = None) -> Any:
+    """A policy from a baseline name (``zero``, ``random``, ``guidance``, ``lqr``), a tuning file
+    (``training/guidance_tuning*.json``: the guidance controller with its winning gains;
+    ``training/lqr_tuning.json``: the LQR with its winning tuning) or a model path (see
+    :class:`SB3Policy` for ``allow_unnormalized``; an RLlib run or checkpoint folder gives an
+    :class:`accd_gym.learning.rllib.RLlibPolicy`). ``config``: the env configuration (overrides) the
+    policy will run on; the LQR is designed for it."""
+    from accd_gym.control.baselines import BASELINES, guidance_from_tuning, make_baseline
+
+    if spec in BASELINES:
+        return make_baseline(spec, seed, config)
+    if spec.endswith(".json") and Path(spec).is_file():
+        from accd_gym.control.lqr import is_lqr_tuning, lqr_from_tuning
+
+        if is_lqr_tuning(spec):
+            return lqr_from_tuning(spec, config)
+        return guidance_from_tuning(spec)
+    if Path(spec).exists():
+        from accd_gym.learning.rllib import RLlibPolicy, is_rllib_run
+
+        if is_rllib_run(spec):
+            return RLlibPolicy(spec)
+        return SB3Policy(spec, allow_unnormalized=allow_unnormalized)
+    return make_baseline(spec, seed, config)  # raises ConfigError naming the allowed names

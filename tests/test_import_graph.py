@@ -1,0 +1,166 @@
+"""The package's import graph, read from the source with ``ast``: every import of an accd_gym
+module, at module level or inside a function, absolute or relative, is an edge; the graph has no
+cycle, every edge ends at a module that exists at its new path, and no module imports another
+module's private names (``_x``; the ``_core`` extension module is the binding, not private)."""
+
+from __future__ import annotations
+
+import ast
+import textwrap
+from pathlib import Path
+from typing import Optional
+
+import accd_gym
+
+PACKAGE_DIR = Path(accd_gym.__file__).parent
+#: Modules that exist without a Python source of their own.
+EXTENSIONS = {"accd_gym._core"}
+
+
+def modules_of(root: Path, package: str) -> dict[str, Path]:
+    """Every Python module under ``root`` (the folder of package ``package``) by dotted name."""
+    out = {}
+    for path in sorted(root.rglob("*.py")):
+        parts = list(path.relative_to(root).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join([package, *parts])] = path
+    return out
+
+
+def imports_of(name: str, path: Path, known: set[str]) -> list[tuple[str, str, int]]:
+    """``(imported module, imported name or "", line)`` of every import in module ``name`` (file
+    ``path``) of a module of the package; ``from P import n`` names module ``P.n`` when that is a
+    module, else module ``P`` and name ``n``."""
+    root = name.split(".")[0]
+    is_package = path.name == "__init__.py"
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name == root or alias.name.startswith(root + "."):
+                    out.append((alias.name, "", node.lineno))
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                package = name.split(".") if is_package else name.split(".")[:-1]
+                base_parts = package[: len(package) - (node.level - 1)]
+                base = ".".join(base_parts + ([node.module] if node.module else []))
+            else:
+                base = node.module or ""
+            if base != root and not base.startswith(root + "."):
+                continue
+            for alias in node.names:
+                sub = f"{base}.{alias.name}"
+                if sub in known:
+                    out.append((sub, "", node.lineno))
+                else:
+                    out.append((base, alias.name, node.lineno))
+    return out
+
+
+def import_graph(root: Path, package: str, extensions: set[str] = frozenset()) -> dict[str, set[str]]:
+    """Module -> the package's modules it imports, anywhere in its source."""
+    mods = modules_of(root, package)
+    known = set(mods) | set(extensions)
+    return {name: {target for target, _, _ in imports_of(name, path, known)} - {name} for name, path in mods.items()}
+
+
+def find_cycle(graph: dict[str, set[str]]) -> Optional[list[str]]:
+    """One cycle of ``graph`` as ``[a, b, ..., a]``, or None when it has none."""
+    state: dict[str, int] = {}  # 1: on the current path, 2: done
+    stack: list[str] = []
+
+    def visit(node: str) -> Optional[list[str]]:
+        state[node] = 1
+        stack.append(node)
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == 1:
+                return stack[stack.index(nxt):] + [nxt]
+            if nxt not in state:
+                found = visit(nxt)
+                if found:
+                    return found
+        stack.pop()
+        state[node] = 2
+        return None
+
+    for node in sorted(graph):
+        if node not in state:
+            found = visit(node)
+            if found:
+                return found
+    return None
+
+
+def test_the_package_has_no_import_cycle():
+    graph = import_graph(PACKAGE_DIR, "accd_gym", EXTENSIONS)
+    assert len(graph) > 30 and "accd_gym.envs.vector" in graph
+    cycle = find_cycle(graph)
+    assert cycle is None, "import cycle: " + " -> ".join(cycle)
+
+
+def test_every_import_names_an_existing_module_at_its_new_path():
+    mods = modules_of(PACKAGE_DIR, "accd_gym")
+    known = set(mods) | EXTENSIONS
+    missing = [
+        f"{path.relative_to(PACKAGE_DIR)}:{line}: {target}"
+        for name, path in mods.items()
+        for target, _, line in imports_of(name, path, known)
+        if target not in known
+    ]
+    assert not missing, "imports of modules that do not exist (old paths?):\n" + "\n".join(missing)
+
+
+def test_no_module_imports_a_private_name_of_another():
+    mods = modules_of(PACKAGE_DIR, "accd_gym")
+    known = set(mods) | EXTENSIONS
+    bad = []
+    for name, path in mods.items():
+        for target, imported, line in imports_of(name, path, known):
+            private = imported if imported else target.rsplit(".", 1)[-1]
+            if not private.startswith("_") or private.startswith("__") or target in EXTENSIONS:
+                continue
+            if not imported and target.rsplit(".", 1)[0] == name:
+                continue  # a package importing its own private submodule
+            bad.append(f"{path.relative_to(PACKAGE_DIR)}:{line}: {target}{'.' + imported if imported else ''}")
+    assert not bad, "private names imported across modules:\n" + "\n".join(bad)
+
+
+def _write(root: Path, files: dict[str, str]) -> None:
+    for rel, text in files.items():
+        path = root / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(textwrap.dedent(text))
+
+
+def test_the_checks_find_cycles_hidden_in_functions_and_relative_imports(tmp_path):
+    pkg = tmp_path / "pkg"
+    _write(pkg, {
+        "__init__.py": "",
+        "a/__init__.py": "",
+        "a/low.py": "def f():\n    from ..b import high\n    return high\n",
+        "a/mid.py": "from . import low\n",
+        "b/__init__.py": "",
+        "b/high.py": "from pkg.a.mid import low as _low\nfrom ..a import mid\n",
+    })
+    graph = import_graph(pkg, "pkg")
+    assert graph["pkg.a.low"] == {"pkg.b.high"} and graph["pkg.a.mid"] == {"pkg.a.low"}
+    assert graph["pkg.b.high"] == {"pkg.a.mid"}
+    cycle = find_cycle(graph)
+    assert cycle is not None and cycle[0] == cycle[-1] and set(cycle) == {"pkg.a.low", "pkg.a.mid", "pkg.b.high"}
+    (pkg / "a" / "low.py").write_text("def f():\n    return 1\n")
+    assert find_cycle(import_graph(pkg, "pkg")) is None
+
+
+def test_the_real_graph_with_one_injected_back_edge_has_a_cycle():
+    graph = import_graph(PACKAGE_DIR, "accd_gym", EXTENSIONS)
+    assert "accd_gym.envs.task" in graph["accd_gym.envs.vector"]
+    graph["accd_gym.envs.task"] = graph["accd_gym.envs.task"] | {"accd_gym.envs.vector"}
+    assert find_cycle(graph) is not None
+
+
+def test_the_private_name_check_sees_private_imports(tmp_path):
+    pkg = tmp_path / "pkg"
+    _write(pkg, {"__init__.py": "", "x.py": "def _h():\n    pass\n", "y.py": "def g():\n    from .x import _h\n"})
+    known = set(modules_of(pkg, "pkg"))
+    assert ("pkg.x", "_h", 2) in imports_of("pkg.y", pkg / "y.py", known)
