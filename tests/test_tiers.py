@@ -44,7 +44,7 @@ def test_an_unknown_tier_is_refused_naming_the_tiers():
 
 def test_tier_tables_are_generated_from_the_declaration():
     doc = (Path(__file__).resolve().parents[1] / "docs" / "environment.md").read_text()
-    section = re.search(r"<!-- generated: accd_gym.tiers.tiers_markdown\(\) -->\n(.*?)\n<!-- end generated -->", doc, re.S)
+    section = re.search(r"<!-- generated: accd_gym\.envs\.tiers\.tiers_markdown\(\) -->\n(.*?)\n<!-- end generated -->", doc, re.S)
     assert section and section.group(1) == tiers_markdown()
     assert tiers_markdown() in accd_gym.envs.tiers.__doc__
     for t in TIERS.values():

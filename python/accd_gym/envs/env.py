@@ -11,6 +11,7 @@ import numpy as np
 
 from accd_gym import _core
 from accd_gym.envs.config import valid_config, with_arguments
+from accd_gym.envs.tables import with_task_tables
 from accd_gym.envs.core_env import CoreEnvMixin
 from accd_gym.envs.task import (
     action_space,
@@ -43,12 +44,7 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
     any other shape than (4,) raise ``StateError`` (a ``ValueError``). Pitch moves both horizontal flaps together, yaw both
     vertical flaps, roll all four differentially (``accd_gym.mix_flaps`` does the mixing).
 
-    | index | flap | unit | positive deflection |
-    |---|---|---|---|
-    | 0 | right (horizontal) | flap_limit_deg | with left: nose up (pitch) |
-    | 1 | left (horizontal) | flap_limit_deg | with right: nose up (pitch) |
-    | 2 | top (vertical) | flap_limit_deg | with bottom: nose right (yaw) |
-    | 3 | bottom (vertical) | flap_limit_deg | with top: nose right (yaw) |
+    {ACTION_TABLE}
 
     ## Observation Space
 
@@ -56,17 +52,7 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
     clipped to [-10, 10]; vectors in the TA frame. ``accd_gym.task.OBSERVATION_TABLE`` holds this
     table in code.
 
-    | index | name | unit | scale | quantity |
-    |---|---|---|---|---|
-    | 0-2 | ``boom_rel_x/y/z`` | m | 0.05 | boom tip minus capture point |
-    | 3-5 | ``boom_rel_vx/vy/vz`` | m/s | 0.1 | boom-tip velocity minus capture-point velocity |
-    | 6-8 | ``accd_dx/dy/dz`` | m | 0.05 | ACCD position minus its open-loop equilibrium |
-    | 9-11 | ``accd_vx/vy/vz`` | m/s | 0.1 | ACCD velocity relative to the aircraft |
-    | 12-15 | ``quat_w/x/y/z`` | - | 1 | attitude quaternion body -> TA frame (w >= 0) |
-    | 16-18 | ``rate_p/q/r`` | rad/s | 0.5 | body rates (roll, pitch, yaw) |
-    | 19-22 | ``flap_right/left/top/bottom`` | - | 1 | flap deflections / ``accd.flap_limit_deg`` |
-    | 23 | ``tension`` | N | 1e-4 | tension at the attachment |
-    | 24 | ``time_left`` | - | 1 | time left in the capture window / ``capture_window`` |
+    {OBSERVATION_TABLE}
 
     **Sensors** (``sensors={"enabled": True, ...}``; off by default, and then the observation is
     the true state). The same layout then holds what an onboard sensor suite measures: the boom
@@ -82,16 +68,10 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
 
     ## Rewards
 
-    Per agent step, with ``d`` the distance from the capture point to the boom tip (m) at the end
-    of the step, ``a`` the action and ``a'`` the previous one (zero at the start)::
+    Summed per agent step; ``steps_left`` counts the agent steps left in the window, so capturing
+    always beats hovering next to the boom. Bounds per step: ``accd_gym.reward_bounds()``.
 
-        r = w_p exp(-d / lambda) - w_e sum(a^2)/4 - w_s sum(((a - a')/2)^2)/4
-            + [captured] (w_c + w_p * steps_left) - [overload or envelope exit or diverged] w_f
-
-    Defaults (``reward`` config): ``w_p = 1``, ``lambda = 10 m``, ``w_e = 0.05``,
-    ``w_s = 0.05``, ``w_c = 100``, ``w_f = 50``. ``steps_left`` counts the agent steps left in the
-    window, so capturing always beats hovering next to the boom. Bounds per step:
-    ``[-(w_e + w_s + w_f), w_p * 700 + w_c]`` with the defaults (``accd_gym.reward_bounds``).
+    {REWARD_TABLE}
 
     ## Starting State
 
@@ -108,13 +88,7 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
 
     ## Episode End
 
-    | condition | kind | ``info`` flag |
-    |---|---|---|
-    | capture point within ``boom.capture_radius`` (0.5 m) of the boom tip at a relative speed under ``boom.max_closing_speed`` (2 m/s), checked every physics step | terminated | ``captured`` |
-    | attachment tension above ``limits.overload_fraction`` (0.5) x the tether's breaking tension, checked every physics step | terminated | ``overload`` |
-    | distance to the boom over ``limits.max_distance`` (60 m), nose more than ``limits.max_tilt_deg`` (60 deg) off the flight direction, a pitch/yaw rate over ``limits.max_body_rate`` (10 rad/s, tumbling) or a roll rate over ``limits.max_roll_rate`` (50 rad/s; the tether's swivel leaves roll free) | terminated | ``envelope_exit`` |
-    | the simulation diverged (non-finite or implausible state); the observation is the last good one | terminated | ``diverged`` |
-    | ``capture_window`` (70 s, 700 agent steps) elapsed | truncated | - |
+    {EPISODE_END_TABLE}
 
     The registered spec has ``max_episode_steps`` = 700 (the default window), so
     ``gymnasium.make`` adds a ``TimeLimit`` of 700 steps; with another ``capture_window`` pass
@@ -257,4 +231,4 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
         self._np_random = d["np_random"]
 
 
-InAirCaptureEnv.__doc__ = with_arguments(InAirCaptureEnv.__doc__)
+InAirCaptureEnv.__doc__ = with_task_tables(with_arguments(InAirCaptureEnv.__doc__))
