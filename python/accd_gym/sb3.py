@@ -17,6 +17,7 @@ from accd_gym.task import (
     DIVERGED_COLUMN,
     action_space,
     check_actions,
+    check_flag,
     check_seed,
     info_dicts,
     observation_space,
@@ -44,12 +45,17 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
       ``diverged``, ``episode_steps``, ``wake_seed``, ``TimeLimit.truncated``, and
       ``divergence`` when the env diverged).
 
-    Observations are written by Rust into numpy arrays in place (two sets, used alternately: an
-    array stays valid through the next step, as SB3's rollout collection needs); the GIL is
-    released while the envs step on ``num_threads`` threads (0: one per core). Works under
-    ``VecMonitor`` and ``VecNormalize``.
+    **Copies** (``copy=True``, the default, as ``DummyVecEnv``; the attribute ``copy``): the
+    observations, rewards and dones ``step`` and ``reset`` return are new arrays, never changed
+    by the env afterwards. ``copy=False`` returns the observation array that the Rust core writes
+    in place instead, saving its copy: two sets are used alternately, so it stays valid through
+    the next ``step`` or ``reset`` (what SB3's rollout collection needs: it copies the previous
+    observation into its buffer) and is overwritten by the call after it. Rewards, dones, infos
+    and ``terminal_observation`` entries are new in both modes. The GIL is released while the
+    envs step on ``num_threads`` threads (0: one per core). Works under ``VecMonitor`` and
+    ``VecNormalize``.
 
-    Arguments besides ``num_envs``, ``seed``, ``num_threads`` and ``render_mode``: the
+    Arguments besides ``num_envs``, ``seed``, ``num_threads``, ``copy`` and ``render_mode``: the
     configuration keys (as for the single env), a section a dict of its keys, ``tether`` also a
     preset name:
 
@@ -64,9 +70,11 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         *,
         seed: Optional[int] = None,
         num_threads: int = 0,
+        copy: bool = True,
         render_mode: Optional[str] = None,
         **config: Any,
     ) -> None:
+        self.copy = check_flag(copy, "copy")
         if render_mode not in (None, "rgb_array"):
             raise ConfigError(
                 f"invalid config: `render_mode` = {render_mode!r} is outside the allowed range 'rgb_array' or None"
@@ -104,7 +112,7 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         self._pending_options = {}
         self._base_seed = None
         self.reset_infos = [{"wake_seed": int(w)} for w in wake]
-        return obs
+        return obs.copy() if self.copy else obs
 
     def step_async(self, actions: np.ndarray) -> None:
         """Stores the actions ((num_envs, 4); the shape is checked here, finiteness by the step)."""
@@ -125,7 +133,8 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         for i in np.flatnonzero(dones):
             infos[i]["terminal_observation"] = final_obs[i].copy()
             self.reset_infos[i] = {"wake_seed": int(self._core.episode_seeds(int(i))["wake"])}
-        return obs, reward.astype(np.float32), dones.copy(), infos
+        # (The rewards' conversion and the dones are new arrays already.)
+        return (obs.copy() if self.copy else obs), reward.astype(np.float32), dones, infos
 
     def close(self) -> None:
         """Nothing to release: the Rust core frees its memory and threads when dropped."""
@@ -165,6 +174,7 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         return {
             "num_envs": self.num_envs,
             "num_threads": self._core.num_threads,
+            "copy": self.copy,
             "render_mode": self.render_mode,
             "config": self._config,
             "state": self.get_state(),
@@ -174,7 +184,8 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         }
 
     def __setstate__(self, d: dict[str, Any]) -> None:
-        self.__init__(d["num_envs"], num_threads=d["num_threads"], render_mode=d["render_mode"], **d["config"])
+        self.__init__(d["num_envs"], num_threads=d["num_threads"], copy=d.get("copy", True), render_mode=d["render_mode"],
+                      **d["config"])
         self.set_state(d["state"])
         self._base_seed = d["base_seed"]
         self._pending_options = d["pending_options"]

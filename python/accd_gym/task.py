@@ -124,6 +124,16 @@ def check_seed(seed: Any, what: str = "seed", bound: int = 2**64) -> int:
     return value
 
 
+def check_flag(value: Any, what: str) -> bool:
+    """``value`` as a bool: True or False (Python or numpy bools only; ``1``, ``"yes"`` and None
+    raise :class:`~accd_gym.ConfigError` naming ``what``)."""
+    from accd_gym.errors import ConfigError
+
+    if not isinstance(value, (bool, np.bool_)):
+        raise ConfigError(f"invalid config: `{what}` = {value!r} is outside the allowed range: True or False")
+    return bool(value)
+
+
 #: Wake seeds are reported as int64 (as gymnasium batches Python ints), so they lie in [0, 2^63).
 WAKE_SEED_BOUND: int = 2**63
 

@@ -20,6 +20,7 @@ from accd_gym.task import (
     INFO_NAMES,
     action_space,
     check_actions,
+    check_flag,
     check_max_episode_steps,
     check_seed,
     observation_space,
@@ -76,10 +77,13 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
     times. Wake options cannot be combined with a partial ``reset_mask`` (the schedule is the
     batch's).
 
-    **Buffers (copy versus view)**: the observation, reward and flag arrays ``step`` and
-    ``reset`` return are numpy arrays the Rust core writes in place (no copy per step). Two sets
-    are used alternately, so an array stays valid through the next ``step`` and is overwritten by
-    the one after; copy what you keep longer. Info arrays and ``final_obs`` entries are copies.
+    **Copies** (``copy=True``, the default, as ``SyncVectorEnv``; the attribute ``copy``): every array ``step`` and
+    ``reset`` return is new, never changed by the env afterwards. ``copy=False`` (also through
+    ``gymnasium.make_vec(..., copy=False)``) returns the observation, reward, termination and
+    truncation arrays that the Rust core writes in place instead, saving their copy: two sets are
+    used alternately, so such an array stays valid through the next ``step`` or ``reset`` and is
+    overwritten by the call after it; copy what you keep longer. Info arrays and ``final_obs``
+    entries are new in both modes.
 
     ``max_episode_steps`` (passed by ``gymnasium.make_vec`` from the registered spec): at least
     the configuration's episode length (``capture_window / agent_step``), which ends episodes
@@ -88,7 +92,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
     ``render()`` returns a tuple of one RGB frame per env, as ``SyncVectorEnv`` does.
 
     **Arguments** besides ``num_envs``, ``seed``, ``num_threads``, ``autoreset_mode``,
-    ``render_mode`` and ``max_episode_steps``: the configuration keys (as for the single env),
+    ``copy``, ``render_mode`` and ``max_episode_steps``: the configuration keys (as for the single env),
     a section a dict of its keys, ``tether`` also a preset name:
 
     {CONFIG_ARGUMENTS}
@@ -102,6 +106,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         *,
         autoreset_mode: Union[AutoresetMode, str] = AutoresetMode.NEXT_STEP,
         num_threads: int = 0,
+        copy: bool = True,
         render_mode: Optional[str] = None,
         max_episode_steps: Optional[int] = None,
         **config: Any,
@@ -119,6 +124,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
                 f"invalid config: `autoreset_mode` = {autoreset_mode!r} is outside the allowed range: an AutoresetMode, "
                 f"its value ({', '.join(repr(m.value) for m in _MODES)}) or {', '.join(map(repr, by_name))}"
             )
+        self.copy = check_flag(copy, "copy")
         if render_mode not in (None, "rgb_array"):
             raise ConfigError(
                 f"invalid config: `render_mode` = {render_mode!r} is outside the allowed range 'rgb_array' or None"
@@ -176,7 +182,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         selected = np.ones(self.num_envs, dtype=bool) if mask is None else mask.copy()
         wake_seed = wake.astype(np.int64)
         wake_seed[~selected] = 0
-        return obs, {"wake_seed": wake_seed, "_wake_seed": selected}
+        return (obs.copy() if self.copy else obs), {"wake_seed": wake_seed, "_wake_seed": selected}
 
     def start_episode(self, i: int, seed: int, wake_seed: Optional[int] = None) -> np.ndarray:
         """Starts a new episode in env ``i`` alone and returns every env's observations (a copy).
@@ -203,7 +209,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
             obs, _ = self.reset(seed=seeds, options={"reset_mask": mask})
         finally:
             self._core.set_wake_schedule(kind, kept)
-        return np.array(obs, copy=True)
+        return obs if self.copy else obs.copy()
 
     @property
     def np_random_seed(self) -> tuple[int, ...]:  # type: ignore[override]
@@ -269,6 +275,8 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
             infos["_final_info"] = done.copy()
         infos["wake_seed"] = wake_seed
         infos["_wake_seed"] = np.ones(self.num_envs, dtype=bool)
+        if self.copy:
+            return obs.copy(), reward.copy(), terminated.copy(), truncated.copy(), infos
         return obs, reward, terminated, truncated, infos
 
     def _step_infos(
@@ -327,6 +335,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
             "num_envs": self.num_envs,
             "autoreset_mode": self.metadata["autoreset_mode"],
             "num_threads": self._core.num_threads,
+            "copy": self.copy,
             "render_mode": self.render_mode,
             "config": self._config,
             "state": self.get_state(),
@@ -337,6 +346,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
             d["num_envs"],
             autoreset_mode=d["autoreset_mode"],
             num_threads=d["num_threads"],
+            copy=d.get("copy", True),
             render_mode=d["render_mode"],
             **d["config"],
         )
