@@ -42,6 +42,17 @@ class CoreEnvMixin:
         They are a function of the episode's wake seed alone."""
         return self._core.episode_parameters(int(i))
 
+    def _reset_info(self, i: int, wake_seed: int) -> dict[str, Any]:
+        """The info of env ``i``'s episode as the single env's ``reset`` reports it, for the
+        episode's ``wake_seed``: ``wake_seed``, and with randomized physics ``parameters`` (the
+        drawn parameters, :meth:`episode_parameters`). The one place the reset info is built:
+        every env class reports these keys."""
+        info: dict[str, Any] = {"wake_seed": int(wake_seed)}
+        parameters = self._core.episode_parameters(int(i))
+        if parameters is not None:
+            info["parameters"] = parameters
+        return info
+
     def true_boom_relative(self) -> np.ndarray:
         """The boom tip minus the capture point of every env at its current state, (num_envs, 3) m,
         TA frame, from the physics: what ``boom_rel_x/y/z`` of the observation shows without

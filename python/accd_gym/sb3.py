@@ -43,7 +43,9 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
     * rewards are float32, dones bool, infos a list of dicts (``time``, ``distance``,
       ``relative_speed``, ``peak_tension``, ``captured``, ``overload``, ``envelope_exit``,
       ``diverged``, ``episode_steps``, ``wake_seed``, ``TimeLimit.truncated``, and
-      ``divergence`` when the env diverged).
+      ``divergence`` when the env diverged); ``reset_infos[i]`` is the single env's reset info
+      (``wake_seed``, and with randomized physics the drawn ``parameters``), after ``reset()``
+      and after each automatic reset;
 
     **Copies** (``copy=True``, the default, as ``DummyVecEnv``; the attribute ``copy``): the
     observations, rewards and dones ``step`` and ``reset`` return are new arrays, never changed
@@ -111,7 +113,7 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         obs, wake = self._reset_core(self._base_seed, self._pending_options)
         self._pending_options = {}
         self._base_seed = None
-        self.reset_infos = [{"wake_seed": int(w)} for w in wake]
+        self.reset_infos = [self._reset_info(i, w) for i, w in enumerate(wake.tolist())]
         return obs.copy() if self.copy else obs
 
     def step_async(self, actions: np.ndarray) -> None:
@@ -132,7 +134,7 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
             d["TimeLimit.truncated"] = time_limit
         for i in np.flatnonzero(dones):
             infos[i]["terminal_observation"] = final_obs[i].copy()
-            self.reset_infos[i] = {"wake_seed": int(self._core.episode_seeds(int(i))["wake"])}
+            self.reset_infos[i] = self._reset_info(int(i), self._core.episode_seeds(int(i))["wake"])
         # (The rewards' conversion and the dones are new arrays already.)
         return (obs.copy() if self.copy else obs), reward.astype(np.float32), dones, infos
 

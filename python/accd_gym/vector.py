@@ -65,11 +65,13 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
     ``peak_tension`` (float64), ``captured``, ``overload``, ``envelope_exit``, ``diverged``
     (bool), ``episode_steps`` (int64), ``divergence`` (object, only when an env diverged) are
     the step's; ``wake_seed`` (int64) is every env's. An env reset in this step (``NEXT_STEP``:
-    the step after its episode ended; ``SAME_STEP``: the step that ended it) reports only its new
-    episode's ``wake_seed``: its other entries are 0 with the mask False. With ``SAME_STEP``,
+    the step after its episode ended; ``SAME_STEP``: the step that ended it) reports its new
+    episode's reset info, as the single env's ``reset`` gives it: ``wake_seed`` and, with
+    randomized physics, ``parameters`` (a dict of float64 arrays with their ``_name`` masks, the
+    drawn parameters); its step entries are 0 with the mask False. With ``SAME_STEP``,
     ``final_obs`` (object array, the ended episodes' last observations) and ``final_info`` (the
-    ended episodes' step infos, masked to the ended envs) are added. ``reset`` returns
-    ``wake_seed`` of the envs it reset.
+    ended episodes' step infos, masked to the ended envs) are added. ``reset`` returns the reset
+    info (``wake_seed``, ``parameters``) of the envs it reset.
 
     **Wake-seed lists** (``options={"wake_seeds": W}``): the batch covers the list, env ``i``'s
     episode ``e`` (counted from the last seeding) using ``W[(i + e * num_envs) % len(W)]``: a
@@ -133,6 +135,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         # states need no file.
         valid = valid_config(config)
         self._config = json.loads(valid.to_json())
+        self._randomized = bool(self._config["randomization"]["enabled"])
         check_max_episode_steps(max_episode_steps, self._config)
         self._core = _core.BatchEnv(valid, int(num_envs), random_seed(), _MODES[mode], int(num_threads))
         self.num_envs = self._core.num_envs
@@ -182,7 +185,8 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         selected = np.ones(self.num_envs, dtype=bool) if mask is None else mask.copy()
         wake_seed = wake.astype(np.int64)
         wake_seed[~selected] = 0
-        return (obs.copy() if self.copy else obs), {"wake_seed": wake_seed, "_wake_seed": selected}
+        infos = self._add_parameters({"wake_seed": wake_seed, "_wake_seed": selected}, selected)
+        return (obs.copy() if self.copy else obs), infos
 
     def start_episode(self, i: int, seed: int, wake_seed: Optional[int] = None) -> np.ndarray:
         """Starts a new episode in env ``i`` alone and returns every env's observations (a copy).
@@ -275,9 +279,21 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
             infos["_final_info"] = done.copy()
         infos["wake_seed"] = wake_seed
         infos["_wake_seed"] = np.ones(self.num_envs, dtype=bool)
+        if mode != AutoresetMode.DISABLED:
+            self._add_parameters(infos, ~stepped)
         if self.copy:
             return obs.copy(), reward.copy(), terminated.copy(), truncated.copy(), infos
         return obs, reward, terminated, truncated, infos
+
+    def _add_parameters(self, infos: dict[str, Any], rows: np.ndarray) -> dict[str, Any]:
+        """``infos`` with the reset info that the rows' new episodes have beyond ``wake_seed``
+        (randomized physics: the drawn ``parameters``), batched by ``VectorEnv._add_info`` as
+        ``SyncVectorEnv`` batches the single env's reset infos."""
+        if not self._randomized or not np.count_nonzero(rows):
+            return infos
+        for i in np.flatnonzero(rows).tolist():
+            infos = self._add_info(infos, {"parameters": self._core.episode_parameters(i)}, i)
+        return infos
 
     def _step_infos(
         self, info: np.ndarray, wake_seed: np.ndarray, rows: np.ndarray, ended: bool = False
