@@ -15,10 +15,13 @@ from accd_gym.core_env import CoreEnvMixin
 from accd_gym.errors import ConfigError
 from accd_gym.task import (
     DIVERGED_COLUMN,
+    MAX_ENVS,
+    MAX_THREADS,
     action_space,
     check_actions,
+    check_base_seed,
+    check_count,
     check_flag,
-    check_seed,
     info_dicts,
     observation_space,
     random_seed,
@@ -76,6 +79,8 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         render_mode: Optional[str] = None,
         **config: Any,
     ) -> None:
+        n = check_count(num_envs, "num_envs", 1, MAX_ENVS)
+        threads = check_count(num_threads, "num_threads", 0, MAX_THREADS)
         self.copy = check_flag(copy, "copy")
         if render_mode not in (None, "rgb_array"):
             raise ConfigError(
@@ -86,8 +91,8 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         # states need no file.
         valid = valid_config(config)
         self._config = json.loads(valid.to_json())
-        base = random_seed() if seed is None else check_seed(seed)
-        self._core = _core.BatchEnv(valid, int(num_envs), base, "same_step", int(num_threads))
+        base = random_seed(n) if seed is None else check_base_seed(seed, n)
+        self._core = _core.BatchEnv(valid, n, base, "same_step", threads)
         self._actions: Optional[np.ndarray] = None
         self._base_seed: Optional[int] = None if seed is None else base
         self._pending_options: dict[str, Any] = {}
@@ -96,9 +101,11 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
 
     def seed(self, seed: Optional[int] = None) -> Sequence[Optional[int]]:
         """Seeds the envs at the next ``reset()``: env ``i`` gets seed ``seed + i`` (as
-        ``DummyVecEnv``); returns those seeds."""
-        self._base_seed = random_seed() if seed is None else check_seed(seed)
-        return [(self._base_seed + i) % 2**64 for i in range(self.num_envs)]
+        ``DummyVecEnv``); returns those seeds. ``seed`` is an integer in [0, 2^64 - num_envs], so
+        that no env's seed wraps (ConfigError otherwise, here rather than at the reset where
+        ``DummyVecEnv``'s single env would raise it)."""
+        self._base_seed = random_seed(self.num_envs) if seed is None else check_base_seed(seed, self.num_envs)
+        return [self._base_seed + i for i in range(self.num_envs)]
 
     def set_options(self, options: Optional[Union[list[dict], dict]] = None) -> None:
         """Wake options (``wake_seed``, ``wake_seeds``) applied at the next ``reset()``."""

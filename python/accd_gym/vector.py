@@ -18,8 +18,12 @@ from accd_gym.errors import ConfigError
 from accd_gym.task import (
     EVENT_NAMES,
     INFO_NAMES,
+    MAX_ENVS,
+    MAX_THREADS,
     action_space,
     check_actions,
+    check_base_seed,
+    check_count,
     check_flag,
     check_max_episode_steps,
     check_seed,
@@ -51,6 +55,9 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
     **Seeds**: ``reset(seed=s)`` gives env ``i`` the seed ``s + i``, ``seed=[s0, s1, ...]`` the
     seed ``s_i``: env ``i`` then replays the single env with that seed, whatever the batch size
     or thread count. Python and numpy integers are accepted; bools, floats and strings are not.
+    Seeds are 64-bit and never wrap: an int ``s`` lies in [0, 2^64 - num_envs] (a larger one
+    raises ConfigError naming the range, where ``SyncVectorEnv`` raises it from the env whose
+    seed ``s + i`` passes 2^64 - 1), list entries in [0, 2^64).
 
     **Autoreset** (``metadata["autoreset_mode"]``, chosen with ``autoreset_mode=``, an
     ``AutoresetMode``, its value or ``"next_step"``/``"same_step"``/``"disabled"``):
@@ -79,18 +86,20 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
     times. Wake options cannot be combined with a partial ``reset_mask`` (the schedule is the
     batch's).
 
-    **Copies** (``copy=True``, the default, as ``SyncVectorEnv``; the attribute ``copy``): every array ``step`` and
-    ``reset`` return is new, never changed by the env afterwards. ``copy=False`` (also through
-    ``gymnasium.make_vec(..., copy=False)``) returns the observation, reward, termination and
-    truncation arrays that the Rust core writes in place instead, saving their copy: two sets are
-    used alternately, so such an array stays valid through the next ``step`` or ``reset`` and is
-    overwritten by the call after it; copy what you keep longer. Info arrays and ``final_obs``
-    entries are new in both modes.
+    **Copies** (``copy=True``, the default, as ``SyncVectorEnv``; the attribute ``copy``): every
+    array ``step`` and ``reset`` return is new, never changed by the env afterwards.
+    ``copy=False`` (also through ``gymnasium.make_vec(..., copy=False)``) returns the
+    observation, reward, termination and truncation arrays that the Rust core writes in place
+    instead, saving their copy: two sets are used alternately, so such an array stays valid
+    through the next ``step`` or ``reset`` and is overwritten by the call after it; copy what you
+    keep longer. Info arrays and ``final_obs`` entries are new in both modes.
 
     ``max_episode_steps`` (passed by ``gymnasium.make_vec`` from the registered spec): at least
     the configuration's episode length (``capture_window / agent_step``), which ends episodes
     (truncation); a shorter limit raises ConfigError (pass ``max_episode_steps=`` with a longer
-    ``capture_window``). ``num_threads``: threads stepping the envs (0: one per core). ``render_mode="rgb_array"``:
+    ``capture_window``). ``num_envs``: an integer in [1, 65536]; ``num_threads``: threads
+    stepping the envs, an integer in [0, 1024] (0: one per core); Python or numpy integers only
+    (ConfigError naming the argument otherwise: ``"3"``, ``2.7`` and ``True`` are refused). ``render_mode="rgb_array"``:
     ``render()`` returns a tuple of one RGB frame per env, as ``SyncVectorEnv`` does.
 
     **Arguments** besides ``num_envs``, ``seed``, ``num_threads``, ``autoreset_mode``,
@@ -113,6 +122,8 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         max_episode_steps: Optional[int] = None,
         **config: Any,
     ) -> None:
+        n = check_count(num_envs, "num_envs", 1, MAX_ENVS)
+        threads = check_count(num_threads, "num_threads", 0, MAX_THREADS)
         by_name = {name: m for m, name in _MODES.items()}
         if isinstance(autoreset_mode, str) and autoreset_mode in by_name:
             mode: Optional[AutoresetMode] = by_name[autoreset_mode]
@@ -137,7 +148,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         self._config = json.loads(valid.to_json())
         self._randomized = bool(self._config["randomization"]["enabled"])
         check_max_episode_steps(max_episode_steps, self._config)
-        self._core = _core.BatchEnv(valid, int(num_envs), random_seed(), _MODES[mode], int(num_threads))
+        self._core = _core.BatchEnv(valid, n, random_seed(n), _MODES[mode], threads)
         self.num_envs = self._core.num_envs
         self.render_mode = render_mode
         self.metadata = {
@@ -159,7 +170,8 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         """Starts new episodes in every env (or those ``options["reset_mask"]`` selects); returns
         ``(observations, infos)``.
 
-        ``seed``: an int (env ``i``: seed ``seed + i``), a list of ints (one per env) or None
+        ``seed``: an int (env ``i``: seed ``seed + i``; in [0, 2^64 - num_envs], so that no env's
+        seed wraps: ConfigError otherwise), a list of ints in [0, 2^64) (one per env) or None
         (each env's next episode). ``options``: ``{"wake_seed": int | None}`` or
         ``{"wake_seeds": [int, ...]}`` (persist over later resets), ``{"reset_mask": mask}``
         (a (num_envs,) bool numpy array with at least one True: only those envs are reset).
@@ -197,8 +209,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         later resets is kept. Held-out evaluation (:mod:`accd_gym.evaluation`) starts episode
         ``k`` this way, which makes it independent of the batch size and of its place in a batch.
         """
-        if not 0 <= int(i) < self.num_envs:
-            raise ConfigError(f"invalid config: env index `i` = {i} is outside the allowed range 0..{self.num_envs - 1}")
+        i = self._env_index(i)
         from accd_gym.task import WAKE_SEED_BOUND
 
         seed = check_seed(seed)
@@ -207,9 +218,9 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         self._core.set_wake_schedule("training", []) if wake is None else self._core.set_wake_schedule("fixed", [wake])
         try:
             mask = np.zeros(self.num_envs, dtype=bool)
-            mask[int(i)] = True
+            mask[i] = True
             seeds = list(self.np_random_seed)
-            seeds[int(i)] = seed
+            seeds[i] = seed
             obs, _ = self.reset(seed=seeds, options={"reset_mask": mask})
         finally:
             self._core.set_wake_schedule(kind, kept)
@@ -236,7 +247,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
                     f"invalid config: `seed` has {len(seed)} values, expected num_envs = {self.num_envs}"
                 )
             return [check_seed(s) for s in seed]
-        return check_seed(seed)
+        return check_base_seed(seed, self.num_envs)
 
     def _reset_mask(self, mask: Any) -> np.ndarray:
         """``options["reset_mask"]``, checked as ``SyncVectorEnv`` checks it."""
