@@ -290,7 +290,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
             infos["_final_info"] = done.copy()
         infos["wake_seed"] = wake_seed
         infos["_wake_seed"] = np.ones(self.num_envs, dtype=bool)
-        if mode != AutoresetMode.DISABLED:
+        if self._randomized and mode != AutoresetMode.DISABLED:
             self._add_parameters(infos, ~stepped)
         if self.copy:
             return obs.copy(), reward.copy(), terminated.copy(), truncated.copy(), infos
