@@ -33,7 +33,8 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
 
     The task is that of :class:`accd_gym.env.InAirCaptureEnv` (see its docstring for the
     observation, action, reward and episode-end tables). It behaves as SB3's ``DummyVecEnv`` of
-    single envs (``tests/test_vector_equivalence.py`` compares them step by step):
+    single envs (``tests/test_vector_equivalence.py`` compares them step by step,
+    ``tests/test_vector_rollouts.py`` whole rollouts of every registered tier):
 
     * same-step autoreset: when an episode ends, ``step_wait`` returns the next episode's first
       observation, ``done=True``, and ``infos[i]["terminal_observation"]`` (a copy of the ended

@@ -50,7 +50,8 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
     :class:`accd_gym.env.InAirCaptureEnv`. The vector env behaves as gymnasium's
     ``SyncVectorEnv`` of single envs (``gymnasium.make_vec(..., vectorization_mode="sync")``):
     the same observations, rewards, flags and infos, dtypes included, in every autoreset mode and
-    with partial resets (``tests/test_vector_equivalence.py`` compares them step by step).
+    with partial resets (``tests/test_vector_equivalence.py`` compares them step by step,
+    ``tests/test_vector_rollouts.py`` whole rollouts of every registered tier).
 
     **Seeds**: ``reset(seed=s)`` gives env ``i`` the seed ``s + i``, ``seed=[s0, s1, ...]`` the
     seed ``s_i``: env ``i`` then replays the single env with that seed, whatever the batch size
