@@ -223,3 +223,65 @@ def test_np_random_seed_reports_each_envs_seed_as_sync_vector_env_does():
         assert native.np_random_seed == reference.np_random_seed, kwargs
     native.close()
     reference.close()
+
+
+def _make_copying(kind, **kw):
+    if kind == "gymnasium":
+        return gym.make_vec(ENV_ID, num_envs=2, **CONFIG, **kw)
+    return accd_gym.AccdVecEnv(2, **CONFIG, **kw)
+
+
+def _arrays(obj) -> list:
+    """Every numpy array in ``obj`` (nested tuples, lists and dicts)."""
+    if isinstance(obj, np.ndarray):
+        return [obj]
+    items = obj.values() if isinstance(obj, dict) else obj if isinstance(obj, (tuple, list)) else ()
+    return [a for item in items for a in _arrays(item)]
+
+
+@pytest.mark.parametrize("kind", ["gymnasium", "sb3"])
+def test_returned_arrays_are_new_and_never_change_later_by_default(kind):
+    import copy
+
+    env = _make_copying(kind)
+    assert env.copy is True
+    kept, snapshots = [], []
+    kept.append(env.reset(seed=3) if kind == "gymnasium" else env.reset())
+    snapshots.append(copy.deepcopy(kept[-1]))
+    for _ in range(5):
+        kept.append(env.step(np.full((2, 4), 0.3, np.float32)))
+        snapshots.append(copy.deepcopy(kept[-1]))
+    for k, (a, b) in enumerate(zip(kept, snapshots)):
+        assert_same(a, b, f"returned object {k}")
+    arrays = _arrays(kept)
+    assert len(arrays) >= 1 + 5 * 3
+    assert not any(np.shares_memory(a, b) for i, a in enumerate(arrays) for b in arrays[i + 1:])
+
+
+@pytest.mark.parametrize("kind", ["gymnasium", "sb3"])
+def test_copy_false_returns_the_in_place_buffers_valid_through_the_next_call(kind):
+    env = _make_copying(kind, copy=False)
+    assert env.copy is False
+    first = env.reset(seed=3) if kind == "gymnasium" else env.reset()
+    obs = [first[0] if kind == "gymnasium" else first]
+    saved = [obs[0].copy()]
+    for k in range(4):
+        obs.append(env.step(np.full((2, 4), 0.3, np.float32))[0])
+        assert np.array_equal(obs[-2], saved[-1]), f"step {k}: the previous call's array is intact"
+        saved.append(obs[-1].copy())
+    # Two buffers, used alternately by reset and step.
+    assert all(np.shares_memory(obs[k], obs[k + 2]) for k in range(3))
+    assert not any(np.shares_memory(obs[k], obs[k + 1]) for k in range(4))
+    assert not np.array_equal(obs[1], saved[1]), "overwritten two calls later"
+
+
+def test_copy_must_be_a_bool_and_survives_pickling():
+    import pickle
+
+    for bad in (0, 1, "yes", None):
+        with pytest.raises(accd_gym.ConfigError, match="`copy`"):
+            accd_gym.InAirCaptureVectorEnv(2, copy=bad, **CONFIG)
+        with pytest.raises(accd_gym.ConfigError, match="`copy`"):
+            accd_gym.AccdVecEnv(2, copy=bad, **CONFIG)
+    assert pickle.loads(pickle.dumps(accd_gym.InAirCaptureVectorEnv(2, copy=False, **CONFIG))).copy is False
+    assert pickle.loads(pickle.dumps(accd_gym.AccdVecEnv(2, copy=False, **CONFIG))).copy is False

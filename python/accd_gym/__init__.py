@@ -60,8 +60,11 @@ from accd_gym.control.lqr import LqrPolicy, linearize
 _aliases.register()
 
 #: The registered id of the nominal env (``gymnasium.make(ENV_ID)``, ``gymnasium.make_vec(ENV_ID, n)``);
-#: the benchmark tiers' ids are in :data:`accd_gym.envs.tiers.TIERS`.
-ENV_ID = "accd_gym/InAirCapture-v0"
+#: the benchmark tiers' ids are in :data:`accd_gym.envs.tiers.TIERS`. A ``str`` whose pickle imports
+#: ``accd_gym`` (:class:`accd_gym.envs.tiers.EnvId`), so that it also works in subprocess vector envs
+#: started with ``spawn`` or ``forkserver``, which a plain string id does not (use
+#: ``"accd_gym:accd_gym/InAirCapture-v0"`` there).
+ENV_ID: str = TIERS["nominal"].id
 _register_tiers()
 
 

@@ -18,6 +18,8 @@ __all__ = [
     "OBS_DIM",
     "ACT_DIM",
     "OBS_BOUND",
+    "MAX_ENVS",
+    "MAX_THREADS",
     "INFO_NAMES",
     "PARAMETER_NAMES",
     "TRAINING_WAKE_SEEDS",
@@ -45,6 +47,8 @@ def mix_flaps(pitch: float, yaw: float, roll: float) -> list[float]: ...
 OBS_DIM: int
 ACT_DIM: int
 OBS_BOUND: float
+MAX_ENVS: int
+MAX_THREADS: int
 INFO_NAMES: list[str]
 PARAMETER_NAMES: list[str]
 TRAINING_WAKE_SEEDS: tuple[int, int]

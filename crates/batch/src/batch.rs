@@ -155,13 +155,19 @@ pub struct ResetBuffers<'a> {
     pub wake_seed: &'a mut [u64],
 }
 
+/// Most envs in one batch.
+pub const MAX_ENVS: usize = 65_536;
+/// Most threads of a batch's pool.
+pub const MAX_THREADS: usize = 1024;
+
 /// How `reset` seeds the envs.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum SeedSpec {
     /// Keep each env's base seed and start its next episode.
     Next,
-    /// Env `i` gets base seed `s + i` (wrapping), as gymnasium's `SyncVectorEnv` and SB3's
-    /// `DummyVecEnv` seed their sub-envs; episode counters restart at 0.
+    /// Env `i` gets base seed `s + i`, as gymnasium's `SyncVectorEnv` and SB3's `DummyVecEnv`
+    /// seed their sub-envs; episode counters restart at 0. `s + N - 1` must fit in 64 bits
+    /// ([`check_base_seed`]): a seed never wraps.
     Base(u64),
     /// Env `i` gets base seed `s_i` (so it replays a single env seeded `s_i`); episode counters
     /// restart at 0.
@@ -183,6 +189,24 @@ struct Slot {
     /// A step of the batch was interrupted while this env's episode may have been part-way
     /// through it: the env refuses steps and saves until it is reset or restored.
     interrupted: bool,
+}
+
+/// Checks that base seed `seed` gives each of `num_envs` envs its seed `seed + i` without
+/// wrapping past 2^64 - 1 (a wrapped seed would silently repeat another env's episodes).
+pub fn check_base_seed(seed: u64, num_envs: usize) -> Result<()> {
+    let last = (num_envs.max(1) - 1) as u64;
+    if seed.checked_add(last).is_none() {
+        return Err(SimError::invalid_config(
+            "seed",
+            seed,
+            &format!(
+                "[0, 2^64 - num_envs] = [0, {}] for num_envs = {num_envs} (env i is seeded seed + i)",
+                u64::MAX - last
+            ),
+        )
+        .into());
+    }
+    Ok(())
 }
 
 /// N episodes of one config.
@@ -228,12 +252,23 @@ impl BatchEnv {
         threads: usize,
         interrupted: &mut dyn FnMut() -> bool,
     ) -> Result<BatchEnv> {
-        if !(1..=65_536).contains(&num_envs) {
-            return Err(SimError::invalid_config("num_envs", num_envs, "[1, 65536]").into());
+        if !(1..=MAX_ENVS).contains(&num_envs) {
+            return Err(SimError::invalid_config(
+                "num_envs",
+                num_envs,
+                &format!("[1, {MAX_ENVS}]"),
+            )
+            .into());
         }
-        if threads > 1024 {
-            return Err(SimError::invalid_config("num_threads", threads, "[0, 1024]").into());
+        if threads > MAX_THREADS {
+            return Err(SimError::invalid_config(
+                "num_threads",
+                threads,
+                &format!("[0, {MAX_THREADS}]"),
+            )
+            .into());
         }
+        check_base_seed(seed, num_envs)?;
         crate::memory::check_budget(&config, num_envs)?;
         let config = Arc::new(config);
         let equilibrium = Arc::new(Equilibrium::settle_interruptible(&config, interrupted)?);
@@ -247,7 +282,7 @@ impl BatchEnv {
         let mut slots = Vec::with_capacity(num_envs);
         for i in 0..n {
             let mut episode = first.clone();
-            let base = seed.wrapping_add(i);
+            let base = seed + i;
             episode.reset(episode_seeds(base, 0, i, n, &schedule))?;
             if interrupted() {
                 return Err(SimError::Interrupted {
@@ -371,8 +406,10 @@ impl BatchEnv {
         let n = self.slots.len();
         check_len("obs", out.obs.len(), n * OBS_DIM)?;
         check_len("wake_seed", out.wake_seed.len(), n)?;
-        if let SeedSpec::PerEnv(list) = &seeds {
-            check_len("seed", list.len(), n)?;
+        match &seeds {
+            SeedSpec::PerEnv(list) => check_len("seed", list.len(), n)?,
+            SeedSpec::Base(s) => check_base_seed(*s, n)?,
+            SeedSpec::Next => {}
         }
         if let Some(m) = mask {
             check_len("reset_mask", m.len(), n)?;
@@ -385,7 +422,7 @@ impl BatchEnv {
             match &seeds {
                 SeedSpec::Next => slot.index += 1,
                 SeedSpec::Base(s) => {
-                    slot.base = s.wrapping_add(i as u64);
+                    slot.base = s + i as u64;
                     slot.index = 0;
                 }
                 SeedSpec::PerEnv(list) => {

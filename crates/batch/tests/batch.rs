@@ -179,6 +179,61 @@ fn seeds_reset_and_replay_and_per_env_seeds_match_a_single_env() {
 }
 
 #[test]
+fn a_base_seed_never_wraps_past_64_bits() {
+    let top = u64::MAX - 2;
+    let mut a = Runner::new(3, 1, Autoreset::SameStep);
+    let highest = a.reset(SeedSpec::Base(top));
+    assert_eq!(
+        highest,
+        a.reset(SeedSpec::PerEnv(vec![top, top + 1, u64::MAX]))
+    );
+    a.step(&actions(3, 0)).unwrap();
+    let mut obs = vec![0.0; 3 * OBS_DIM];
+    let mut wake = vec![0; 3];
+    for seed in [top + 1, u64::MAX] {
+        let buffers = ResetBuffers {
+            obs: &mut obs,
+            wake_seed: &mut wake,
+        };
+        let e = a
+            .env
+            .reset(SeedSpec::Base(seed), None, buffers)
+            .unwrap_err();
+        let text = e.to_string();
+        assert!(
+            text.contains(&format!("`seed` = {seed}")) && text.contains(&top.to_string()),
+            "{text}"
+        );
+        let e = BatchEnv::new(
+            config().validated().unwrap(),
+            3,
+            seed,
+            Autoreset::SameStep,
+            1,
+        )
+        .err()
+        .unwrap();
+        assert!(e.to_string().contains("`seed`"), "{e}");
+    }
+    // A refused reset changed nothing: the envs step on as they would have.
+    let mut b = Runner::new(3, 1, Autoreset::SameStep);
+    b.reset(SeedSpec::Base(top));
+    b.step(&actions(3, 0)).unwrap();
+    assert_eq!(
+        a.step(&actions(3, 1)).unwrap(),
+        b.step(&actions(3, 1)).unwrap()
+    );
+    assert!(BatchEnv::new(
+        config().validated().unwrap(),
+        1,
+        u64::MAX,
+        Autoreset::SameStep,
+        1
+    )
+    .is_ok());
+}
+
+#[test]
 fn a_masked_reset_restarts_only_the_selected_envs_and_cancels_their_pending_autoreset() {
     let mut r = Runner::new(3, 2, Autoreset::NextStep);
     let first = r.reset(SeedSpec::Base(20));

@@ -4,18 +4,18 @@
 
 use accd_batch::BatchState;
 use accd_batch::{
-    info, Autoreset, BatchEnv, BatchError, ResetBuffers, SeedSpec, StepBuffers, WakeSchedule,
-    HELD_OUT_WAKE_SEEDS, TRAINING_WAKE_SEEDS,
+    check_base_seed, info, Autoreset, BatchEnv, BatchError, ResetBuffers, SeedSpec, StepBuffers,
+    WakeSchedule, HELD_OUT_WAKE_SEEDS, MAX_ENVS, MAX_THREADS, TRAINING_WAKE_SEEDS,
 };
 use accd_sim::state_format::{self, StateKind};
 use accd_sim::{EnvConfig, SimError, Valid, ACT_DIM, OBSERVATION, OBS_BOUND, OBS_DIM};
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
-use pyo3::types::{PyBytes, PyDict, PyTuple};
+use pyo3::types::{PyBytes, PyDict, PyString, PyTuple};
 use serde::{Deserialize, Serialize};
 
 use crate::arrays::{vector_to_py, vectors_to_py};
-use crate::capture::snapshot_dict;
+use crate::capture::{seed_from_py, snapshot_dict, usize_from_py};
 use crate::config::PyEnvConfig;
 use crate::errors::{raise, IntoPy, Kind};
 use crate::signals::SignalCheck;
@@ -155,19 +155,28 @@ fn action_rows<'a>(actions: &'a PyReadonlyArray2<'_, f32>, n: usize) -> PyResult
 #[pymethods]
 impl PyBatchEnv {
     /// ``num_envs`` episodes of ``config`` (a validated ``EnvConfig``, used as it is, or an
-    /// ``EnvConfig`` as JSON, validated here), env ``i`` seeded with base ``seed + i``; autoreset
-    /// ``"same_step"``, ``"next_step"`` or ``"disabled"``; ``num_threads`` threads of its own (0:
-    /// one per core).
+    /// ``EnvConfig`` as JSON, validated here), env ``i`` seeded with base ``seed + i`` (``seed``
+    /// in [0, 2^64 - num_envs]: no seed wraps); autoreset ``"same_step"``, ``"next_step"`` or
+    /// ``"disabled"``; ``num_threads`` threads of its own (0 or None: one per core). The counts
+    /// are Python or numpy integers in [1, MAX_ENVS] and [0, MAX_THREADS] (ConfigError naming
+    /// the argument otherwise).
     #[new]
-    #[pyo3(signature = (config, num_envs, seed, autoreset_mode = "same_step", num_threads = 0))]
+    #[pyo3(signature = (config, num_envs, seed, autoreset_mode = "same_step", num_threads = None))]
     fn new(
         py: Python<'_>,
         config: &Bound<'_, PyAny>,
-        num_envs: usize,
-        seed: u64,
+        num_envs: &Bound<'_, PyAny>,
+        seed: &Bound<'_, PyAny>,
         autoreset_mode: &str,
-        num_threads: usize,
+        num_threads: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
+        let num_envs = usize_from_py("num_envs", num_envs, 1, MAX_ENVS)?;
+        let num_threads = match num_threads {
+            Some(t) => usize_from_py("num_threads", t, 0, MAX_THREADS)?,
+            None => 0,
+        };
+        let seed = seed_from_py("seed", seed)?;
+        check_base_seed(seed, num_envs).py_err()?;
         let mode = parse_autoreset(autoreset_mode)?;
         let config = match config.cast::<PyEnvConfig>() {
             Ok(valid) => Valid::clone(&valid.get().inner),
@@ -229,9 +238,10 @@ impl PyBatchEnv {
     /// Starts new episodes in every env, or in those ``mask`` selects ((num_envs,) bool), and
     /// returns ``(obs, wake_seed)``: every env's observation (num_envs, OBS_DIM) float32 and its
     /// episode's wake seed (num_envs,) uint64 (new episodes', and the current ones of envs the
-    /// mask leaves alone). ``seed``: None (each env's next episode), an int (env ``i``: base
-    /// ``seed + i``) or a list of num_envs ints (env ``i``: base ``seed[i]``); a single env
-    /// seeded with env ``i``'s base replays it.
+    /// mask leaves alone). ``seed``: None (each env's next episode), an int in
+    /// [0, 2^64 - num_envs] (env ``i``: base ``seed + i``, never wrapped) or a sequence of
+    /// num_envs ints in [0, 2^64) (env ``i``: base ``seed[i]``); a single env seeded with env
+    /// ``i``'s base replays it. Python and numpy integers only (ConfigError otherwise).
     #[pyo3(signature = (seed = None, mask = None))]
     fn reset<'py>(
         &mut self,
@@ -242,15 +252,17 @@ impl PyBatchEnv {
         let spec = match seed {
             None => SeedSpec::Next,
             Some(s) if s.is_none() => SeedSpec::Next,
-            Some(s) => match s.extract::<u64>() {
-                Ok(v) => SeedSpec::Base(v),
-                Err(_) => SeedSpec::PerEnv(s.extract::<Vec<u64>>().map_err(|_| {
-                    raise(
-                        Kind::Config,
-                        format!("invalid config: `seed` = {s} is outside the allowed range: None, an int in [0, 2^64) or a list of num_envs such ints"),
-                    )
-                })?),
-            },
+            // A sequence (list, tuple, array): one seed per env; a string is no sequence of seeds.
+            Some(s) if !s.is_instance_of::<PyString>() && s.try_iter().is_ok() => SeedSpec::PerEnv(
+                s.try_iter()?
+                    .map(|v| seed_from_py("seed", &v?))
+                    .collect::<PyResult<Vec<u64>>>()?,
+            ),
+            Some(s) => {
+                let base = seed_from_py("seed", s)?;
+                check_base_seed(base, self.inner.num_envs()).py_err()?;
+                SeedSpec::Base(base)
+            }
         };
         let b = self.next_buffers(py);
         let obs = b.obs.bind(py).clone();
@@ -349,8 +361,9 @@ impl PyBatchEnv {
         &mut self,
         py: Python<'_>,
         actions: PyReadonlyArray2<'_, f32>,
-        steps: usize,
+        steps: &Bound<'_, PyAny>,
     ) -> PyResult<f64> {
+        let steps = usize_from_py("steps", steps, 0, usize::MAX)?;
         let n = self.inner.num_envs();
         let a = action_rows(&actions, n)?.to_vec();
         let mut out = accd_batch::StepOutputs::new(n);
@@ -616,6 +629,8 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("OBS_DIM", OBS_DIM)?;
     m.add("ACT_DIM", ACT_DIM)?;
     m.add("OBS_BOUND", OBS_BOUND)?;
+    m.add("MAX_ENVS", MAX_ENVS)?;
+    m.add("MAX_THREADS", MAX_THREADS)?;
     m.add("INFO_NAMES", info::NAMES.to_vec())?;
     m.add("EVENT_NAMES", info::EVENTS.map(|k| info::NAMES[k]).to_vec())?;
     m.add("PARAMETER_NAMES", accd_sim::Parameters::NAMES.to_vec())?;

@@ -121,6 +121,56 @@ pub fn seed_from_py(name: &str, value: &Bound<'_, PyAny>) -> PyResult<u64> {
     index.extract::<u64>().map_err(|_| bad())
 }
 
+/// A count argument (a number of envs, threads or steps): a Python or numpy integer in
+/// `[low, high]`; bools, floats, strings and integers out of range are refused (`ConfigError`
+/// naming the argument, the value and the range), never truncated, wrapped or parsed.
+pub fn count_from_py(name: &str, value: &Bound<'_, PyAny>, low: u64, high: u64) -> PyResult<u64> {
+    let range = if high == u64::MAX {
+        format!("[{low}, 2^64 - 1]")
+    } else {
+        format!("[{low}, {high}]")
+    };
+    let bad = || {
+        raise(
+            Kind::Config,
+            format!(
+                "invalid config: `{name}` = {} is outside the allowed range: an integer in {range}",
+                value.repr().map(|r| r.to_string()).unwrap_or_default()
+            ),
+        )
+    };
+    // numpy's bool scalar is no int subclass; its type is `numpy.bool` (`numpy.bool_` before 2.0).
+    let type_name = value
+        .get_type()
+        .name()
+        .map(|n| n.to_string())
+        .unwrap_or_default();
+    if value.is_instance_of::<PyBool>()
+        || value.is_instance_of::<PyFloat>()
+        || type_name == "bool"
+        || type_name == "bool_"
+    {
+        return Err(bad());
+    }
+    // Integers and numpy integers implement __index__; floats, strings and numpy floats do not.
+    let index = value.call_method0("__index__").map_err(|_| bad())?;
+    match index.extract::<u64>() {
+        Ok(v) if (low..=high).contains(&v) => Ok(v),
+        _ => Err(bad()),
+    }
+}
+
+/// [`count_from_py`] for a count used as a `usize`, at most `usize::MAX`.
+pub fn usize_from_py(
+    name: &str,
+    value: &Bound<'_, PyAny>,
+    low: usize,
+    high: usize,
+) -> PyResult<usize> {
+    // usize is at most 64 bits on every supported target: the conversions are lossless.
+    count_from_py(name, value, low as u64, high as u64).map(|v| v as usize)
+}
+
 /// Flap commands: a sequence of 4 real numbers (Python or numpy floats and ints); bools,
 /// complex numbers, strings and non-finite values are refused (`StateError`).
 fn commands_from_py(name: &str, value: &Bound<'_, PyAny>) -> PyResult<[f64; 4]> {
@@ -289,18 +339,24 @@ impl PyCaptureSim {
 
     /// Advances ``steps`` physics steps holding the flap commands ``flap_commands_deg`` (right,
     /// left, top, bottom; degrees, clipped to the flap limit; default all zero), releasing the
-    /// GIL, and returns :meth:`state`.
+    /// GIL, and returns :meth:`state`. ``steps``: a Python or numpy integer >= 0 (default, or
+    /// None: 1).
     ///
     /// Raises:
+    ///     ConfigError: ``steps`` is no integer (a bool, float or string) or is negative.
     ///     StateError: a non-finite or wrongly sized command.
     ///     SimulationError: the simulation diverged (the episode keeps its last good state).
-    #[pyo3(signature = (flap_commands_deg = None, steps = 1))]
+    #[pyo3(signature = (flap_commands_deg = None, steps = None), text_signature = "($self, flap_commands_deg=None, steps=1)")]
     fn step<'py>(
         &mut self,
         py: Python<'py>,
         flap_commands_deg: Option<&Bound<'py, PyAny>>,
-        steps: usize,
+        steps: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
+        let steps = match steps {
+            Some(s) => usize_from_py("steps", s, 0, usize::MAX)?,
+            None => 1,
+        };
         let command = match flap_commands_deg {
             Some(v) if !v.is_none() => {
                 commands_from_py("flap_commands_deg", v)?.map(f64::to_radians)

@@ -9,6 +9,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyFloat};
 
 use crate::arrays::{floats_from_py, vector_from_py, vector_to_py, vectors_from_py, vectors_to_py};
+use crate::capture::usize_from_py;
 use crate::errors::{raise, IntoPy, Kind, ToPy};
 use crate::signals::SignalCheck;
 
@@ -194,6 +195,19 @@ impl PyTether {
         }
         state.time = time;
         self.inner.set_state(state).py_err()
+    }
+
+    /// `steps` fixed steps with the GIL released (see `step`).
+    fn step_n(&mut self, py: Python<'_>, steps: usize) -> PyResult<()> {
+        let flow = self.flow;
+        let inner = &mut self.inner;
+        let mut check = SignalCheck::new();
+        let result =
+            py.detach(|| inner.step_many_interruptible(steps, &flow, &mut || check.interrupted()));
+        if let Some(e) = check.take() {
+            return Err(e);
+        }
+        result.py_err()
     }
 }
 
@@ -525,23 +539,21 @@ impl PyTether {
 
     /// Advances ``steps`` fixed steps (the GIL is released meanwhile). Each step takes as many
     /// RK4 substeps as the chain's fastest mode needs at the current tension (one for Table 3).
+    /// ``steps``: a Python or numpy integer >= 0 (default, or None: 1).
     ///
     /// Raises:
+    ///     ConfigError: ``steps`` is no integer (a bool, float or string) or is negative.
     ///     KeyboardInterrupt: Ctrl+C (signal handlers run every 50 ms); the tether keeps the
     ///         state of the last whole step.
     ///     SimulationError: the state diverged (non-finite, a joint folded completely, or a segment
     ///         reached the chart's lateral singularity); the tether keeps the last good state.
-    #[pyo3(signature = (steps = 1))]
-    fn step(&mut self, py: Python<'_>, steps: usize) -> PyResult<()> {
-        let flow = self.flow;
-        let inner = &mut self.inner;
-        let mut check = SignalCheck::new();
-        let result =
-            py.detach(|| inner.step_many_interruptible(steps, &flow, &mut || check.interrupted()));
-        if let Some(e) = check.take() {
-            return Err(e);
-        }
-        result.py_err()
+    #[pyo3(signature = (steps = None), text_signature = "($self, steps=1)")]
+    fn step(&mut self, py: Python<'_>, steps: Option<&Bound<'_, PyAny>>) -> PyResult<()> {
+        let steps = match steps {
+            Some(s) => usize_from_py("steps", s, 0, usize::MAX)?,
+            None => 1,
+        };
+        self.step_n(py, steps)
     }
 
     /// Advances by ``duration`` seconds, rounded to whole steps; returns the number of steps.
@@ -553,7 +565,7 @@ impl PyTether {
             ));
         }
         let steps = (duration / self.inner.time_step()).round() as usize;
-        self.step(py, steps)?;
+        self.step_n(py, steps)?;
         Ok(steps)
     }
 

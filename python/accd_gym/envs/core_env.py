@@ -9,7 +9,7 @@ from typing import Any, Optional, Sequence, Union
 import numpy as np
 
 from accd_gym.errors import StateError
-from accd_gym.envs.task import random_seed, wake_options
+from accd_gym.envs.task import check_count, random_seed, wake_options
 
 
 class CoreEnvMixin:
@@ -40,7 +40,18 @@ class CoreEnvMixin:
         ``force_coefficient_scale``, ``moment_coefficient_scale``, ``wake_alpha_deg``,
         ``wake_strength``, ``airspeed`` m/s, ``ambient_sigma_mps``); None without randomization.
         They are a function of the episode's wake seed alone."""
-        return self._core.episode_parameters(int(i))
+        return self._core.episode_parameters(self._env_index(i))
+
+    def _reset_info(self, i: int, wake_seed: int) -> dict[str, Any]:
+        """The info of env ``i``'s episode as the single env's ``reset`` reports it, for the
+        episode's ``wake_seed``: ``wake_seed``, and with randomized physics ``parameters`` (the
+        drawn parameters, :meth:`episode_parameters`). The one place the reset info is built:
+        every env class reports these keys."""
+        info: dict[str, Any] = {"wake_seed": int(wake_seed)}
+        parameters = self._core.episode_parameters(int(i))
+        if parameters is not None:
+            info["parameters"] = parameters
+        return info
 
     def true_boom_relative(self) -> np.ndarray:
         """The boom tip minus the capture point of every env at its current state, (num_envs, 3) m,
@@ -52,7 +63,11 @@ class CoreEnvMixin:
         """Where env ``i``'s current episode starts from (TA frame, m): ``equilibrium`` (the
         ACCD's open-loop equilibrium), ``capture_point`` (the capture point's) and
         ``boom_nominal`` (the boom tip's nominal formation position: ``boom.placement``)."""
-        return self._core.episode_setup(int(i))
+        return self._core.episode_setup(self._env_index(i))
+
+    def _env_index(self, i: Any) -> int:
+        """``i`` checked as an env index: an integer in [0, num_envs - 1] (ConfigError naming it)."""
+        return check_count(i, "i", 0, self._core.num_envs - 1, noun="env index")
 
     def _reset_core(
         self,
@@ -65,7 +80,7 @@ class CoreEnvMixin:
         all); returns ``(obs, wake_seeds)`` of every env."""
         wake_options(self._core, options)
         if seed is None and not self._seeded:
-            seed = random_seed()
+            seed = random_seed(self._core.num_envs)
         obs, wake = self._core.reset(seed, None if mask is None else mask.tolist())
         self._seeded = True
         self._needs_reset = False

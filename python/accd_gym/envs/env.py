@@ -169,10 +169,7 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
             seed = check_seed(seed)
         super().reset(seed=seed)
         obs, wake = self._reset_core(seed, options)
-        info: dict[str, Any] = {"wake_seed": int(wake[0])}
-        parameters = self._core.episode_parameters(0)
-        if parameters is not None:
-            info["parameters"] = parameters
+        info = self._reset_info(0, wake[0])
         if self.render_mode == "human":
             self.render()
         return obs[0].copy(), info

@@ -39,12 +39,29 @@ SENSORS_TIER: dict[str, Any] = {
 }
 
 
+class EnvId(str):
+    """A gymnasium id this package registers: a ``str``, equal to and hashing as the plain id,
+    that pickles as a call of this class. Unpickling it therefore imports ``accd_gym``, which
+    registers the ids: a subprocess started with ``spawn`` or ``forkserver`` (SB3's
+    ``SubprocVecEnv`` and gymnasium's ``AsyncVectorEnv`` on macOS and Windows, SB3's default
+    ``forkserver`` on Linux) that receives the id in a pickled env factory can make the env
+    although it never imported ``accd_gym``. A plain string id there raises gymnasium's
+    ``NamespaceNotFound`` in the child; the module-qualified id
+    ``"accd_gym:accd_gym/InAirCapture-v0"`` works everywhere."""
+
+    __slots__ = ()
+
+    def __reduce__(self) -> tuple[type, tuple[str]]:
+        return (EnvId, (str(self),))
+
+
 @dataclass(frozen=True)
 class Tier:
     """One benchmark tier: its gymnasium id, what it stands for, and its configuration overrides
     on the nominal task (sections as dicts, merged with the defaults like any keyword argument)."""
 
     name: str
+    #: The registered id (an :class:`EnvId`: a ``str`` whose pickle imports ``accd_gym``).
     id: str
     summary: str
     overrides: Mapping[str, Any] = field(default_factory=dict)
@@ -102,20 +119,20 @@ TIERS: dict[str, Tier] = {
     for t in (
         Tier(
             "nominal",
-            "accd_gym/InAirCapture-v0",
+            EnvId("accd_gym/InAirCapture-v0"),
             "the mission's nominal case: 8 deg wake with its turbulence, perfect full-state "
             "observations, the paper's tether and ACCD",
         ),
         Tier(
             "precision",
-            "accd_gym/InAirCapturePrecision-v0",
+            EnvId("accd_gym/InAirCapturePrecision-v0"),
             "a soft capture in severe turbulence: MIL-F-8785C severe ambient turbulence (7 m/s), "
             "a 0.3 m capture radius and a 1 m/s closing-speed limit",
             _PRECISION,
         ),
         Tier(
             "sensors",
-            "accd_gym/InAirCaptureSensors-v0",
+            EnvId("accd_gym/InAirCaptureSensors-v0"),
             "the nominal physics seen through sensors: a vision sensor for the boom (range-"
             "dependent noise, 20 Hz, 60 ms latency, 10 % dropouts in bursts), IMU/AHRS noise and "
             "bias, GNSS and load-cell noise; the formation uncertain by +-8 m",
@@ -123,7 +140,7 @@ TIERS: dict[str, Tier] = {
         ),
         Tier(
             "randomized",
-            "accd_gym/InAirCaptureRandomized-v0",
+            EnvId("accd_gym/InAirCaptureRandomized-v0"),
             "randomized physics per episode from its wake seed: tether length and diameter, ACCD "
             "mass and aerodynamics, wake angle and strength, towing speed, ambient turbulence; the "
             "formation uncertain by +-8 m",
@@ -131,7 +148,7 @@ TIERS: dict[str, Tier] = {
         ),
         Tier(
             "hard",
-            "accd_gym/InAirCaptureHard-v0",
+            EnvId("accd_gym/InAirCaptureHard-v0"),
             "everything at once: the precision scenario's soft capture, sensors, randomized "
             "physics with light to severe ambient turbulence",
             merge(
@@ -150,4 +167,4 @@ def tier(name: str) -> Tier:
     return TIERS[name]
 
 
-__all__ = ["EXACT_AIR_SCHEME", "SENSORS_TIER", "SENSORS", "Tier", "TIERS", "merge", "tier"]
+__all__ = ["EnvId", "EXACT_AIR_SCHEME", "SENSORS_TIER", "SENSORS", "Tier", "TIERS", "merge", "tier"]

@@ -15,9 +15,13 @@ from accd_gym.envs.core_env import CoreEnvMixin
 from accd_gym.errors import ConfigError
 from accd_gym.envs.task import (
     DIVERGED_COLUMN,
+    MAX_ENVS,
+    MAX_THREADS,
     action_space,
     check_actions,
-    check_seed,
+    check_base_seed,
+    check_count,
+    check_flag,
     info_dicts,
     observation_space,
     random_seed,
@@ -29,7 +33,8 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
 
     The task is that of :class:`accd_gym.env.InAirCaptureEnv` (see its docstring for the
     observation, action, reward and episode-end tables). It behaves as SB3's ``DummyVecEnv`` of
-    single envs (``tests/test_vector_equivalence.py`` compares them step by step):
+    single envs (``tests/test_vector_equivalence.py`` compares them step by step,
+    ``tests/test_vector_rollouts.py`` whole rollouts of every registered tier):
 
     * same-step autoreset: when an episode ends, ``step_wait`` returns the next episode's first
       observation, ``done=True``, and ``infos[i]["terminal_observation"]`` (a copy of the ended
@@ -42,14 +47,21 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
     * rewards are float32, dones bool, infos a list of dicts (``time``, ``distance``,
       ``relative_speed``, ``peak_tension``, ``captured``, ``overload``, ``envelope_exit``,
       ``diverged``, ``episode_steps``, ``wake_seed``, ``TimeLimit.truncated``, and
-      ``divergence`` when the env diverged).
+      ``divergence`` when the env diverged); ``reset_infos[i]`` is the single env's reset info
+      (``wake_seed``, and with randomized physics the drawn ``parameters``), after ``reset()``
+      and after each automatic reset;
 
-    Observations are written by Rust into numpy arrays in place (two sets, used alternately: an
-    array stays valid through the next step, as SB3's rollout collection needs); the GIL is
-    released while the envs step on ``num_threads`` threads (0: one per core). Works under
-    ``VecMonitor`` and ``VecNormalize``.
+    **Copies** (``copy=True``, the default, as ``DummyVecEnv``; the attribute ``copy``): the
+    observations, rewards and dones ``step`` and ``reset`` return are new arrays, never changed
+    by the env afterwards. ``copy=False`` returns the observation array that the Rust core writes
+    in place instead, saving its copy: two sets are used alternately, so it stays valid through
+    the next ``step`` or ``reset`` (what SB3's rollout collection needs: it copies the previous
+    observation into its buffer) and is overwritten by the call after it. Rewards, dones, infos
+    and ``terminal_observation`` entries are new in both modes. The GIL is released while the
+    envs step on ``num_threads`` threads (0: one per core). Works under ``VecMonitor`` and
+    ``VecNormalize``.
 
-    Arguments besides ``num_envs``, ``seed``, ``num_threads`` and ``render_mode``: the
+    Arguments besides ``num_envs``, ``seed``, ``num_threads``, ``copy`` and ``render_mode``: the
     configuration keys (as for the single env), a section a dict of its keys, ``tether`` also a
     preset name:
 
@@ -64,9 +76,13 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         *,
         seed: Optional[int] = None,
         num_threads: int = 0,
+        copy: bool = True,
         render_mode: Optional[str] = None,
         **config: Any,
     ) -> None:
+        n = check_count(num_envs, "num_envs", 1, MAX_ENVS)
+        threads = check_count(num_threads, "num_threads", 0, MAX_THREADS)
+        self.copy = check_flag(copy, "copy")
         if render_mode not in (None, "rgb_array"):
             raise ConfigError(
                 f"invalid config: `render_mode` = {render_mode!r} is outside the allowed range 'rgb_array' or None"
@@ -76,8 +92,8 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         # states need no file.
         valid = valid_config(config)
         self._config = json.loads(valid.to_json())
-        base = random_seed() if seed is None else check_seed(seed)
-        self._core = _core.BatchEnv(valid, int(num_envs), base, "same_step", int(num_threads))
+        base = random_seed(n) if seed is None else check_base_seed(seed, n)
+        self._core = _core.BatchEnv(valid, n, base, "same_step", threads)
         self._actions: Optional[np.ndarray] = None
         self._base_seed: Optional[int] = None if seed is None else base
         self._pending_options: dict[str, Any] = {}
@@ -86,9 +102,11 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
 
     def seed(self, seed: Optional[int] = None) -> Sequence[Optional[int]]:
         """Seeds the envs at the next ``reset()``: env ``i`` gets seed ``seed + i`` (as
-        ``DummyVecEnv``); returns those seeds."""
-        self._base_seed = random_seed() if seed is None else check_seed(seed)
-        return [(self._base_seed + i) % 2**64 for i in range(self.num_envs)]
+        ``DummyVecEnv``); returns those seeds. ``seed`` is an integer in [0, 2^64 - num_envs], so
+        that no env's seed wraps (ConfigError otherwise, here rather than at the reset where
+        ``DummyVecEnv``'s single env would raise it)."""
+        self._base_seed = random_seed(self.num_envs) if seed is None else check_base_seed(seed, self.num_envs)
+        return [self._base_seed + i for i in range(self.num_envs)]
 
     def set_options(self, options: Optional[Union[list[dict], dict]] = None) -> None:
         """Wake options (``wake_seed``, ``wake_seeds``) applied at the next ``reset()``."""
@@ -103,8 +121,8 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         obs, wake = self._reset_core(self._base_seed, self._pending_options)
         self._pending_options = {}
         self._base_seed = None
-        self.reset_infos = [{"wake_seed": int(w)} for w in wake]
-        return obs
+        self.reset_infos = [self._reset_info(i, w) for i, w in enumerate(wake.tolist())]
+        return obs.copy() if self.copy else obs
 
     def step_async(self, actions: np.ndarray) -> None:
         """Stores the actions ((num_envs, 4); the shape is checked here, finiteness by the step)."""
@@ -124,8 +142,9 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
             d["TimeLimit.truncated"] = time_limit
         for i in np.flatnonzero(dones):
             infos[i]["terminal_observation"] = final_obs[i].copy()
-            self.reset_infos[i] = {"wake_seed": int(self._core.episode_seeds(int(i))["wake"])}
-        return obs, reward.astype(np.float32), dones.copy(), infos
+            self.reset_infos[i] = self._reset_info(int(i), self._core.episode_seeds(int(i))["wake"])
+        # (The rewards' conversion and the dones are new arrays already.)
+        return (obs.copy() if self.copy else obs), reward.astype(np.float32), dones, infos
 
     def close(self) -> None:
         """Nothing to release: the Rust core frees its memory and threads when dropped."""
@@ -165,6 +184,7 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         return {
             "num_envs": self.num_envs,
             "num_threads": self._core.num_threads,
+            "copy": self.copy,
             "render_mode": self.render_mode,
             "config": self._config,
             "state": self.get_state(),
@@ -174,7 +194,8 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         }
 
     def __setstate__(self, d: dict[str, Any]) -> None:
-        self.__init__(d["num_envs"], num_threads=d["num_threads"], render_mode=d["render_mode"], **d["config"])
+        self.__init__(d["num_envs"], num_threads=d["num_threads"], copy=d.get("copy", True), render_mode=d["render_mode"],
+                      **d["config"])
         self.set_state(d["state"])
         self._base_seed = d["base_seed"]
         self._pending_options = d["pending_options"]

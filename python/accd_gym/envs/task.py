@@ -29,6 +29,10 @@ PARAMETER_NAMES: tuple[str, ...] = tuple(_core.PARAMETER_NAMES)
 TRAINING_WAKE_SEEDS: range = range(*_core.TRAINING_WAKE_SEEDS)
 #: Wake seeds held out for evaluation (training never draws them): ``range(10**9, 10**9 + 1000)``.
 HELD_OUT_WAKE_SEEDS: range = range(*_core.HELD_OUT_WAKE_SEEDS)
+#: Most envs of one vector env (``num_envs``).
+MAX_ENVS: int = _core.MAX_ENVS
+#: Most threads of one vector env (``num_threads``; 0: one per core).
+MAX_THREADS: int = _core.MAX_THREADS
 #: Observation scale by name (the observation is the quantity times its scale).
 OBSERVATION_SCALE: dict[str, float] = {name: scale for name, _, scale, _ in OBSERVATION_TABLE}
 #: Observation index by name.
@@ -134,6 +138,50 @@ def check_seed(seed: Any, what: str = "seed", bound: int = 2**64) -> int:
     return value
 
 
+def check_count(value: Any, what: str, low: int, high: int | None = None, noun: str = "") -> int:
+    """``value`` as a Python int in [low, high] (``high=None``: no upper bound): a Python or numpy
+    integer. Bools, floats, strings and integers out of range raise
+    :class:`~accd_gym.ConfigError` naming ``what`` (after ``noun``, e.g. "env index"), the value
+    and the range; nothing is truncated or parsed (``2.7`` is not 2, ``"3"`` is not 3, ``True``
+    is not 1)."""
+    from accd_gym.errors import ConfigError
+
+    allowed = f"an integer in [{low}, {high}]" if high is not None else f"an integer >= {low}"
+    name = f"{noun} `{what}`" if noun else f"`{what}`"
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise ConfigError(f"invalid config: {name} = {value!r} is outside the allowed range: {allowed}")
+    count = int(value)
+    if count < low or (high is not None and count > high):
+        raise ConfigError(f"invalid config: {name} = {count} is outside the allowed range: {allowed}")
+    return count
+
+
+def check_base_seed(seed: Any, num_envs: int) -> int:
+    """A vector env's int seed ``seed``, which gives env ``i`` the seed ``seed + i``: a Python or
+    numpy integer in [0, 2^64 - num_envs], so that every env's seed is a 64-bit seed (none wraps
+    around to 0). Raises :class:`~accd_gym.ConfigError` naming ``seed`` and the range otherwise
+    (a ``SyncVectorEnv`` of single envs raises it from the env whose seed is out of range)."""
+    from accd_gym.errors import ConfigError
+
+    value = check_seed(seed)
+    if value + num_envs - 1 >= 2**64:
+        raise ConfigError(
+            f"invalid config: `seed` = {value} is outside the allowed range [0, 2^64 - num_envs] = "
+            f"[0, {2**64 - num_envs}] for num_envs = {num_envs} (env i is seeded seed + i)"
+        )
+    return value
+
+
+def check_flag(value: Any, what: str) -> bool:
+    """``value`` as a bool: True or False (Python or numpy bools only; ``1``, ``"yes"`` and None
+    raise :class:`~accd_gym.ConfigError` naming ``what``)."""
+    from accd_gym.errors import ConfigError
+
+    if not isinstance(value, (bool, np.bool_)):
+        raise ConfigError(f"invalid config: `{what}` = {value!r} is outside the allowed range: True or False")
+    return bool(value)
+
+
 #: Wake seeds are reported as int64 (as gymnasium batches Python ints), so they lie in [0, 2^63).
 WAKE_SEED_BOUND: int = 2**63
 
@@ -192,9 +240,10 @@ def check_max_episode_steps(max_episode_steps: Any, config: dict[str, Any]) -> N
         )
 
 
-def random_seed() -> int:
-    """A fresh 64-bit seed from the operating system's entropy."""
-    return int(np.random.SeedSequence().generate_state(1, dtype=np.uint64)[0])
+def random_seed(num_envs: int = 1) -> int:
+    """A fresh 64-bit seed from the operating system's entropy, a valid int seed of ``num_envs``
+    envs (:func:`check_base_seed`: in [0, 2^64 - num_envs])."""
+    return int(np.random.SeedSequence().generate_state(1, dtype=np.uint64)[0]) % (2**64 - num_envs + 1)
 
 
 def observation_table_markdown() -> str:

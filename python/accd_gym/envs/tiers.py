@@ -18,7 +18,7 @@ from typing import Any, Mapping, Optional
 
 from accd_gym import _core
 from accd_gym.envs.config import default_config, env_config
-from accd_gym.envs.overrides import SENSORS, TIERS, Tier, merge, tier
+from accd_gym.envs.overrides import SENSORS, TIERS, EnvId, Tier, merge, tier
 from accd_gym.envs.task import episode_steps
 
 

@@ -18,8 +18,13 @@ from accd_gym.errors import ConfigError
 from accd_gym.envs.task import (
     EVENT_NAMES,
     INFO_NAMES,
+    MAX_ENVS,
+    MAX_THREADS,
     action_space,
     check_actions,
+    check_base_seed,
+    check_count,
+    check_flag,
     check_max_episode_steps,
     check_seed,
     observation_space,
@@ -45,11 +50,15 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
     :class:`accd_gym.env.InAirCaptureEnv`. The vector env behaves as gymnasium's
     ``SyncVectorEnv`` of single envs (``gymnasium.make_vec(..., vectorization_mode="sync")``):
     the same observations, rewards, flags and infos, dtypes included, in every autoreset mode and
-    with partial resets (``tests/test_vector_equivalence.py`` compares them step by step).
+    with partial resets (``tests/test_vector_equivalence.py`` compares them step by step,
+    ``tests/test_vector_rollouts.py`` whole rollouts of every registered tier).
 
     **Seeds**: ``reset(seed=s)`` gives env ``i`` the seed ``s + i``, ``seed=[s0, s1, ...]`` the
     seed ``s_i``: env ``i`` then replays the single env with that seed, whatever the batch size
     or thread count. Python and numpy integers are accepted; bools, floats and strings are not.
+    Seeds are 64-bit and never wrap: an int ``s`` lies in [0, 2^64 - num_envs] (a larger one
+    raises ConfigError naming the range, where ``SyncVectorEnv`` raises it from the env whose
+    seed ``s + i`` passes 2^64 - 1), list entries in [0, 2^64).
 
     **Autoreset** (``metadata["autoreset_mode"]``, chosen with ``autoreset_mode=``, an
     ``AutoresetMode``, its value or ``"next_step"``/``"same_step"``/``"disabled"``):
@@ -64,11 +73,13 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
     ``peak_tension`` (float64), ``captured``, ``overload``, ``envelope_exit``, ``diverged``
     (bool), ``episode_steps`` (int64), ``divergence`` (object, only when an env diverged) are
     the step's; ``wake_seed`` (int64) is every env's. An env reset in this step (``NEXT_STEP``:
-    the step after its episode ended; ``SAME_STEP``: the step that ended it) reports only its new
-    episode's ``wake_seed``: its other entries are 0 with the mask False. With ``SAME_STEP``,
+    the step after its episode ended; ``SAME_STEP``: the step that ended it) reports its new
+    episode's reset info, as the single env's ``reset`` gives it: ``wake_seed`` and, with
+    randomized physics, ``parameters`` (a dict of float64 arrays with their ``_name`` masks, the
+    drawn parameters); its step entries are 0 with the mask False. With ``SAME_STEP``,
     ``final_obs`` (object array, the ended episodes' last observations) and ``final_info`` (the
-    ended episodes' step infos, masked to the ended envs) are added. ``reset`` returns
-    ``wake_seed`` of the envs it reset.
+    ended episodes' step infos, masked to the ended envs) are added. ``reset`` returns the reset
+    info (``wake_seed``, ``parameters``) of the envs it reset.
 
     **Wake-seed lists** (``options={"wake_seeds": W}``): the batch covers the list, env ``i``'s
     episode ``e`` (counted from the last seeding) using ``W[(i + e * num_envs) % len(W)]``: a
@@ -76,19 +87,24 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
     times. Wake options cannot be combined with a partial ``reset_mask`` (the schedule is the
     batch's).
 
-    **Buffers (copy versus view)**: the observation, reward and flag arrays ``step`` and
-    ``reset`` return are numpy arrays the Rust core writes in place (no copy per step). Two sets
-    are used alternately, so an array stays valid through the next ``step`` and is overwritten by
-    the one after; copy what you keep longer. Info arrays and ``final_obs`` entries are copies.
+    **Copies** (``copy=True``, the default, as ``SyncVectorEnv``; the attribute ``copy``): every
+    array ``step`` and ``reset`` return is new, never changed by the env afterwards.
+    ``copy=False`` (also through ``gymnasium.make_vec(..., copy=False)``) returns the
+    observation, reward, termination and truncation arrays that the Rust core writes in place
+    instead, saving their copy: two sets are used alternately, so such an array stays valid
+    through the next ``step`` or ``reset`` and is overwritten by the call after it; copy what you
+    keep longer. Info arrays and ``final_obs`` entries are new in both modes.
 
     ``max_episode_steps`` (passed by ``gymnasium.make_vec`` from the registered spec): at least
     the configuration's episode length (``capture_window / agent_step``), which ends episodes
     (truncation); a shorter limit raises ConfigError (pass ``max_episode_steps=`` with a longer
-    ``capture_window``). ``num_threads``: threads stepping the envs (0: one per core). ``render_mode="rgb_array"``:
+    ``capture_window``). ``num_envs``: an integer in [1, 65536]; ``num_threads``: threads
+    stepping the envs, an integer in [0, 1024] (0: one per core); Python or numpy integers only
+    (ConfigError naming the argument otherwise: ``"3"``, ``2.7`` and ``True`` are refused). ``render_mode="rgb_array"``:
     ``render()`` returns a tuple of one RGB frame per env, as ``SyncVectorEnv`` does.
 
     **Arguments** besides ``num_envs``, ``seed``, ``num_threads``, ``autoreset_mode``,
-    ``render_mode`` and ``max_episode_steps``: the configuration keys (as for the single env),
+    ``copy``, ``render_mode`` and ``max_episode_steps``: the configuration keys (as for the single env),
     a section a dict of its keys, ``tether`` also a preset name:
 
     {CONFIG_ARGUMENTS}
@@ -102,10 +118,13 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         *,
         autoreset_mode: Union[AutoresetMode, str] = AutoresetMode.NEXT_STEP,
         num_threads: int = 0,
+        copy: bool = True,
         render_mode: Optional[str] = None,
         max_episode_steps: Optional[int] = None,
         **config: Any,
     ) -> None:
+        n = check_count(num_envs, "num_envs", 1, MAX_ENVS)
+        threads = check_count(num_threads, "num_threads", 0, MAX_THREADS)
         by_name = {name: m for m, name in _MODES.items()}
         if isinstance(autoreset_mode, str) and autoreset_mode in by_name:
             mode: Optional[AutoresetMode] = by_name[autoreset_mode]
@@ -119,6 +138,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
                 f"invalid config: `autoreset_mode` = {autoreset_mode!r} is outside the allowed range: an AutoresetMode, "
                 f"its value ({', '.join(repr(m.value) for m in _MODES)}) or {', '.join(map(repr, by_name))}"
             )
+        self.copy = check_flag(copy, "copy")
         if render_mode not in (None, "rgb_array"):
             raise ConfigError(
                 f"invalid config: `render_mode` = {render_mode!r} is outside the allowed range 'rgb_array' or None"
@@ -127,8 +147,9 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         # states need no file.
         valid = valid_config(config)
         self._config = json.loads(valid.to_json())
+        self._randomized = bool(self._config["randomization"]["enabled"])
         check_max_episode_steps(max_episode_steps, self._config)
-        self._core = _core.BatchEnv(valid, int(num_envs), random_seed(), _MODES[mode], int(num_threads))
+        self._core = _core.BatchEnv(valid, n, random_seed(n), _MODES[mode], threads)
         self.num_envs = self._core.num_envs
         self.render_mode = render_mode
         self.metadata = {
@@ -150,7 +171,8 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         """Starts new episodes in every env (or those ``options["reset_mask"]`` selects); returns
         ``(observations, infos)``.
 
-        ``seed``: an int (env ``i``: seed ``seed + i``), a list of ints (one per env) or None
+        ``seed``: an int (env ``i``: seed ``seed + i``; in [0, 2^64 - num_envs], so that no env's
+        seed wraps: ConfigError otherwise), a list of ints in [0, 2^64) (one per env) or None
         (each env's next episode). ``options``: ``{"wake_seed": int | None}`` or
         ``{"wake_seeds": [int, ...]}`` (persist over later resets), ``{"reset_mask": mask}``
         (a (num_envs,) bool numpy array with at least one True: only those envs are reset).
@@ -176,7 +198,8 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         selected = np.ones(self.num_envs, dtype=bool) if mask is None else mask.copy()
         wake_seed = wake.astype(np.int64)
         wake_seed[~selected] = 0
-        return obs, {"wake_seed": wake_seed, "_wake_seed": selected}
+        infos = self._add_parameters({"wake_seed": wake_seed, "_wake_seed": selected}, selected)
+        return (obs.copy() if self.copy else obs), infos
 
     def start_episode(self, i: int, seed: int, wake_seed: Optional[int] = None) -> np.ndarray:
         """Starts a new episode in env ``i`` alone and returns every env's observations (a copy).
@@ -187,8 +210,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         later resets is kept. Held-out evaluation (:mod:`accd_gym.evaluation`) starts episode
         ``k`` this way, which makes it independent of the batch size and of its place in a batch.
         """
-        if not 0 <= int(i) < self.num_envs:
-            raise ConfigError(f"invalid config: env index `i` = {i} is outside the allowed range 0..{self.num_envs - 1}")
+        i = self._env_index(i)
         from accd_gym.envs.task import WAKE_SEED_BOUND
 
         seed = check_seed(seed)
@@ -197,13 +219,13 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         self._core.set_wake_schedule("training", []) if wake is None else self._core.set_wake_schedule("fixed", [wake])
         try:
             mask = np.zeros(self.num_envs, dtype=bool)
-            mask[int(i)] = True
+            mask[i] = True
             seeds = list(self.np_random_seed)
-            seeds[int(i)] = seed
+            seeds[i] = seed
             obs, _ = self.reset(seed=seeds, options={"reset_mask": mask})
         finally:
             self._core.set_wake_schedule(kind, kept)
-        return np.array(obs, copy=True)
+        return obs if self.copy else obs.copy()
 
     @property
     def np_random_seed(self) -> tuple[int, ...]:  # type: ignore[override]
@@ -226,7 +248,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
                     f"invalid config: `seed` has {len(seed)} values, expected num_envs = {self.num_envs}"
                 )
             return [check_seed(s) for s in seed]
-        return check_seed(seed)
+        return check_base_seed(seed, self.num_envs)
 
     def _reset_mask(self, mask: Any) -> np.ndarray:
         """``options["reset_mask"]``, checked as ``SyncVectorEnv`` checks it."""
@@ -269,7 +291,21 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
             infos["_final_info"] = done.copy()
         infos["wake_seed"] = wake_seed
         infos["_wake_seed"] = np.ones(self.num_envs, dtype=bool)
+        if self._randomized and mode != AutoresetMode.DISABLED:
+            self._add_parameters(infos, ~stepped)
+        if self.copy:
+            return obs.copy(), reward.copy(), terminated.copy(), truncated.copy(), infos
         return obs, reward, terminated, truncated, infos
+
+    def _add_parameters(self, infos: dict[str, Any], rows: np.ndarray) -> dict[str, Any]:
+        """``infos`` with the reset info that the rows' new episodes have beyond ``wake_seed``
+        (randomized physics: the drawn ``parameters``), batched by ``VectorEnv._add_info`` as
+        ``SyncVectorEnv`` batches the single env's reset infos."""
+        if not self._randomized or not np.count_nonzero(rows):
+            return infos
+        for i in np.flatnonzero(rows).tolist():
+            infos = self._add_info(infos, {"parameters": self._core.episode_parameters(i)}, i)
+        return infos
 
     def _step_infos(
         self, info: np.ndarray, wake_seed: np.ndarray, rows: np.ndarray, ended: bool = False
@@ -327,6 +363,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
             "num_envs": self.num_envs,
             "autoreset_mode": self.metadata["autoreset_mode"],
             "num_threads": self._core.num_threads,
+            "copy": self.copy,
             "render_mode": self.render_mode,
             "config": self._config,
             "state": self.get_state(),
@@ -337,6 +374,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
             d["num_envs"],
             autoreset_mode=d["autoreset_mode"],
             num_threads=d["num_threads"],
+            copy=d.get("copy", True),
             render_mode=d["render_mode"],
             **d["config"],
         )

@@ -15,7 +15,7 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 
-from accd_gym.envs.task import EVENT_NAMES, INFO_NAMES
+from accd_gym.envs.task import EVENT_NAMES, INFO_NAMES, MAX_ENVS, check_count
 from accd_gym.errors import ConfigError
 
 #: Base seed of evaluation episodes (initial conditions and RLV motion); fixed so runs compare.
@@ -63,9 +63,9 @@ def run_episodes(
     """Runs episodes ``0 .. episodes - 1`` of ``policy`` (see :func:`run_episode_range`); returns
     them in index order. ``wake_seeds=None`` draws training wake seeds (for tuning on training
     data). Needs no stable-baselines3."""
-    if episodes < 1:
-        raise ConfigError(f"invalid config: `episodes` = {episodes} is outside the allowed range >= 1")
-    return run_episode_range(policy, 0, episodes, seed=seed, wake_seeds=wake_seeds, batch=min(int(num_envs), episodes),
+    episodes = check_count(episodes, "episodes", 1)
+    num_envs = check_count(num_envs, "num_envs", 1, MAX_ENVS)
+    return run_episode_range(policy, 0, episodes, seed=seed, wake_seeds=wake_seeds, batch=min(num_envs, episodes),
                              num_threads=num_threads, config=config, progress=progress, desc=desc)
 
 
@@ -100,11 +100,10 @@ def run_episode_range(
     """
     from accd_gym.envs.vector import InAirCaptureVectorEnv
 
-    start, stop, batch = int(start), int(stop), int(batch)
+    start, stop = check_count(start, "start", 0), check_count(stop, "stop", 0)
+    batch = check_count(batch, "batch", 1, MAX_ENVS)
     if not 0 <= start < stop:
         raise ConfigError(f"invalid config: episode range {start}..{stop} is empty or negative; need 0 <= start < stop")
-    if batch < 1:
-        raise ConfigError(f"invalid config: `batch` = {batch} is outside the allowed range >= 1")
     if wake_seeds is not None and len(wake_seeds) < stop:
         raise ConfigError(f"invalid config: {len(wake_seeds)} wake seeds for episodes up to {stop - 1}; need at least {stop}")
     env = InAirCaptureVectorEnv(batch, autoreset_mode="disabled", num_threads=num_threads, **(config or {}))

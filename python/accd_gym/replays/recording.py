@@ -262,7 +262,7 @@ def iter_recordings(
     from accd_gym import _core
     from accd_gym.evals.episodes import EVAL_BASE_SEED
     from accd_gym.evals.policies import load_policy
-    from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, INFO_NAMES, check_actions, check_seed
+    from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, INFO_NAMES, MAX_ENVS, check_actions, check_count, check_seed
 
     if episodes is None:
         episodes = len(wake_seeds) if wake_seeds is not None else 1
@@ -289,7 +289,7 @@ def iter_recordings(
     from accd_gym.evals.episodes import start_policy_episodes
     from accd_gym.envs.vector import InAirCaptureVectorEnv
 
-    batch = max(1, min(int(num_envs), episodes))  # the evaluation's batch: the policy sees the same rows
+    batch = min(check_count(num_envs, "num_envs", 1, MAX_ENVS), episodes)  # the evaluation's batch: the policy sees the same rows
     env = InAirCaptureVectorEnv(batch, autoreset_mode="disabled", num_threads=num_threads, **(config or {}))
     core = env._core
     cfg = env._config
