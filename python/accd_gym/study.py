@@ -70,6 +70,7 @@ from typing import Any, Optional, Sequence
 import numpy as np
 
 import accd_gym
+from accd_gym import files as _files
 
 #: Flap deflection of the reconstructed Fig. 12 pitch and yaw commands, deg (paper 2.1: RANS data
 #: up to 10 deg).
@@ -762,7 +763,7 @@ def plot_cases(results: list[CaseResult], path: Path, title: str, dpi: int = 90)
         ax.grid(True, alpha=0.3)
     axes[0].legend(fontsize=8)
     fig.suptitle(title, fontsize=11)
-    fig.savefig(path, dpi=dpi)
+    _files.save_figure(fig, path, dpi=dpi)
     plt.close(fig)
 
 
@@ -799,7 +800,7 @@ def plot_max_tension(result: MaxTensionResult, metrics: dict[str, Any], path: Pa
         f"{c.rlv_drag_N / 1e3:.0f} kN drag, TA {c.ta_mass_kg / 1e3:.0f} t, {c.preset}",
         fontsize=11,
     )
-    fig.savefig(path, dpi=dpi)
+    _files.save_figure(fig, path, dpi=dpi)
     plt.close(fig)
 
 
@@ -890,8 +891,8 @@ def run_study(
             md += f"\n### {_TITLES[figure]}\n\n![{figure}]({figure}.png)\n\n{markdown_table(rows)}"
         if bar is not None:
             bar.close()
-    (out_dir / f"{study}.json").write_text(json.dumps(doc, indent=2))
-    (out_dir / f"{study}.md").write_text(md)
+    _files.write_text(out_dir / f"{study}.json", json.dumps(doc, indent=2))
+    _files.write_text(out_dir / f"{study}.md", md)
     return doc
 
 
@@ -913,5 +914,5 @@ def run(
         docs[name] = run_study(name, out_dir, progress=progress, dpi=dpi)
     if len(names) > 1:
         parts = [(Path(out_dir) / f"{n}.md").read_text() for n in names]
-        (Path(out_dir) / "summary.md").write_text("# Design studies (paper section 4)\n\n" + "\n".join(parts))
+        _files.write_text(Path(out_dir) / "summary.md", "# Design studies (paper section 4)\n\n" + "\n".join(parts))
     return docs
