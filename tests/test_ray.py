@@ -28,6 +28,9 @@ from accd_gym import distributed, rllib, sweep  # noqa: E402
 from accd_gym.baselines import GuidancePolicy, RandomPolicy  # noqa: E402
 from accd_gym.evaluation import evaluate, load_policy, run_episodes  # noqa: E402
 
+# Longer than the suite's default time limit (pyproject.toml): Ray clusters start per module (per xdist worker), and RLlib and Tune train.
+pytestmark = pytest.mark.timeout(1800)
+
 SHORT = {"capture_window": 6.0}
 WAKE = list(accd_gym.HELD_OUT_WAKE_SEEDS[:40])
 ROOT = Path(__file__).resolve().parents[1]
