@@ -159,6 +159,17 @@ def _kind(mode: int) -> str:
     return "not a regular file"
 
 
+def check_regular_file(path: str | Path, what: str, allowed: str = "a regular file") -> None:
+    """ConfigError naming ``what`` and the path when ``path`` is missing or is not a regular file
+    (a folder, a FIFO, a device), checked without opening it (opening a FIFO blocks)."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError as e:
+        raise ConfigError(f"invalid config: {what} {str(path)!r} cannot be read ({e.strerror or e})") from None
+    if not stat.S_ISREG(mode):
+        raise ConfigError(f"invalid config: {what} {str(path)!r} is {_kind(mode)}; it must be {allowed}")
+
+
 def read_user_file(path: str | Path, what: str, limit: int = MAX_INPUT_FILE_BYTES) -> bytes:
     """The bytes of the file a user named as ``what`` (e.g. ``"training config"``,
     ``"accd.aero_table"``): ConfigError naming ``what``, the path and the limit when it is
@@ -166,19 +177,22 @@ def read_user_file(path: str | Path, what: str, limit: int = MAX_INPUT_FILE_BYTE
     never ends) or larger than ``limit`` bytes (enforced while reading: the file may grow)."""
     p = Path(path)
     allowed = f"a regular file of at most {limit // (1024 * 1024)} MiB"
-    try:
-        mode = os.stat(p).st_mode
-    except OSError as e:
-        raise ConfigError(f"invalid config: {what} {str(path)!r} cannot be read ({e.strerror or e})") from None
-    if not stat.S_ISREG(mode):
-        raise ConfigError(f"invalid config: {what} {str(path)!r} is {_kind(mode)}; it must be {allowed}")
+    check_regular_file(p, what, allowed)
+    chunks: list[bytes] = []
+    size = 0
     try:
         with open(p, "rb") as f:
             if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):  # replaced since the check
                 raise ConfigError(f"invalid config: {what} {str(path)!r} is not a regular file; it must be {allowed}")
-            data = f.read(limit + 1)
+            while size <= limit:
+                chunk = f.read(min(1 << 20, limit + 1 - size))
+                if not chunk:
+                    break
+                chunks.append(chunk)
+                size += len(chunk)
     except OSError as e:
         raise ConfigError(f"invalid config: {what} {str(path)!r} cannot be read ({e.strerror or e})") from None
+    data = b"".join(chunks)
     if len(data) > limit:
         raise ConfigError(f"invalid config: {what} {str(path)!r} is larger than {limit} bytes; it must be {allowed}")
     return data
@@ -196,5 +210,5 @@ def read_user_json(path: str | Path, what: str):
         raise ConfigError(f"invalid config: {what} {str(path)!r} is not valid JSON ({e})") from None
 
 
-__all__ = ["MAX_INPUT_FILE_BYTES", "atomic_open", "atomic_path", "read_user_file", "read_user_json", "save_figure", "save_npz",
+__all__ = ["MAX_INPUT_FILE_BYTES", "atomic_open", "atomic_path", "check_regular_file", "read_user_file", "read_user_json", "save_figure", "save_npz",
            "write_bytes", "write_text", "writable_folder"]

@@ -157,13 +157,11 @@ class Recording:
     def load(cls, path: str | Path) -> "Recording":
         """Reads a file written by :meth:`save`; raises ConfigError for another file (also one
         that is not a regular file, or is truncated)."""
-        import io
+        from accd_gym.files import check_regular_file
 
-        from accd_gym.files import read_user_file
-
-        data = read_user_file(path, "recording", limit=2**40)
+        check_regular_file(path, "recording")
         try:
-            return cls._from_npz(io.BytesIO(data), path)
+            return cls._from_npz(path, path)
         except ConfigError:
             raise
         except Exception as e:  # a truncated or foreign file fails in zipfile, zlib or numpy
