@@ -67,6 +67,7 @@ def test_jobs_follow_the_config():
     assert quick["learners"]["sac"]["tiers"] == ["nominal"]
 
 
+@pytest.mark.timeout(1800)  # trains every tier with PPO and SAC
 def test_quick_benchmark_runs_the_whole_pipeline(tmp_path, monkeypatch):
     pytest.importorskip("stable_baselines3")
     from accd_gym.cli import main

@@ -29,6 +29,9 @@ from accd_gym.learning import rllib  # noqa: E402
 from accd_gym.control.baselines import GuidancePolicy, RandomPolicy  # noqa: E402
 from accd_gym.evals.evaluation import evaluate, load_policy, run_episodes  # noqa: E402
 
+# Longer than the suite's default time limit (pyproject.toml): Ray clusters start per module (per xdist worker), and RLlib and Tune train.
+pytestmark = pytest.mark.timeout(1800)
+
 SHORT = {"capture_window": 6.0}
 WAKE = list(accd_gym.HELD_OUT_WAKE_SEEDS[:40])
 ROOT = Path(__file__).resolve().parents[1]

@@ -15,6 +15,10 @@ from accd_gym import ConfigError, SimulationError, StateError, _core
 
 SHORT = {"capture_window": 5.0}
 
+# The interruption tests send SIGINT to this process: it must raise KeyboardInterrupt even when
+# the suite was started with SIGINT ignored (conftest.py).
+pytestmark = pytest.mark.usefixtures("sigint_raises_keyboard_interrupt")
+
 
 def _interrupt_after(seconds: float) -> threading.Timer:
     """Sends SIGINT to this process after ``seconds`` (Python raises KeyboardInterrupt in the

@@ -13,6 +13,9 @@ import accd_gym
 from accd_gym.studies import runner, study
 from accd_gym.cli import main
 
+# Longer than the suite's default time limit (pyproject.toml): the module fixtures run the design studies (timed with the first test that uses them).
+pytestmark = pytest.mark.timeout(1800)
+
 #: design.md section 7: "settles about 50 m below" / "about 70 m below", within 15 %.
 DEPTH_TOLERANCE = 0.15
 

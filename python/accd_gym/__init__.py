@@ -29,7 +29,7 @@ Public API:
 * :func:`isa` -- the International Standard Atmosphere.
 * :mod:`accd_gym.zoo` -- rl-zoo3 hyperparameters (``--conf-file accd_gym.zoo.ppo``).
 * :class:`AccdError` and its subclasses :class:`ConfigError`, :class:`StateError`,
-  :class:`SimulationError`.
+  :class:`SimulationError`, :class:`OutputError`.
 """
 
 from typing import TYPE_CHECKING, Any, Optional
@@ -47,7 +47,7 @@ from accd_gym._core import (
 )
 from accd_gym._core import reward_bounds as _core_reward_bounds
 from accd_gym import _aliases
-from accd_gym.errors import AccdError, ConfigError, SimulationError, StateError
+from accd_gym.errors import AccdError, ConfigError, OutputError, SimulationError, StateError
 from accd_gym.envs.config import EXACT_AIR_SCHEME, default_config, env_config
 from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, PARAMETER_NAMES, TRAINING_WAKE_SEEDS
 from accd_gym.envs.env import InAirCaptureEnv
@@ -114,6 +114,7 @@ __all__ = [
     "reward_bounds",
     "CaptureSim",
     "ConfigError",
+    "OutputError",
     "SimulationError",
     "StateError",
     "Tether",

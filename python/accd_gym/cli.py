@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 from typing import Optional, Sequence
+from accd_gym import files as _files
 
 
 def _settle(args: argparse.Namespace) -> int:
@@ -36,7 +37,7 @@ def _export_aero(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(default_aero_table_json())
+    _files.write_text(out, default_aero_table_json())
     print(f"wrote the default ACCD aerodynamic tables to {out}")
     return 0
 
@@ -53,7 +54,8 @@ def _train(args: argparse.Namespace) -> int:
         if is_rllib_run(out):
             raise _usage(f"--resume {str(out)!r}: resuming an RLlib run is not supported; its checkpoints/ restore with "
                          "ray.rllib.algorithms.Algorithm.from_checkpoint")
-        meta = training.resume(out, progress=not args.quiet)
+        meta = training.resume(out, progress=not args.quiet,
+                               report=lambda line: print(f"accd-gym: {line}", file=sys.stderr, flush=True))
     else:
         if args.out is None:
             raise _usage("train needs --out RUN (or --resume RUN)")
@@ -86,11 +88,13 @@ def _train(args: argparse.Namespace) -> int:
 def _is_rllib_config(path: Optional[str]) -> bool:
     """Whether the training config file at ``path`` asks for the RLlib trainer (a file that cannot
     be read is left to the loader's error)."""
+    from accd_gym.errors import ConfigError
+    from accd_gym.files import read_user_json
     from accd_gym.learning.rllib import is_rllib_config
 
     try:
-        return path is not None and is_rllib_config(json.loads(Path(path).read_text()))
-    except (OSError, ValueError):
+        return path is not None and Path(path).exists() and is_rllib_config(read_user_json(path, "training config"))
+    except ConfigError:
         return False
 
 

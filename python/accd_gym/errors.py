@@ -7,6 +7,8 @@
      +-- StateError (also ValueError)       invalid state or array argument (shape, non-finite),
                                             or a saved state that cannot be restored
      +-- SimulationError (also RuntimeError) the simulation diverged
+     +-- OutputError (also OSError)         a file could not be written (full disk, read-only
+                                            folder); the previous file is left as it was
 """
 
 
@@ -28,4 +30,20 @@ class SimulationError(AccdError, RuntimeError):
     """The simulation diverged (non-finite state, a folded joint, a coordinate singularity)."""
 
 
-__all__ = ["AccdError", "ConfigError", "StateError", "SimulationError"]
+class OutputError(AccdError, OSError):
+    """A file could not be written (a full disk, a read-only folder, ...). The message names the
+    file and the reason; the write was atomic (:mod:`accd_gym.files`), so the previous version of
+    the file, if any, is left as it was. ``errno`` and ``filename`` are those of the failure."""
+
+    def __init__(self, message: str, errno: int | None = None, filename: str | None = None) -> None:
+        super().__init__(message)
+        self.message = message
+        self.errno = errno
+        self.filename = filename
+        self.strerror = message
+
+    def __str__(self) -> str:
+        return self.message
+
+
+__all__ = ["AccdError", "ConfigError", "StateError", "SimulationError", "OutputError"]

@@ -49,7 +49,7 @@ accd_spec::config_struct! {
         /// See [`crate::aero`] for the file format; an inline table (text starting with `{`) is a
         /// configuration that carries its table, for pickles and saved envs.
         pub aero_table: Option<String> = None, "", "",
-            "aerodynamic table: a file path or the table as JSON text (None: the default finned body)";
+            "aerodynamic table: a file path (a regular file of at most 64 MiB) or the table as JSON text (None: the default finned body)";
         /// The table's uncertainty, for robustness studies and randomized physics: every force
         /// coefficient (base and flap increments) is multiplied by it.
         pub force_coefficient_scale: f64 = 1.0, "-", "(0, 10]",
@@ -117,7 +117,7 @@ impl AccdConfig {
             Some(text) if text.trim_start().starts_with('{') => {
                 AeroModel::from_json(text, "accd.aero_table (inline)")?
             }
-            Some(path) => AeroModel::from_path(std::path::Path::new(path))?,
+            Some(path) => AeroModel::from_path(std::path::Path::new(path), "accd.aero_table")?,
         };
         let model = if self.force_coefficient_scale == 1.0 && self.moment_coefficient_scale == 1.0 {
             model

@@ -403,12 +403,11 @@ impl AeroModel {
         AeroModel::from_file_data(&data, name)
     }
 
-    /// Reads a JSON file in the documented format.
-    pub fn from_path(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| SimError::Io {
-            path: path.display().to_string(),
-            reason: e.to_string(),
-        })?;
+    /// Reads a JSON file in the documented format, named by the configuration field `field`
+    /// (`accd.aero_table`) in the errors: a regular file of at most
+    /// [`crate::table_file::MAX_TABLE_FILE_BYTES`] ([`crate::table_file::read_table_file`]).
+    pub fn from_path(path: &Path, field: &str) -> Result<Self> {
+        let text = crate::table_file::read_table_file(path, field)?;
         AeroModel::from_json(&text, &path.display().to_string())
     }
 

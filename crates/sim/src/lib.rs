@@ -11,7 +11,8 @@
 //! # Modules, by concept (no import cycle: `tests/module_graph.rs`)
 //! * configuration: [`config`] (the physics' [`CaptureConfig`], its cross-field rules, reading
 //!   JSON documents), [`valid`] (a validated configuration, what the constructors take);
-//! * tables: [`interp`] (grid look-ups), [`aero`] (the ACCD's coefficient tables);
+//! * tables: [`interp`] (grid look-ups), [`aero`] (the ACCD's coefficient tables),
+//!   [`table_file`] (reading a user's table file: regular files of bounded size only);
 //! * the air: [`air`] (the [`AirDisturbance`] interface), [`wake`] (mean wake: tables and the
 //!   analytic model), [`turbulence`], [`wake_field`] (wake + turbulence as one field);
 //! * bodies and scene: [`accd`] (the capturing device, flaps, loads), [`aircraft`], [`boom`];
@@ -38,6 +39,7 @@ pub mod randomization;
 pub mod rng;
 pub mod sensors;
 pub mod state_format;
+pub mod table_file;
 pub mod task;
 pub mod turbulence;
 pub mod valid;

@@ -265,15 +265,15 @@ impl WakeTable {
         WakeTable::new(data)
     }
 
-    /// Reads, parses and validates a JSON table file. Errors: [`SimError::Io`] when the file
-    /// cannot be read, [`SimError::InvalidTable`] (named by the path) when its content is bad.
-    pub fn from_file(path: impl AsRef<Path>) -> Result<WakeTable> {
+    /// Reads, parses and validates a JSON table file, named by the configuration field `field`
+    /// (`wake.tables.low`) in the errors. Errors: [`SimError::InvalidConfig`] when the path is
+    /// not a regular file of at most [`crate::table_file::MAX_TABLE_FILE_BYTES`],
+    /// [`SimError::Io`] when the file cannot be read, [`SimError::InvalidTable`] (named by the
+    /// path) when its content is bad.
+    pub fn from_file(path: impl AsRef<Path>, field: &str) -> Result<WakeTable> {
         let path = path.as_ref();
         let name = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| SimError::Io {
-            path: name.clone(),
-            reason: e.to_string(),
-        })?;
+        let text = crate::table_file::read_table_file(path, field)?;
         let data: WakeTableData = serde_json::from_str(&text)
             .map_err(|e| SimError::invalid_table(&name, format!("bad JSON: {e}")))?;
         WakeTable::named(data, &name)
@@ -585,9 +585,13 @@ impl WakeTables {
             .clone()
     }
 
-    /// Loads a pair from two JSON files (low angle first).
+    /// Loads a pair from two JSON files (low angle first), named `wake.tables.low` and
+    /// `wake.tables.high` in the errors ([`WakeTable::from_file`]).
     pub fn from_files(low: impl AsRef<Path>, high: impl AsRef<Path>) -> Result<WakeTables> {
-        WakeTables::new(WakeTable::from_file(low)?, WakeTable::from_file(high)?)
+        WakeTables::new(
+            WakeTable::from_file(low, "wake.tables.low")?,
+            WakeTable::from_file(high, "wake.tables.high")?,
+        )
     }
 
     /// The table at the lower angle of attack.
@@ -641,7 +645,7 @@ accd_spec::config_struct! {
         pub attachment_from_nose_m: [f64; 3] = DEFAULT_ATTACHMENT_FROM_NOSE_M, "m", "[-1000, 1000]",
             "position of the tether attachment (the TA frame's origin) relative to the TA's nose";
         pub tables: Option<WakeTableFiles> = None, "", "",
-            "user wake tables, {\"low\": path, \"high\": path} (None: the analytic model)";
+            "user wake tables, {\"low\": path, \"high\": path}, regular files of at most 64 MiB each (None: the analytic model)";
         /// `"per_step"` is the default since the fast scheme's measurement (BENCHMARKS.md);
         /// `"per_stage"` is the exact scheme of the first releases.
         /// Scales the mean wake's velocity perturbation by the factor and its turbulent kinetic

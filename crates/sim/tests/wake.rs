@@ -410,7 +410,7 @@ fn loader_errors_name_the_problem() {
     assert!(err.contains("alpha"), "{err}");
 
     // Files: a missing file is Io, bad content is InvalidTable named by the path.
-    let err = WakeTable::from_file("/nonexistent/wake.json").unwrap_err();
+    let err = WakeTable::from_file("/nonexistent/wake.json", "wake.tables.low").unwrap_err();
     assert!(
         matches!(&err, SimError::Io { path, .. } if path == "/nonexistent/wake.json"),
         "{err}"
@@ -419,7 +419,7 @@ fn loader_errors_name_the_problem() {
     let mut d = small();
     d.z_over_l = vec![1.0, -1.0];
     std::fs::write(&path, serde_json::to_string(&d).unwrap()).unwrap();
-    let err = WakeTable::from_file(&path).unwrap_err();
+    let err = WakeTable::from_file(&path, "wake.tables.low").unwrap_err();
     std::fs::remove_file(&path).unwrap();
     let SimError::InvalidTable { table, reason } = err else {
         panic!()

@@ -226,9 +226,12 @@ def guidance_from_tuning(path: str) -> GuidancePolicy:
     import json
     from pathlib import Path
 
+    from accd_gym.files import read_user_json
+
+    doc = read_user_json(path, "guidance tuning file")
     try:
-        best = json.loads(Path(path).read_text())["best"]["gains"]
-    except (OSError, ValueError, KeyError, TypeError) as e:
+        best = doc["best"]["gains"]
+    except (KeyError, TypeError) as e:
         raise ConfigError(f"invalid config: policy {path!r} is not a guidance tuning file ({e})") from None
     policy = GuidancePolicy(**best)
     policy.name = f"guidance ({Path(path).stem})"

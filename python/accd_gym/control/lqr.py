@@ -369,9 +369,13 @@ def is_lqr_tuning(path: str) -> bool:
     """Whether the JSON file ``path`` is an LQR tuning result (``"policy": "lqr"``)."""
     from pathlib import Path
 
+    from accd_gym.files import read_user_json
+
+    if not Path(path).exists():
+        return False
     try:
-        doc = json.loads(Path(path).read_text())
-    except (OSError, ValueError):
+        doc = read_user_json(path, "tuning file")
+    except ConfigError:
         return False
     return isinstance(doc, dict) and doc.get("policy") == "lqr"
 
@@ -381,9 +385,12 @@ def lqr_from_tuning(path: str, config: Any = None) -> LqrPolicy:
     result file (ConfigError if it is not one)."""
     from pathlib import Path
 
+    from accd_gym.files import read_user_json
+
+    doc = read_user_json(path, "LQR tuning file")
     try:
-        best = json.loads(Path(path).read_text())["best"]["tuning"]
-    except (OSError, ValueError, KeyError, TypeError) as e:
+        best = doc["best"]["tuning"]
+    except (KeyError, TypeError) as e:
         raise ConfigError(f"invalid config: policy {path!r} is not an LQR tuning file ({e})") from None
     policy = LqrPolicy.for_config(config, tuning=best)
     policy.name = f"lqr ({Path(path).stem})"

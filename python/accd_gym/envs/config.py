@@ -94,16 +94,15 @@ def self_contained(config: Mapping[str, Any]) -> dict[str, Any]:
     """A copy of a complete configuration that needs no file: a user aerodynamic table given by
     path (``accd.aero_table``) is replaced by the table's contents (JSON text, which the core
     reads as the table itself). For pickles and saved envs that must load on another machine.
-    Raises ConfigError when the file cannot be read."""
+    Raises ConfigError when the file cannot be read, is not a regular file of at most 64 MiB
+    (:func:`accd_gym.files.read_user_file`) or is not JSON."""
     out = json.loads(json.dumps(config, default=_plain))
     accd = out.get("accd")
     table = accd.get("aero_table") if isinstance(accd, dict) else None
     if isinstance(table, str) and not table.lstrip().startswith("{"):
-        try:
-            with open(table) as f:
-                out["accd"]["aero_table"] = json.dumps(json.load(f))
-        except (OSError, ValueError) as e:
-            raise ConfigError(f"invalid config: `accd.aero_table` = {table!r} cannot be read ({e})") from None
+        from accd_gym.files import read_user_json
+
+        out["accd"]["aero_table"] = json.dumps(read_user_json(table, "`accd.aero_table`"))
     return out
 
 
@@ -161,17 +160,16 @@ def with_arguments(doc: Optional[str]) -> Optional[str]:
 
 def read_json_object(path: "str | Path", what: str) -> dict[str, Any]:
     """The JSON object in file ``path`` (a training, sweep or other config named ``what`` in the
-    messages); raises :class:`~accd_gym.ConfigError` if the file is missing, is not JSON or
-    holds something other than an object."""
+    messages); raises :class:`~accd_gym.ConfigError` if the file is missing, is not a regular
+    file of at most 64 MiB (:func:`accd_gym.files.read_user_file`), is not JSON or holds
+    something other than an object."""
     from pathlib import Path
 
-    p = Path(path)
-    if not p.is_file():
+    from accd_gym.files import read_user_json
+
+    if not Path(path).exists():
         raise ConfigError(f"invalid config: {what} file {str(path)!r} does not exist")
-    try:
-        raw = json.loads(p.read_text())
-    except json.JSONDecodeError as e:
-        raise ConfigError(f"invalid config: {str(path)!r} is not valid JSON ({e})") from None
+    raw = read_user_json(path, what)
     if not isinstance(raw, dict):
         raise ConfigError(
             f"invalid config: {str(path)!r} holds a JSON {type(raw).__name__}; a {what} must be a JSON object"

@@ -289,9 +289,9 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
               "train_wall_s": round(train_s, 2), "eval_wall_s": round(time.perf_counter() - t1, 2),
               "steps_per_s": meta.get("steps_per_s"), "run": str(run), "episodes": record}
     if meta["status"] == "done":
-        tmp = run / (RESULT_FILE + ".tmp")
-        tmp.write_text(json.dumps({"key": key, "result": result}))
-        tmp.replace(run / RESULT_FILE)
+        from accd_gym import files
+
+        files.write_text(run / RESULT_FILE, json.dumps({"key": key, "result": result}))
     return result | {"reused": False}
 
 
@@ -449,7 +449,9 @@ def plot_profile(profile: dict[str, list[float]], taus: np.ndarray, path: Path) 
     ax.legend()
     ax.set_title("Performance profile over every tier")
     fig.tight_layout()
-    fig.savefig(path)
+    from accd_gym.files import save_figure
+
+    save_figure(fig, path)
     plt.close(fig)
 
 
@@ -520,8 +522,13 @@ def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] =
     ``docs``, docs/benchmark.md and docs/figures/benchmark_profile.png there too)."""
     import datetime
 
-    out = Path(out).resolve()
-    out.mkdir(parents=True, exist_ok=True)
+    from accd_gym import files
+
+    # before the jobs: a read-only folder (or --docs folder) is refused at once
+    out = files.writable_folder(Path(out).resolve())
+    if docs is not None:
+        files.writable_folder(docs, "--docs")
+        files.writable_folder(docs / "figures", "--docs")
     t0 = time.perf_counter()
     todo = jobs(config)
     results = _run_jobs(todo, config, out, ray_address, progress)
@@ -550,14 +557,13 @@ def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] =
                  for r in results],
         "profile": {"tau": taus.tolist(), **profile},
     }
-    (out / "benchmark.json").write_text(json.dumps(doc, indent=1))
-    (out / "episodes.json").write_text(json.dumps({"runs": {r["name"]: r["episodes"] for r in results},
-                                                   "baselines": baselines}))
-    (out / "benchmark.md").write_text(report_markdown(doc).replace("figures/benchmark_profile.png", "performance_profile.png"))
+    files.write_text(out / "benchmark.json", json.dumps(doc, indent=1))
+    files.write_text(out / "episodes.json", json.dumps({"runs": {r["name"]: r["episodes"] for r in results},
+                                                        "baselines": baselines}))
+    files.write_text(out / "benchmark.md", report_markdown(doc).replace("figures/benchmark_profile.png", "performance_profile.png"))
     plot_profile(profile, taus, out / "performance_profile.png")
     if docs is not None:
-        (docs / "figures").mkdir(parents=True, exist_ok=True)
-        (docs / "benchmark.md").write_text(report_markdown(doc))
+        files.write_text(docs / "benchmark.md", report_markdown(doc))
         plot_profile(profile, taus, docs / "figures" / "benchmark_profile.png")
     return doc
 

@@ -140,9 +140,10 @@ def evaluate(
             f"invalid config: `episodes` = {episodes} is outside the allowed range 1..{len(HELD_OUT_WAKE_SEEDS)} (held-out wake seeds)"
         )
     seeds = list(wake_seeds) if wake_seeds is not None else list(HELD_OUT_WAKE_SEEDS[:episodes])
+    from accd_gym import files
+
+    out = files.writable_folder(out)  # before the episodes: a read-only folder is refused at once
     loaded = [(spec, load_policy(spec, allow_unnormalized=allow_unnormalized, config=config)) for spec in policies]  # fail early
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     results: dict[str, Any] = {
         "episodes": episodes,
         "base_seed": seed,
@@ -159,7 +160,7 @@ def evaluate(
         runs, ray_info = distributed.run_policies(dict(loaded), episodes, seed=seed, wake_seeds=seeds, num_envs=num_envs,
                                                   config=config, address=ray_address, chunk=ray_chunk,
                                                   cpus_per_task=max(1, num_threads), progress=progress)
-        (out / "ray_tasks.json").write_text(json.dumps(ray_info, indent=1))
+        files.write_text(out / "ray_tasks.json", json.dumps(ray_info, indent=1))
     for spec, policy in loaded:
         if ray_address is None:
             runs[spec] = run_episodes(policy, episodes, seed=seed, wake_seeds=seeds, num_envs=num_envs,
@@ -178,14 +179,16 @@ def evaluate(
                                            config=config, allow_unnormalized=allow_unnormalized)
             for spec, eps in runs.items()
         }
-    (out / "results.json").write_text(json.dumps(results, indent=1))
-    np.savez_compressed(out / "trajectories.npz", **{f"{_label(s)}__{e.index}": e.trajectory for s, eps in runs.items() for e in eps})
+    # each file atomically: a full disk leaves the previous evaluation's file, never half a file
+    files.write_text(out / "results.json", json.dumps(results, indent=1))
+    with files.atomic_open(out / "trajectories.npz") as f:
+        np.savez_compressed(f, **{f"{_label(s)}__{e.index}": e.trajectory for s, eps in runs.items() for e in eps})
     plot_trajectories(runs, out / "trajectories.png", dpi=dpi)
     from accd_gym.envs.config import env_config
 
     radius = env_config(config or {})["boom"]["capture_radius"]
     plot_miss_cdf(runs, out / "miss_distance_cdf.png", dpi=dpi, capture_radius=radius)
-    (out / "summary.md").write_text(summary_markdown(results))
+    files.write_text(out / "summary.md", summary_markdown(results))
     return results
 
 
@@ -269,7 +272,9 @@ def plot_trajectories(runs: dict[str, list[Episode]], path: Path, max_episodes: 
         side.set_title(f"{_label(spec)}: side view (green captured, red not)", fontsize=9)
         top.set_title(f"{_label(spec)}: top view", fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=dpi)
+    from accd_gym.files import save_figure
+
+    save_figure(fig, path, dpi=dpi)
     plt.close(fig)
 
 
@@ -292,7 +297,9 @@ def plot_miss_cdf(runs: dict[str, list[Episode]], path: Path, dpi: int = 90, cap
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=dpi)
+    from accd_gym.files import save_figure
+
+    save_figure(fig, path, dpi=dpi)
     plt.close(fig)
 
 

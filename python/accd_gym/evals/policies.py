@@ -6,9 +6,6 @@ stable-baselines3 models (:class:`SB3Policy`) and RLlib runs
 
 from __future__ import annotations
 
-import json
-import pickle
-import zipfile
 from pathlib import Path
 from typing import Any, Optional
 
@@ -68,34 +65,37 @@ class SB3Policy:
                 "--allow-unnormalized on the command line, if it was trained without VecNormalize)"
             )
         self.name = str(path)
-        self.algo = _algo_of(model_path)
         try:
-            from stable_baselines3 import PPO, SAC
+            from stable_baselines3 import PPO, SAC  # noqa: F401
         except ModuleNotFoundError as e:
             raise ModuleNotFoundError(
                 f"loading the trained model {str(path)!r} needs stable-baselines3 ({e}): pip install 'accd-gym[sb3]'",
                 name=e.name,
             ) from e
+        from accd_gym.learning.training import model_algo
 
         self._device = device
+        self._model_path = str(model_path)
+        self._stats_path = str(stats_path)
         self._model_bytes = model_path.read_bytes()
         self._stats_bytes = stats_path.read_bytes() if stats_path.is_file() else None
+        #: What run.json beside or above the model says (checked against the zip when loading).
+        self._run_algo = _run_algo(model_path)
+        self.algo = self._run_algo or model_algo(self._model_bytes, self._model_path)
         self._load()
         if self._stats_bytes is None:
             warnings.warn(f"policy {str(path)!r}: no VecNormalize statistics; observations are passed unnormalised",
                           stacklevel=2)
 
     def _load(self) -> None:
-        """Builds the model and the normalizer from the files' bytes (kept for pickling)."""
-        import io
+        """Builds the model and the normalizer from the files' bytes (kept for pickling);
+        ConfigError naming the file that is damaged or of another env or algorithm."""
+        from accd_gym.learning.training import load_model, load_statistics
 
-        from stable_baselines3 import PPO, SAC
-
-        cls = {"ppo": PPO, "sac": SAC}[self.algo]
-        self.model = cls.load(io.BytesIO(self._model_bytes), device=self._device)
+        self.model = load_model(self._model_bytes, self._model_path, self._run_algo, device=self._device)
         self.normalizer = None
         if self._stats_bytes is not None:
-            self.normalizer = pickle.loads(self._stats_bytes)
+            self.normalizer = load_statistics(self._stats_bytes, self._stats_path)
             self.normalizer.training = False
 
     def __getstate__(self) -> dict[str, Any]:
@@ -119,29 +119,32 @@ class SB3Policy:
 
 
 def _run_status(run: Path) -> str:
-    """The ``status`` of a run folder's run.json ("unknown" without one)."""
+    """The ``status`` of a run folder's run.json ("unknown" without one or with a damaged one)."""
+    from accd_gym.files import read_user_json
+
+    if not (run / "run.json").exists():
+        return "unknown"
     try:
-        return str(json.loads((run / "run.json").read_text()).get("status", "unknown"))
-    except (OSError, ValueError, AttributeError):
+        return str(read_user_json(run / "run.json", "run summary").get("status", "unknown"))
+    except (ConfigError, AttributeError):
         return "unknown"
 
 
-def _algo_of(model_path: Path) -> str:
-    """'ppo' or 'sac' for a saved model: from run.json beside or above it, else the zip's data."""
+def _run_algo(model_path: Path) -> Optional[str]:
+    """'ppo' or 'sac' as the run.json beside or above a saved model says, None without one;
+    ConfigError naming the run.json when it is damaged or names another algorithm."""
+    from accd_gym.files import read_user_json
+
     for folder in (model_path.parent, model_path.parent.parent):
         meta = folder / "run.json"
-        if meta.is_file():
-            return json.loads(meta.read_text())["algo"]
-    try:
-        with zipfile.ZipFile(model_path) as z:
-            data = z.read("data").decode()
-    except (zipfile.BadZipFile, KeyError) as e:
-        raise ConfigError(f"invalid config: {str(model_path)!r} is not a stable-baselines3 model ({e})") from None
-    if "sac.policies" in data:
-        return "sac"
-    if "policies.ActorCriticPolicy" in data or "ppo" in data.lower():
-        return "ppo"
-    raise ConfigError(f"invalid config: cannot tell the algorithm of {str(model_path)!r} (allowed: PPO, SAC)")
+        if meta.exists():
+            doc = read_user_json(meta, "run summary")
+            algo = doc.get("algo") if isinstance(doc, dict) else None
+            if algo not in ("ppo", "sac"):
+                raise ConfigError(f"invalid config: {str(meta)!r} is not a run summary of a stable-baselines3 run: "
+                                  f"`algo` = {algo!r} is outside the allowed range ['ppo', 'sac']")
+            return algo
+    return None
 
 
 def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False, config: Optional[Any] = None) -> Any:

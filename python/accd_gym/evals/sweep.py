@@ -49,6 +49,7 @@ from typing import Any, Optional, Sequence
 import numpy as np
 
 from accd_gym.errors import ConfigError
+from accd_gym import files as _files
 
 #: Defaults of a sweep config.
 DEFAULTS: dict[str, Any] = {
@@ -211,7 +212,7 @@ def _trial(params: dict[str, Any]) -> None:
            "steps_per_s": meta.get("steps_per_s"), "episodes": episodes, "captures": s["captures"],
            "capture_rate": s["capture_rate"], "capture_rate_ci95": s["capture_rate_ci95"],
            "miss_distance_median_m": s["miss_distance_m"]["median"], "run": str(run)}
-    (run / "eval.json").write_text(json.dumps({"summary": s, "trial": doc}, indent=1))
+    _files.write_text(run / "eval.json", json.dumps({"summary": s, "trial": doc}, indent=1))
     # The driver builds its table from the reported metrics: no shared filesystem needed for it.
     tune.report({k: v for k, v in doc.items() if k not in ("point", "capture_rate_ci95")})
 
@@ -327,8 +328,8 @@ def run(config: dict[str, Any] | str | Path, out: str | Path, *, progress: bool 
     trials.sort(key=lambda t: (json.dumps(t["point"], sort_keys=True), t["seed"]))
     doc = {"config": cfg, "trials": trials, "failed": failed, "aggregates": aggregate(trials) if trials else [],
            "wall_time_s": time.perf_counter() - t0, "cluster_cpus": int(ray.cluster_resources().get("CPU", 0))}
-    (out / "sweep.json").write_text(json.dumps(doc, indent=1))
-    (out / "summary.md").write_text(summary_markdown(doc))
+    _files.write_text(out / "sweep.json", json.dumps(doc, indent=1))
+    _files.write_text(out / "summary.md", summary_markdown(doc))
     return doc
 
 

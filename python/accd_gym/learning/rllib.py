@@ -346,9 +346,13 @@ def is_rllib_run(path: str | Path) -> bool:
     p = Path(path)
     if (p / "rllib_checkpoint.json").is_file():
         return True
+    from accd_gym.files import read_user_json
+
+    if not (p / "run.json").exists():
+        return False
     try:
-        return json.loads((p / "run.json").read_text()).get("trainer") == "rllib"
-    except (OSError, ValueError, AttributeError):
+        return read_user_json(p / "run.json", "run summary").get("trainer") == "rllib"
+    except (ConfigError, AttributeError):
         return False
 
 

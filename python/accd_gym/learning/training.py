@@ -36,8 +36,14 @@ rollout).
 Interruption: SIGINT (Ctrl+C) or SIGTERM writes a checkpoint (model, VecNormalize statistics,
 the envs' exact state, SAC's replay buffer) to ``checkpoints/`` and marks ``run.json``
 ``"status": "interrupted"``; ``accd-gym train --resume OUT`` (:func:`resume`) continues from the
-latest checkpoint to the same total with the same config. ``accd-gym evaluate OUT`` of an
-unfinished run evaluates its latest checkpoint and says so.
+newest checkpoint that loads (saying which damaged ones it skipped) to the same total with the
+same config. ``accd-gym evaluate OUT`` of an unfinished run evaluates its latest checkpoint and
+says so.
+
+Nothing saved is lost: every file is written atomically (:mod:`accd_gym.files`; a checkpoint's
+model zip last, after its companions), so a crash or a full disk leaves the earlier checkpoints
+and the previous run.json intact; a write that fails stops the training with an
+:class:`~accd_gym.errors.OutputError` saying which checkpoint the run keeps.
 """
 
 from __future__ import annotations
@@ -45,17 +51,17 @@ from __future__ import annotations
 import contextlib
 import json
 import math
-import os
 import re
 import signal
 import threading
 import time
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 import numpy as np
 
-from accd_gym.errors import ConfigError
+from accd_gym import files
+from accd_gym.errors import ConfigError, OutputError, StateError
 
 #: Defaults of a training config (``algo_kwargs`` are per algorithm).
 DEFAULTS: dict[str, Any] = {
@@ -341,56 +347,207 @@ def _base_env(env: Any) -> Any:
     return env
 
 
-def latest_checkpoint(run: str | Path) -> Optional[dict[str, Any]]:
-    """The newest checkpoint of a run folder: ``{"steps", "model", "vecnormalize", "env_state",
-    "replay_buffer"}`` (paths; the last two None when absent), or None without checkpoints."""
+def checkpoints(run: str | Path) -> list[dict[str, Any]]:
+    """Every checkpoint of a run folder, newest first: ``{"steps", "model", "vecnormalize",
+    "env_state", "replay_buffer"}`` (paths; the last three None when absent). Whether each one
+    loads is not checked here (:func:`resume` tries them in this order)."""
     folder = Path(run) / "checkpoints"
-    best: Optional[tuple[int, Path]] = None
+    found: list[tuple[int, Path]] = []
     for p in folder.glob("*_steps.zip"):
         m = re.fullmatch(r"(.+)_(\d+)_steps", p.stem)
-        if m and (best is None or int(m.group(2)) > best[0]):
-            best = (int(m.group(2)), p)
-    if best is None:
-        return None
-    steps, model = best
-    prefix = model.stem[: -len(f"_{steps}_steps")]
+        if m and not p.name.startswith(".") and p.is_file():
+            found.append((int(m.group(2)), p))
+    records = []
+    for steps, model in sorted(found, key=lambda f: (f[0], f[1].name), reverse=True):
+        prefix = model.stem[: -len(f"_{steps}_steps")]
 
-    def beside(kind: str, ext: str) -> Optional[Path]:
-        q = folder / f"{prefix}_{kind}_{steps}_steps.{ext}"
-        return q if q.is_file() else None
+        def beside(kind: str, ext: str) -> Optional[Path]:
+            q = folder / f"{prefix}_{kind}_{steps}_steps.{ext}"
+            return q if q.is_file() else None
 
-    return {
-        "steps": steps,
-        "model": model,
-        "vecnormalize": beside("vecnormalize", "pkl"),
-        "env_state": beside("envstate", "bin"),
-        "replay_buffer": beside("replay_buffer", "pkl"),
-    }
+        records.append({
+            "steps": steps,
+            "model": model,
+            "vecnormalize": beside("vecnormalize", "pkl"),
+            "env_state": beside("envstate", "bin"),
+            "replay_buffer": beside("replay_buffer", "pkl"),
+        })
+    return records
 
 
-def _save_checkpoint(model: Any, env: Any, cfg: dict[str, Any], out: Path) -> dict[str, Any]:
-    """Writes the model, the VecNormalize statistics, the envs' exact state and (SAC) the replay
-    buffer as a checkpoint named like CheckpointCallback's; returns :func:`latest_checkpoint`'s
-    record of it."""
+def latest_checkpoint(run: str | Path) -> Optional[dict[str, Any]]:
+    """The newest checkpoint of a run folder (the first of :func:`checkpoints`), or None without
+    checkpoints."""
+    found = checkpoints(run)
+    return found[0] if found else None
+
+
+def _reason(e: BaseException) -> str:
+    """An exception as a short one-line reason (type and the start of its message)."""
+    text = " ".join(str(e).split())
+    return f"{type(e).__name__}: {text[:200]}{'...' if len(text) > 200 else ''}" if text else type(e).__name__
+
+
+def model_algo(data: bytes, name: str) -> Optional[str]:
+    """``"ppo"`` or ``"sac"`` for the bytes of a saved stable-baselines3 model (from its stored
+    policy class), None when the class is neither; ConfigError naming ``name`` when the bytes are
+    not a readable model zip (truncated, corrupted, another file)."""
+    import io
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(io.BytesIO(data)) as z:
+            text = z.read("data").decode()
+    except Exception as e:  # a damaged zip raises BadZipFile, zlib.error, EOFError, KeyError, ...
+        raise ConfigError(f"invalid config: {name!r} is not a readable stable-baselines3 model (truncated or "
+                          f"corrupted: {_reason(e)})") from None
+    if "sac.policies" in text:
+        return "sac"
+    if "policies.ActorCriticPolicy" in text or "ActorCriticPolicy" in text:
+        return "ppo"
+    return None
+
+
+def load_model(data: bytes, name: str, algo: Optional[str], **kwargs: Any) -> Any:
+    """The PPO or SAC model in the bytes of a saved model zip (``name``: its file, for the
+    messages), loaded with ``kwargs`` (``env``, ``device``, ...). ``algo``: what the run's
+    run.json says (None: what the zip holds). ConfigError naming the file when it is damaged,
+    holds another algorithm than ``algo``, does not load, or is a model of another environment
+    (observation or action shape other than accd-gym's)."""
+    from stable_baselines3 import PPO, SAC
+
+    from accd_gym.envs.task import ACT_DIM, OBS_DIM
+
+    stored = model_algo(data, name)
+    if algo is not None and stored is not None and algo != stored:
+        raise ConfigError(f"invalid config: {name!r} holds a {stored.upper()} model, but its run.json says "
+                          f"\"algo\": {algo!r}")
+    algo = algo or stored
+    if algo not in _ALGOS:
+        raise ConfigError(f"invalid config: cannot tell the algorithm of {name!r} (allowed: PPO, SAC)")
+    import io
+
+    try:
+        model = {"ppo": PPO, "sac": SAC}[algo].load(io.BytesIO(data), **kwargs)
+    except Exception as e:  # a damaged or foreign model fails anywhere in torch or SB3
+        raise ConfigError(f"invalid config: {name!r} does not load as a {algo.upper()} model of accd-gym "
+                          f"({_reason(e)})") from None
+    obs = getattr(model.observation_space, "shape", None)
+    act = getattr(model.action_space, "shape", None)
+    if obs != (OBS_DIM,) or act != (ACT_DIM,):
+        raise ConfigError(f"invalid config: {name!r} is a model of another environment: observations of shape "
+                          f"{obs}, actions {act}; accd-gym's are ({OBS_DIM},) and ({ACT_DIM},)")
+    return model
+
+
+def load_statistics(data: bytes, name: str, venv: Any = None) -> Any:
+    """The ``VecNormalize`` statistics pickled in ``data`` (``name``: its file, for the messages),
+    attached to ``venv`` when given. ConfigError naming the file when it is empty, truncated,
+    holds something else, or holds statistics of another environment."""
+    import pickle
+
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from accd_gym.envs.task import OBS_DIM
+
+    if not data:
+        raise ConfigError(f"invalid config: VecNormalize statistics {name!r} are an empty file")
+    try:
+        stats = pickle.loads(data)
+    except Exception as e:  # a truncated or foreign pickle can raise almost anything
+        raise ConfigError(f"invalid config: VecNormalize statistics {name!r} cannot be read (truncated or "
+                          f"corrupted: {_reason(e)})") from None
+    if not isinstance(stats, VecNormalize):
+        raise ConfigError(f"invalid config: {name!r} holds a {type(stats).__name__}, not VecNormalize statistics")
+    shape = getattr(getattr(stats, "observation_space", None), "shape", None)
+    mean = getattr(getattr(stats, "obs_rms", None), "mean", None)
+    if shape != (OBS_DIM,) or (stats.norm_obs and getattr(mean, "shape", None) != (OBS_DIM,)):
+        raise ConfigError(f"invalid config: {name!r} holds VecNormalize statistics of another environment "
+                          f"(observations of shape {shape}; accd-gym's are ({OBS_DIM},))")
+    if venv is not None:
+        try:
+            stats.set_venv(venv)
+        except Exception as e:
+            raise ConfigError(f"invalid config: VecNormalize statistics {name!r} do not fit the env ({_reason(e)})") from None
+    return stats
+
+
+def _save_statistics(env: Any, path: Path) -> None:
+    """Writes the VecNormalize statistics (as ``VecNormalize.save`` does) atomically."""
+    import pickle
+
+    with files.atomic_open(path, "wb") as f:
+        pickle.dump(env, f)
+
+
+def _save_checkpoint(model: Any, env: Any, cfg: dict[str, Any], out: Path, *, replay_buffer: bool = True) -> dict[str, Any]:
+    """Writes the VecNormalize statistics, the envs' exact state, (SAC, with ``replay_buffer``)
+    the replay buffer and the model as a checkpoint named like SB3's CheckpointCallback's; each
+    file atomically (:mod:`accd_gym.files`), the model last, so that a checkpoint's zip exists
+    only once its companions are complete. Returns :func:`checkpoints`' record of it;
+    OutputError (nothing of an earlier checkpoint touched) when a file cannot be written."""
     folder = out / "checkpoints"
     folder.mkdir(parents=True, exist_ok=True)
     steps = int(model.num_timesteps)
     stem = f"{_prefix(cfg)}_{{}}{steps}_steps"
-    model.save(str(folder / (stem.format("") + ".zip")))
-    env.save(str(folder / (stem.format("vecnormalize_") + ".pkl")))
-    (folder / (stem.format("envstate_") + ".bin")).write_bytes(_base_env(env).get_state())
-    if hasattr(model, "save_replay_buffer") and cfg["algo"] == "sac":
-        model.save_replay_buffer(str(folder / (stem.format("replay_buffer_") + ".pkl")))
+    _save_statistics(env, folder / (stem.format("vecnormalize_") + ".pkl"))
+    files.write_bytes(folder / (stem.format("envstate_") + ".bin"), _base_env(env).get_state())
+    if replay_buffer and hasattr(model, "save_replay_buffer") and cfg["algo"] == "sac":
+        with files.atomic_path(folder / (stem.format("replay_buffer_") + ".pkl")) as tmp:
+            model.save_replay_buffer(str(tmp))
+    with files.atomic_path(folder / (stem.format("") + ".zip")) as tmp:
+        model.save(str(tmp))
     record = latest_checkpoint(out)
     assert record is not None and record["steps"] == steps
     return record
 
 
+def _checkpoint_callback(cfg: dict[str, Any], out: Path):
+    """An SB3 callback writing a checkpoint (:func:`_save_checkpoint`, no replay buffer) every
+    ``checkpoint_every`` environment steps, named like SB3's CheckpointCallback's."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    every = max(1, cfg["checkpoint_every"] // cfg["num_envs"])
+
+    class PeriodicCheckpoints(BaseCallback):
+        """Writes a checkpoint every ``every`` calls (vectorised env steps)."""
+
+        def _on_step(self) -> bool:
+            if self.n_calls % every == 0:
+                _save_checkpoint(self.model, self.model.get_env(), cfg, out, replay_buffer=False)
+            return True
+
+    return PeriodicCheckpoints()
+
+
 def _write_meta(out: Path, meta: dict[str, Any]) -> None:
-    """Writes run.json atomically (a crash never leaves half a file)."""
-    tmp = out / "run.json.tmp"
-    tmp.write_text(json.dumps(meta, indent=1, default=str))
-    os.replace(tmp, out / "run.json")
+    """Writes run.json atomically (a crash or a full disk never leaves half a file)."""
+    files.write_text(out / "run.json", json.dumps(meta, indent=1, default=str))
+
+
+def _kept(out: Path) -> str:
+    """What a run folder keeps after a failed write, for the messages."""
+    ckpt = latest_checkpoint(out)
+    if ckpt is None:
+        return "the run has no checkpoint yet"
+    return (f"the run keeps its checkpoint at {ckpt['steps']} steps ({ckpt['model']}); free space and continue with: "
+            f"accd-gym train --resume {out}")
+
+
+def _read_meta(out: Path) -> tuple[dict[str, Any], dict[str, Any]]:
+    """A run folder's run.json and its validated config; ConfigError naming the file when it is
+    missing, not JSON, not a run summary or holds an invalid config."""
+    meta_path = out / "run.json"
+    if not meta_path.exists():
+        raise ConfigError(f"invalid config: --resume {str(out)!r} is not a run folder (no run.json)")
+    meta = files.read_user_json(meta_path, "run summary")
+    if not isinstance(meta, dict) or not isinstance(meta.get("config"), dict):
+        raise ConfigError(f"invalid config: {str(meta_path)!r} is not a run summary (a JSON object with a \"config\" object)")
+    try:
+        cfg = validate_config(meta["config"])
+    except ConfigError as e:
+        raise ConfigError(f"invalid config: {str(meta_path)!r} holds an invalid config: {e}") from None
+    return meta, cfg
 
 
 def train(
@@ -416,7 +573,7 @@ def train(
         if timesteps < 1:
             raise ConfigError(f"invalid config: `timesteps` = {timesteps} is outside the allowed range >= 1")
         cfg["total_timesteps"] = int(timesteps)
-    out = _writable_folder(out)
+    out = files.writable_folder(out)
     torch.set_num_threads(cfg["torch_threads"])
     env = make_training_env(cfg)
     cls = {"ppo": PPO, "sac": SAC}[cfg["algo"]]
@@ -442,52 +599,90 @@ def train(
     return _learn(model, env, cfg, out, meta, progress=progress, fresh=True)
 
 
-def resume(run: str | Path, *, progress: bool = True) -> dict[str, Any]:
-    """Continues an interrupted run (or one killed while training) from its latest checkpoint to
-    the total of its config, with the same config and seeds (the envs continue from their saved
-    state; SAC's replay buffer is restored when it was saved). Returns the run summary.
+def resume(run: str | Path, *, progress: bool = True, report: Optional[Callable[[str], None]] = None) -> dict[str, Any]:
+    """Continues an interrupted run (or one killed while training) from its newest checkpoint
+    that loads to the total of its config, with the same config and seeds (the envs continue
+    from their saved state; SAC's replay buffer is restored when it was saved). Returns the run
+    summary.
 
-    Raises ConfigError when ``run`` is not a run folder, has finished, or has no checkpoint.
+    A checkpoint whose files are damaged (a truncated zip or statistics file, statistics of
+    another env, a model of another algorithm than run.json's) is skipped: ``report`` (default:
+    a warning) gets one line per skipped checkpoint saying why, and the next older one is tried.
+
+    Raises ConfigError when ``run`` is not a run folder, its run.json is damaged, it has
+    finished, or none of its checkpoints loads.
     """
     import torch
-    from stable_baselines3 import PPO, SAC
-    from stable_baselines3.common.vec_env import VecNormalize
 
     out = Path(run)
-    meta_path = out / "run.json"
-    if not meta_path.is_file():
-        raise ConfigError(f"invalid config: --resume {str(run)!r} is not a run folder (no run.json)")
-    try:
-        meta = json.loads(meta_path.read_text())
-        cfg = validate_config(meta["config"])
-    except (json.JSONDecodeError, KeyError, TypeError) as e:
-        raise ConfigError(f"invalid config: {str(meta_path)!r} is not a run summary ({e})") from None
+    meta, cfg = _read_meta(out)
     if meta.get("status") == "done":
         raise ConfigError(f"invalid config: run {str(run)!r} is complete ({meta.get('timesteps')} steps); nothing to resume")
-    ckpt = latest_checkpoint(out)
-    if ckpt is None:
+    found = checkpoints(out)
+    if not found:
         raise ConfigError(f"invalid config: run {str(run)!r} has no checkpoint in {str(out / 'checkpoints')!r} to resume from")
-    if ckpt["vecnormalize"] is None:
-        raise ConfigError(f"invalid config: checkpoint {str(ckpt['model'])!r} has no VecNormalize statistics beside it")
+    if report is None:
+        import warnings
+
+        def report(line: str) -> None:
+            warnings.warn(line, stacklevel=3)
+
     torch.set_num_threads(cfg["torch_threads"])
+    skipped: list[str] = []
+    loaded = None
+    for ckpt in found:
+        try:
+            loaded = _load_checkpoint(ckpt, cfg, out)
+            break
+        except (ConfigError, StateError) as e:
+            reason = " ".join(str(e).split()).removeprefix("invalid config: ")
+            skipped.append(f"{ckpt['model'].name} ({reason})")
+            report(f"skipped checkpoint {ckpt['model']} ({ckpt['steps']} steps): {reason}")
+    if loaded is None:
+        raise ConfigError(f"invalid config: run {str(run)!r}: none of its {len(found)} checkpoints loads; "
+                          f"newest: {skipped[0]}")
+    ckpt, env, model = loaded
+    record = {"from_steps": ckpt["steps"], "checkpoint": str(ckpt["model"])}
+    if skipped:
+        record["skipped"] = skipped
+    meta.setdefault("resumed", []).append(record)
+    meta["status"] = "training"
+    _write_meta(out, meta)
+    return _learn(model, env, cfg, out, meta, progress=progress, fresh=False)
+
+
+def _load_checkpoint(ckpt: dict[str, Any], cfg: dict[str, Any], out: Path) -> tuple[dict[str, Any], Any, Any]:
+    """The env (wrapped, statistics restored, envs at their saved state) and model of one
+    checkpoint; ConfigError or StateError naming the file that does not load."""
     from stable_baselines3.common.vec_env import VecMonitor
 
     from accd_gym.envs.sb3 import AccdVecEnv
 
+    if ckpt["vecnormalize"] is None:
+        raise ConfigError(f"invalid config: checkpoint {str(ckpt['model'])!r} has no VecNormalize statistics beside it")
     base = AccdVecEnv(num_envs=cfg["num_envs"], seed=cfg["seed"], num_threads=cfg["num_threads"], **cfg["env"])
-    if ckpt["env_state"] is not None:
-        base.set_state(ckpt["env_state"].read_bytes())
-        base._base_seed = None  # continue the saved episode sequence instead of reseeding
-    env = VecNormalize.load(str(ckpt["vecnormalize"]), VecMonitor(base, info_keywords=("captured",)))
-    env.training = True
-    cls = {"ppo": PPO, "sac": SAC}[cfg["algo"]]
-    model = cls.load(str(ckpt["model"]), env=env, device=cfg["device"], tensorboard_log=str(out / "tb"))
-    if ckpt["replay_buffer"] is not None and hasattr(model, "load_replay_buffer"):
-        model.load_replay_buffer(str(ckpt["replay_buffer"]))
-    meta.setdefault("resumed", []).append({"from_steps": ckpt["steps"], "checkpoint": str(ckpt["model"])})
-    meta["status"] = "training"
-    _write_meta(out, meta)
-    return _learn(model, env, cfg, out, meta, progress=progress, fresh=False)
+    try:
+        env = load_statistics(ckpt["vecnormalize"].read_bytes(), str(ckpt["vecnormalize"]),
+                              VecMonitor(base, info_keywords=("captured",)))
+        env.training = True
+        model = load_model(ckpt["model"].read_bytes(), str(ckpt["model"]), cfg["algo"], env=env, device=cfg["device"],
+                           tensorboard_log=str(out / "tb"))
+        if ckpt["replay_buffer"] is not None and hasattr(model, "load_replay_buffer"):
+            try:
+                model.load_replay_buffer(str(ckpt["replay_buffer"]))
+            except Exception as e:  # a truncated pickle raises almost anything
+                raise ConfigError(f"invalid config: replay buffer {str(ckpt['replay_buffer'])!r} cannot be read "
+                                  f"(truncated or corrupted: {_reason(e)})") from None
+        if ckpt["env_state"] is not None:
+            try:
+                base.set_state(ckpt["env_state"].read_bytes())
+            except StateError as e:
+                raise StateError(f"env state {str(ckpt['env_state'])!r} cannot be restored: {e}") from None
+            base._base_seed = None  # continue the saved episode sequence instead of reseeding
+    except BaseException:
+        base.close()
+        raise
+    return ckpt, env, model
 
 
 def _learn(model: Any, env: Any, cfg: dict[str, Any], out: Path, meta: dict[str, Any], *, progress: bool,
@@ -495,19 +690,13 @@ def _learn(model: Any, env: Any, cfg: dict[str, Any], out: Path, meta: dict[str,
     """Runs ``model.learn`` to the config's total with checkpoints; on SIGINT/SIGTERM writes a
     checkpoint and marks the run interrupted, else writes the final model. Returns ``meta``."""
     import torch
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
+    from stable_baselines3.common.callbacks import CallbackList
 
-    checkpoints = CheckpointCallback(
-        save_freq=max(1, cfg["checkpoint_every"] // cfg["num_envs"]),
-        save_path=str(out / "checkpoints"),
-        name_prefix=_prefix(cfg),
-        save_vecnormalize=True,
-    )
     remaining = cfg["total_timesteps"] - (0 if fresh else int(model.num_timesteps))
     t0 = time.time()
     start_steps = 0 if fresh else int(model.num_timesteps)
     stop = _StopRequest()
-    callbacks = [checkpoints, _capture_callback(), stop.callback()]
+    callbacks = [_checkpoint_callback(cfg, out), _capture_callback(), stop.callback()]
     split = _thread_split(cfg["torch_threads"], cfg["update_threads"])  # PPO only: validate_config
     if split is not None:
         callbacks.append(split)
@@ -524,11 +713,15 @@ def _learn(model: Any, env: Any, cfg: dict[str, Any], out: Path, meta: dict[str,
     except KeyboardInterrupt as e:
         # A second signal (or Ctrl+C outside the handler's reach): the model may be mid-update,
         # so no checkpoint of it is written; the run is marked and keeps its periodic ones.
-        with _signals_deferred():
+        with _signals_deferred(), contextlib.suppress(OutputError):
             meta.update(status="interrupted", interrupted_by=str(e) or "SIGINT", timesteps=int(model.num_timesteps))
             _write_meta(out, meta)
         env.close()
         raise
+    except OutputError as e:
+        # A periodic checkpoint could not be written (a full disk): the earlier ones are intact.
+        env.close()
+        raise _write_failed(out, meta, f"training stopped at {int(model.num_timesteps)} steps: {e}") from None
     interrupted = stop.signal_name
     wall = time.time() - t0
     with _signals_deferred():
@@ -539,32 +732,41 @@ def _learn(model: Any, env: Any, cfg: dict[str, Any], out: Path, meta: dict[str,
             steps_per_s=round((done - start_steps) / wall, 1) if wall > 0 else None,
             torch_version=torch.__version__,
         )
-        if interrupted is not None:
-            ckpt = _save_checkpoint(model, env, cfg, out)
-            meta.update(status="interrupted", interrupted_by=interrupted, checkpoint=str(ckpt["model"]),
-                        vecnormalize=str(ckpt["vecnormalize"]))
-        else:
-            model.save(str(out / "final_model.zip"))
-            env.save(str(out / "vecnormalize.pkl"))
-            meta.update(status="done")
-            for key in ("checkpoint", "vecnormalize", "interrupted_by"):
-                meta.pop(key, None)
-        _write_meta(out, meta)
+        try:
+            if interrupted is not None:
+                ckpt = _save_checkpoint(model, env, cfg, out)
+                meta.update(status="interrupted", interrupted_by=interrupted, checkpoint=str(ckpt["model"]),
+                            vecnormalize=str(ckpt["vecnormalize"]))
+            else:
+                # the statistics first: a final model on the disk always has its statistics
+                _save_statistics(env, out / "vecnormalize.pkl")
+                with files.atomic_path(out / "final_model.zip") as tmp:
+                    model.save(str(tmp))
+                meta.update(status="done")
+                for key in ("checkpoint", "vecnormalize", "interrupted_by"):
+                    meta.pop(key, None)
+            _write_meta(out, meta)
+        except OutputError as e:
+            env.close()
+            what = (f"training interrupted ({interrupted}) at {done} steps, but its checkpoint could not be written"
+                    if interrupted is not None else f"training finished {done} steps, but its results could not be written")
+            raise _write_failed(out, meta, f"{what}: {e}") from None
     env.close()
     return meta
 
 
-def _writable_folder(out: str | Path) -> Path:
-    """``out`` created if needed; ConfigError naming it when it cannot be created or written."""
-    p = Path(out)
-    try:
-        p.mkdir(parents=True, exist_ok=True)
-        probe = p / ".accd-write-test"
-        probe.write_text("")
-        probe.unlink()
-    except OSError as e:
-        raise ConfigError(f"invalid config: --out {str(out)!r} is not a writable folder ({e.strerror or e})") from None
-    return p
+def _write_failed(out: Path, meta: dict[str, Any], what: str) -> OutputError:
+    """The OutputError for a run whose checkpoint or final model could not be written: run.json
+    marked interrupted at the steps its newest checkpoint holds, if it can still be written;
+    the message says what the run keeps and how to continue."""
+    ckpt = latest_checkpoint(out)
+    with contextlib.suppress(OutputError):
+        meta.update(status="interrupted", interrupted_by="a failed write", timesteps=ckpt["steps"] if ckpt else 0)
+        for key in ("checkpoint", "vecnormalize"):
+            meta.pop(key, None)
+        _write_meta(out, meta)
+    return OutputError(f"{what}; {_kept(out)}")
 
 
-__all__ = ["DEFAULTS", "latest_checkpoint", "load_config", "make_training_env", "resume", "train", "validate_config"]
+__all__ = ["DEFAULTS", "checkpoints", "latest_checkpoint", "load_config", "load_model", "load_statistics", "make_training_env",
+           "model_algo", "resume", "train", "validate_config"]

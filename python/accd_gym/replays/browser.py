@@ -276,7 +276,9 @@ def screenshot(html: str | Path, png: str | Path, *, setup: Optional[str] = None
         if setup:
             page.evaluate(f"Promise.resolve({setup}).then(() => window.accdReplay ? accdReplay.idle() : null)")
         page.evaluate("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))")
-        Path(png).write_bytes(page.screenshot())
+        from accd_gym import files
+
+        files.write_bytes(png, page.screenshot())
         return page.errors()
 
 

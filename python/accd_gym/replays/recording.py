@@ -141,21 +141,37 @@ class Recording:
     def save(self, path: str | Path) -> Path:
         """Writes the recording as a compressed ``.npz`` (``docs/recording-format.md``); returns
         the path. Strings are stored as numpy unicode scalars, so ``numpy.load`` needs no pickle."""
+        from accd_gym import files
+
         p = Path(path)
-        p.parent.mkdir(parents=True, exist_ok=True)
         extra = {
             "format": np.array(FORMAT_NAME),
             "version": np.array(FORMAT_VERSION),
             "meta_json": np.array(json.dumps(self.meta, sort_keys=True)),
         }
-        with open(p, "wb") as f:
+        with files.atomic_open(p, "wb") as f:  # a full disk leaves the previous file, never half of one
             np.savez_compressed(f, **extra, **self.arrays)
         return p
 
     @classmethod
     def load(cls, path: str | Path) -> "Recording":
-        """Reads a file written by :meth:`save`; raises ConfigError for another file."""
-        with np.load(path, allow_pickle=False) as z:
+        """Reads a file written by :meth:`save`; raises ConfigError for another file (also one
+        that is not a regular file, or is truncated)."""
+        from accd_gym.files import check_regular_file
+
+        check_regular_file(path, "recording")
+        try:
+            return cls._from_npz(path, path)
+        except ConfigError:
+            raise
+        except Exception as e:  # a truncated or foreign file fails in zipfile, zlib or numpy
+            raise ConfigError(f"invalid config: {str(path)!r} is not a readable accd-gym recording "
+                              f"({type(e).__name__}: {e})") from None
+
+    @classmethod
+    def _from_npz(cls, source: Any, path: str | Path) -> "Recording":
+        """The recording in an open ``.npz`` (``path`` names it in the messages)."""
+        with np.load(source, allow_pickle=False) as z:
             if "format" not in z.files or str(z["format"]) != FORMAT_NAME:
                 raise ConfigError(f"invalid config: {str(path)!r} is not an accd-gym recording (no `format` = {FORMAT_NAME!r})")
             version = int(z["version"])

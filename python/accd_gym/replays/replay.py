@@ -151,11 +151,10 @@ def _escape(text: str) -> str:
 
 
 def write_replay(rec: Recording, path: str | Path, **kwargs: Any) -> Path:
-    """Writes :func:`replay_html` of ``rec`` to ``path`` (UTF-8); returns the path."""
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(replay_html(rec, **kwargs), encoding="utf-8")
-    return p
+    """Writes :func:`replay_html` of ``rec`` to ``path`` (UTF-8, atomically); returns the path."""
+    from accd_gym import files
+
+    return files.write_text(path, replay_html(rec, **kwargs))
 
 
 def write_video(rec: Recording, path: str | Path, *, fps: Optional[float] = None, width: int = 640,
@@ -168,17 +167,19 @@ def write_video(rec: Recording, path: str | Path, *, fps: Optional[float] = None
         raise ModuleNotFoundError(f"videos need imageio-ffmpeg ({e}): pip install 'accd-gym[replay]'", name=e.name) from e
     from accd_gym.envs.render import render_frame
 
+    from accd_gym import files
+
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
     rate = float(fps) if fps is not None else 1.0 / float(rec.meta["agent_step"])
-    writer = imageio_ffmpeg.write_frames(str(p), (width, height), fps=rate, codec="libx264", pix_fmt_out="yuv420p",
-                                         macro_block_size=16, quality=7, ffmpeg_log_level="error")
-    writer.send(None)
-    try:
-        for k in range(len(rec["time"])):
-            writer.send(np.ascontiguousarray(render_frame(rec.frame_data(k), width, height)))
-    finally:
-        writer.close()
+    with files.atomic_path(p) as tmp:  # a failed encoding leaves the previous video, never half of one
+        writer = imageio_ffmpeg.write_frames(str(tmp), (width, height), fps=rate, codec="libx264", pix_fmt_out="yuv420p",
+                                             macro_block_size=16, quality=7, ffmpeg_log_level="error")
+        writer.send(None)
+        try:
+            for k in range(len(rec["time"])):
+                writer.send(np.ascontiguousarray(render_frame(rec.frame_data(k), width, height)))
+        finally:
+            writer.close()
     return p
 
 
@@ -546,8 +547,9 @@ def run_replay(policy: str, episodes: int, out: str | Path, *, seed: Optional[in
         import sys
 
         print(f"note: {loaded.note}", file=sys.stderr)
-    folder = Path(out)
-    folder.mkdir(parents=True, exist_ok=True)
+    from accd_gym import files
+
+    folder = files.writable_folder(out)  # before the episodes: a read-only folder is refused at once
     bar = None
     if progress:
         from tqdm import tqdm

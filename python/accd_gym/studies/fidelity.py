@@ -35,6 +35,7 @@ from typing import Any, Optional
 import numpy as np
 
 import accd_gym
+from accd_gym import files as _files
 
 #: Simulated time of each Fig. 9 run, s (about two swings of case (b), four cycles of its elongation).
 FIG9_DURATION_S = 10.0
@@ -195,7 +196,7 @@ def run_fig9(out_dir: Path, dpi: int = 90, duration_s: float = FIG9_DURATION_S) 
         ax.grid(True, alpha=0.3)
     axes[0].legend(fontsize=8)
     fig.suptitle("Fig. 9: comparison of elongation approaches (Table 1: n = 4, L = 10 m, 5 kg, k = 1e4 N/m, c1 = 20)")
-    fig.savefig(out_dir / "fig9.png", dpi=dpi)
+    _files.save_figure(fig, out_dir / "fig9.png", dpi=dpi)
     plt.close(fig)
     closed = fig9_closed_forms()
     verdict = fig9_verdict(results)
@@ -483,7 +484,7 @@ def run_tension(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[di
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7)
     fig.suptitle("Attachment tension: simplified (attachment) vs full (distributed) elasticity")
-    fig.savefig(out_dir / "tension.png", dpi=dpi)
+    _files.save_figure(fig, out_dir / "tension.png", dpi=dpi)
     plt.close(fig)
 
     ratios = tension_ratios(max_runs, cap_runs)
@@ -790,7 +791,7 @@ def run_sweep(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[dict
     ax.set_title("maximum-tension readings", fontsize=9)
     ax.legend(fontsize=7)
     ax.grid(True, alpha=0.3, axis="y")
-    fig.savefig(out_dir / "sweep.png", dpi=dpi)
+    _files.save_figure(fig, out_dir / "sweep.png", dpi=dpi)
     plt.close(fig)
     doc = {"study": "sweep", "figures": ["sweep.png"], "settling": settling, "max_tension": tension, "tolerance": PAPER_TOLERANCE}
 

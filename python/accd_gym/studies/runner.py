@@ -10,6 +10,7 @@ import math
 from pathlib import Path
 from typing import Any, Optional, Sequence
 
+from accd_gym import files as _files
 from accd_gym.studies import fidelity
 from accd_gym.studies.study import (
     EXTRA_STUDIES,
@@ -123,8 +124,8 @@ def run_study(
             md += f"\n### {_TITLES[figure]}\n\n![{figure}]({figure}.png)\n\n{markdown_table(rows)}"
         if bar is not None:
             bar.close()
-    (out_dir / f"{study}.json").write_text(json.dumps(doc, indent=2))
-    (out_dir / f"{study}.md").write_text(md)
+    _files.write_text(out_dir / f"{study}.json", json.dumps(doc, indent=2))
+    _files.write_text(out_dir / f"{study}.md", md)
     return doc
 
 
@@ -146,5 +147,5 @@ def run(
         docs[name] = run_study(name, out_dir, progress=progress, dpi=dpi)
     if len(names) > 1:
         parts = [(Path(out_dir) / f"{n}.md").read_text() for n in names]
-        (Path(out_dir) / "summary.md").write_text("# Design studies (paper section 4)\n\n" + "\n".join(parts))
+        _files.write_text(Path(out_dir) / "summary.md", "# Design studies (paper section 4)\n\n" + "\n".join(parts))
     return docs

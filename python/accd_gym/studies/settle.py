@@ -10,6 +10,7 @@ from typing import Any, Optional
 import numpy as np
 
 from accd_gym._core import stand_in_body, towed_tether
+from accd_gym import files as _files
 
 #: Depth band, as a fraction of the final depth, used for the settling time.
 SETTLING_BAND = 0.02
@@ -170,7 +171,7 @@ def plot(result: SettleResult, path: Path, title: str = "") -> None:
     ax.grid(True, alpha=0.3)
     if title:
         fig.suptitle(title)
-    fig.savefig(path, dpi=120)
+    _files.save_figure(fig, path, dpi=120)
     plt.close(fig)
 
 
@@ -182,12 +183,12 @@ def run(out_dir: Path, preset: str = "table3", duration: float = 120.0, progress
     summary = result.summary()
     summary["preset"] = preset
     summary["duration_s"] = duration
-    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2))
+    _files.write_text(out_dir / "summary.json", json.dumps(summary, indent=2))
     body = stand_in_body()
     plot(
         result,
         out_dir / "settle.png",
         title=f"{preset}: towed at 185 m/s, 6000 m with a {body['mass']:.0f} kg stand-in capturing device",
     )
-    np.savez_compressed(out_dir / "history.npz", **{k: v for k, v in asdict(result).items() if isinstance(v, np.ndarray)})
+    _files.save_npz(out_dir / "history.npz", **{k: v for k, v in asdict(result).items() if isinstance(v, np.ndarray)})
     return summary

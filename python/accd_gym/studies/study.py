@@ -71,6 +71,7 @@ from typing import Any, Optional, Sequence
 import numpy as np
 
 import accd_gym
+from accd_gym import files as _files
 
 #: Flap deflection of the reconstructed Fig. 12 pitch and yaw commands, deg (paper 2.1: RANS data
 #: up to 10 deg).
@@ -755,7 +756,7 @@ def plot_cases(results: list[CaseResult], path: Path, title: str, dpi: int = 90)
         ax.grid(True, alpha=0.3)
     axes[0].legend(fontsize=8)
     fig.suptitle(title, fontsize=11)
-    fig.savefig(path, dpi=dpi)
+    _files.save_figure(fig, path, dpi=dpi)
     plt.close(fig)
 
 
@@ -792,5 +793,5 @@ def plot_max_tension(result: MaxTensionResult, metrics: dict[str, Any], path: Pa
         f"{c.rlv_drag_N / 1e3:.0f} kN drag, TA {c.ta_mass_kg / 1e3:.0f} t, {c.preset}",
         fontsize=11,
     )
-    fig.savefig(path, dpi=dpi)
+    _files.save_figure(fig, path, dpi=dpi)
     plt.close(fig)
