@@ -328,7 +328,8 @@ def test_config_docs_are_generated_from_the_declarations():
 
     table = config_table_markdown()
     doc = (Path(__file__).resolve().parents[1] / "docs" / "environment.md").read_text()
-    generated = re.search(r"<!-- generated: [^>]*-->\n(.*?)\n<!-- end generated -->", doc, re.S)
+    generated = re.search(r"<!-- generated: accd_gym\.config\.config_table_markdown\(\) -->\n(.*?)\n<!-- end generated -->",
+                          doc, re.S)
     assert generated and generated.group(1) == table
     for cls in (accd_gym.InAirCaptureEnv, accd_gym.InAirCaptureVectorEnv, accd_gym.AccdVecEnv):
         lines = [line.strip() for line in cls.__doc__.splitlines()]
