@@ -56,9 +56,16 @@ class SB3Policy:
     A model trained with VecNormalize acts on normalised observations: without its statistics it
     would see raw ones and act wrongly, so a missing statistics file is a ConfigError unless
     ``allow_unnormalized=True`` (then observations are passed raw, with a warning).
+
+    A model trained with the env options ``residual``/``history`` (:mod:`accd_gym.agent_io`, read
+    from the run's ``run.json``) gets the observations it was trained on and its actions are
+    turned into flap commands as in training: the policy keeps the base controller (designed
+    for ``config``, the env configuration it runs on) and the history per env, restarted by
+    :meth:`reset`, so it runs on the plain env. :attr:`agent_options` holds them.
     """
 
-    def __init__(self, path: str | Path, device: str = "cpu", *, allow_unnormalized: bool = False) -> None:
+    def __init__(self, path: str | Path, device: str = "cpu", *, allow_unnormalized: bool = False,
+                 config: Optional[Any] = None) -> None:
         import warnings
 
         p = Path(path)
@@ -106,9 +113,20 @@ class SB3Policy:
             ) from e
 
         self._device = device
+        self.agent_options = _agent_options_of(model_path)
+        self._config = _physics_config(config)
+        self._io: Any = None
+        self._started: Optional[np.ndarray] = None
         self._model_bytes = model_path.read_bytes()
         self._stats_bytes = stats_path.read_bytes() if stats_path.is_file() else None
         self._load()
+        expected = self.agent_options.observation_space().shape
+        if self.model.observation_space.shape != expected:
+            raise ConfigError(
+                f"invalid config: policy {str(path)!r} observes shape {self.model.observation_space.shape}, the env "
+                f"options {self.agent_options.to_dict() or 'none'} give {expected}; a model trained with residual/history "
+                "options is evaluated from its run folder (run.json holds them)"
+            )
         if self._stats_bytes is None:
             warnings.warn(f"policy {str(path)!r}: no VecNormalize statistics; observations are passed unnormalised",
                           stacklevel=2)
@@ -135,15 +153,42 @@ class SB3Policy:
         self._load()
 
     def predict(self, obs: Any) -> np.ndarray:
-        """Deterministic actions (N, 4) for raw observations (N, 25), normalised as in training."""
+        """Deterministic flap commands (N, 4) for raw observations (N, 25), normalised as in
+        training (with residual/history options: augmented, and the actions made commands, as
+        the env did in training)."""
         o = np.asarray(obs, dtype=np.float32)
+        if self.agent_options.enabled:
+            o = self._agent_observation(o)
         if self.normalizer is not None and self.normalizer.norm_obs:
             o = self.normalizer.normalize_obs(o)
         actions, _ = self.model.predict(o, deterministic=True)
-        return np.clip(np.asarray(actions, dtype=np.float32), -1.0, 1.0)
+        actions = np.clip(np.asarray(actions, dtype=np.float32), -1.0, 1.0)
+        return actions if self._io is None else self._io.command(actions)
+
+    def _agent_observation(self, obs: np.ndarray) -> np.ndarray:
+        """The observations the model was trained on, advancing the per-env agent state (a new
+        batch size starts every env afresh)."""
+        from accd_gym.agent_io import AgentIO
+
+        if obs.ndim != 2:
+            raise ValueError(f"observations have shape {obs.shape}, expected (N, 25)")
+        if self._io is None or self._io.num_envs != obs.shape[0]:
+            self._io = AgentIO(self.agent_options, self._config, obs.shape[0])
+            self._started = None
+            return self._io.begin(obs)
+        started, self._started = self._started, None
+        return self._io.advance(obs, started)[0]
 
     def reset(self, mask: Optional[np.ndarray] = None) -> None:
-        """Feed-forward policies keep no state."""
+        """The envs ``mask`` selects (all when None) start new episodes: their base controller and
+        history restart at the next :meth:`predict` (nothing to do without env options)."""
+        if self._io is None:
+            return
+        rows = np.ones(self._io.num_envs, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+        if rows.shape != (self._io.num_envs,):
+            self._io = None  # another batch: every env starts afresh
+            return
+        self._started = rows if self._started is None else (self._started | rows)
 
 
 def _run_status(run: Path) -> str:
@@ -152,6 +197,39 @@ def _run_status(run: Path) -> str:
         return str(json.loads((run / "run.json").read_text()).get("status", "unknown"))
     except (OSError, ValueError, AttributeError):
         return "unknown"
+
+
+def _run_meta(model_path: Path) -> Optional[dict[str, Any]]:
+    """The run.json beside or above a saved model, or None."""
+    for folder in (model_path.parent, model_path.parent.parent):
+        meta = folder / "run.json"
+        if meta.is_file():
+            try:
+                return json.loads(meta.read_text())
+            except ValueError:
+                return None
+    return None
+
+
+def _agent_options_of(model_path: Path) -> Any:
+    """The env options (residual, history) the model was trained with, from its run.json."""
+    from accd_gym.agent_io import AgentOptions, split_agent_options
+
+    meta = _run_meta(model_path)
+    env = (meta or {}).get("config", {}).get("env", {}) if isinstance(meta, dict) else {}
+    return split_agent_options(env)[0] if isinstance(env, dict) else AgentOptions()
+
+
+def _physics_config(config: Optional[Any]) -> Any:
+    """An evaluation's env configuration without the env options of :mod:`accd_gym.agent_io`
+    (a trained policy carries its own; see :class:`SB3Policy`)."""
+    from collections.abc import Mapping
+
+    from accd_gym.agent_io import split_agent_options
+
+    if config is not None and not isinstance(config, Mapping):
+        return config  # a validated EnvConfig holds no env options
+    return split_agent_options(dict(config or {}))[1]
 
 
 def _algo_of(model_path: Path) -> str:
@@ -181,6 +259,7 @@ def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False, c
     policy will run on; the LQR is designed for it."""
     from accd_gym.baselines import BASELINES, guidance_from_tuning, make_baseline
 
+    config = _physics_config(config)
     if spec in BASELINES:
         return make_baseline(spec, seed, config)
     if spec.endswith(".json") and Path(spec).is_file():
@@ -194,7 +273,7 @@ def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False, c
 
         if is_rllib_run(spec):
             return RLlibPolicy(spec)
-        return SB3Policy(spec, allow_unnormalized=allow_unnormalized)
+        return SB3Policy(spec, allow_unnormalized=allow_unnormalized, config=config)
     return make_baseline(spec, seed, config)  # raises ConfigError naming the allowed names
 
 
@@ -283,7 +362,9 @@ def run_episode_range(
         raise ConfigError(f"invalid config: `batch` = {batch} is outside the allowed range >= 1")
     if wake_seeds is not None and len(wake_seeds) < stop:
         raise ConfigError(f"invalid config: {len(wake_seeds)} wake seeds for episodes up to {stop - 1}; need at least {stop}")
-    env = InAirCaptureVectorEnv(batch, autoreset_mode="disabled", num_threads=num_threads, **(config or {}))
+    # The env options (residual control, history) are the policy's (SB3Policy applies those of its
+    # run): the episodes run on the plain env.
+    env = InAirCaptureVectorEnv(batch, autoreset_mode="disabled", num_threads=num_threads, **_physics_config(config))
     pending = iter(range(start, stop))
     ep_of = np.full(batch, -1)  # episode index each env runs; -1: a repeat whose result is dropped
     last = np.zeros(batch, dtype=np.int64)  # the last real episode each env ran (repeated when idle)

@@ -18,12 +18,18 @@ update_threads     PPO: threads PyTorch uses in the gradient updates, when the e
                    fixed number, never "per core": the trained policy can depend on it (on an
                    AMD EPYC, 1 and 2 give the same bits, 3 and 4 others; BENCHMARKS.md)
 seed               seed of the env (training wake seeds only) and of the algorithm (default 0)
-env                environment config overrides (see :mod:`accd_gym.config`)
+env                environment config overrides (see :mod:`accd_gym.config`) and the env options
+                   ``residual`` and ``history`` (:mod:`accd_gym.agent_io`)
 vec_normalize      ``VecNormalize`` options: ``norm_obs``, ``norm_reward`` (PPO; false for SAC),
                    ``clip_obs``, ``clip_reward``
 algo_kwargs        keyword arguments of ``PPO``/``SAC`` (``learning_rate``, ``n_steps``, ``gamma``...)
 policy_kwargs      ``net_arch`` (list of ints, or dict ``pi``/``vf``/``qf``), ``activation_fn``
                    (``"tanh"``/``"relu"``), ``log_std_init``
+zero_action_init   true: the policy's last action layer starts at zero
+                   (:class:`accd_gym.callbacks.ZeroActionInit`; PPO: ``action_net``, SAC: the
+                   actor's mean, and its log-std layer constant at ``policy_kwargs.log_std_init``
+                   when given), so that the deterministic policy starts with zero actions: with
+                   ``env.residual`` it starts as the base controller, bit for bit (default false)
 checkpoint_every   environment steps between checkpoints (model + VecNormalize statistics)
 device             PyTorch device (default ``"cpu"``: the networks are small)
 ================== ================================================================================
@@ -72,6 +78,7 @@ DEFAULTS: dict[str, Any] = {
     "policy_kwargs": {},
     "checkpoint_every": 100_000,
     "device": "cpu",
+    "zero_action_init": False,
 }
 _ALGOS = ("ppo", "sac")
 _ACTIVATIONS = ("tanh", "relu", "elu")
@@ -108,6 +115,9 @@ def validate_config(raw: dict[str, Any]) -> dict[str, Any]:
     for key in ("env", "vec_normalize", "algo_kwargs", "policy_kwargs"):
         if not isinstance(cfg[key], dict):
             raise ConfigError(f"invalid config: `{key}` = {cfg[key]!r} is outside the allowed range: a JSON object")
+    if not isinstance(cfg["zero_action_init"], bool):
+        raise ConfigError(f"invalid config: `zero_action_init` = {cfg['zero_action_init']!r} is outside the allowed "
+                          "range: true or false")
     if not isinstance(cfg["device"], str):
         raise ConfigError(f"invalid config: `device` = {cfg['device']!r} is outside the allowed range: a device name such as 'cpu'")
     _check_algo_kwargs(cfg["algo"], cfg["algo_kwargs"])
@@ -149,11 +159,14 @@ def _check_net_arch(policy_kwargs: dict[str, Any]) -> None:
 
 
 def check_training_env(env: dict[str, Any]) -> None:
-    """ConfigError for a bad env override or one that fixes a held-out wake seed (training may
-    only draw training wake seeds); shared by every trainer."""
+    """ConfigError for a bad env override (or env option, :mod:`accd_gym.agent_io`) or one that
+    fixes a held-out wake seed (training may only draw training wake seeds); shared by every
+    trainer."""
+    from accd_gym.agent_io import split_agent_options
     from accd_gym.config import env_config
 
-    full = env_config(env)  # raises ConfigError naming the bad env field
+    _, physics = split_agent_options(env)  # raises ConfigError naming a bad residual/history option
+    full = env_config(physics)  # raises ConfigError naming the bad env field
     from accd_gym.task import HELD_OUT_WAKE_SEEDS
 
     fixed = ([full["wake_seed"]] if full["wake_seed"] is not None else []) + list(full["wake_seeds"] or [])
@@ -442,6 +455,15 @@ def train(
     return _learn(model, env, cfg, out, meta, progress=progress, fresh=True)
 
 
+def _zero_action_init(cfg: dict[str, Any]):
+    """The callback zeroing the last action layer at the start (``zero_action_init``), or None."""
+    if not cfg["zero_action_init"]:
+        return None
+    from accd_gym.callbacks import ZeroActionInit
+
+    return ZeroActionInit()
+
+
 def resume(run: str | Path, *, progress: bool = True) -> dict[str, Any]:
     """Continues an interrupted run (or one killed while training) from its latest checkpoint to
     the total of its config, with the same config and seeds (the envs continue from their saved
@@ -508,6 +530,9 @@ def _learn(model: Any, env: Any, cfg: dict[str, Any], out: Path, meta: dict[str,
     start_steps = 0 if fresh else int(model.num_timesteps)
     stop = _StopRequest()
     callbacks = [checkpoints, _capture_callback(), stop.callback()]
+    init = _zero_action_init(cfg) if fresh else None
+    if init is not None:
+        callbacks.insert(0, init)
     split = _thread_split(cfg["torch_threads"], cfg["update_threads"])  # PPO only: validate_config
     if split is not None:
         callbacks.append(split)
