@@ -118,6 +118,7 @@ class AgentIO:
         self._cur = np.zeros((self.num_envs, OBS_DIM), dtype=np.float32)
         self._base_u = np.zeros((self.num_envs, ACT_DIM), dtype=np.float32)
         self._sent = np.zeros((self.num_envs, ACT_DIM), dtype=np.float32)
+        self._corrected = False
         self.observation_space = options.observation_space()
 
     @classmethod
@@ -160,7 +161,8 @@ class AgentIO:
             self._sent = np.clip(actions, -1.0, 1.0)
             return actions
         correction = np.clip(actions, -1.0, 1.0) * self._scale
-        self._sent = np.clip(self._base_u + correction, -1.0, 1.0).astype(np.float32)
+        self._corrected = bool(np.count_nonzero(correction))
+        self._sent = np.clip(self._base_u + correction, -1.0, 1.0) if self._corrected else self._base_u
         return self._sent
 
     def advance(
@@ -175,7 +177,7 @@ class AgentIO:
         and ``final_obs`` (same-step autoreset) the rows whose episode ended in this step and
         their last observations. Returns the agent observations of every row and, with
         ``ended``, those of the ended episodes' last observations (rows ``ended`` selects)."""
-        if self._base is not None:
+        if self._base is not None and self._corrected:  # (without a correction, the base command was sent)
             self._base.sent(self._sent.astype(np.float64) - self._base_u.astype(np.float64))
         if self._history is not None:
             self._history.push(self._cur, self._sent)

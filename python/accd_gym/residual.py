@@ -98,6 +98,49 @@ class ResidualOptions:
         return {"base": self.base, "scale": self.scale, "observe_base": self.observe_base}
 
 
+class _OneBlasThread:
+    """The context of :func:`one_blas_thread`: numpy's BLAS set to one thread inside, its thread
+    count restored on exit (through threadpoolctl's controller of it; nothing without one)."""
+
+    def __init__(self) -> None:
+        self._libs: list[Any] = []
+        try:
+            from threadpoolctl import ThreadpoolController
+        except ImportError:
+            return
+        self._libs = [c for c in ThreadpoolController().lib_controllers
+                      if c.user_api == "blas" and "numpy" in str(getattr(c, "filepath", ""))]
+        self._saved: list[int] = []
+
+    def __enter__(self) -> "_OneBlasThread":
+        self._saved = [c.get_num_threads() for c in self._libs]
+        for c, n in zip(self._libs, self._saved):
+            if n != 1:
+                c.set_num_threads(1)
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        for c, n in zip(self._libs, self._saved):
+            if n != 1:
+                c.set_num_threads(n)
+
+
+_BLAS: "_OneBlasThread | None" = None
+
+
+def one_blas_thread() -> Any:
+    """A context in which numpy's BLAS runs on the calling thread alone (threadpoolctl; a no-op
+    without it, or when BLAS has one thread already, as in ``accd-gym train``). The base
+    controller's small matrix products gain nothing from BLAS threads, whose spinning workers
+    would take the cores from the env's stepping threads (an LQR step of 64 envs: about 1 ms on
+    one thread, 10-25 ms with OpenBLAS's threads beside the physics on a busy machine). Per-row
+    results do not depend on it (OpenBLAS splits rows and columns, not the sums)."""
+    global _BLAS
+    if _BLAS is None:
+        _BLAS = _OneBlasThread()
+    return _BLAS
+
+
 class BaseController:
     """A base controller of a batch of ``num_envs`` envs: the policy of :data:`BASES` with the
     row bookkeeping residual control needs (restart rows, partial starts, state snapshots)."""
@@ -112,7 +155,8 @@ class BaseController:
 
     def command(self, obs: np.ndarray) -> np.ndarray:
         """The base commands (N, 4) float32 for the batch's observations; advances every row."""
-        return self.policy.predict(obs)
+        with one_blas_thread():
+            return self.policy.predict(obs)
 
     def command_rows(self, obs: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """The base commands of the batch with only the rows ``rows`` selects advanced (the
@@ -120,7 +164,7 @@ class BaseController:
         whole batch, as :meth:`command` does, so that a row's command has the bits it would have
         there."""
         before = self.policy.get_state()
-        u = self.policy.predict(obs)
+        u = self.command(obs)
         if before and not rows.all():
             after = self.policy.get_state()
             merged = {}
@@ -135,7 +179,7 @@ class BaseController:
         """The base commands for ``obs`` without advancing any row (e.g. for an ended episode's
         last observation)."""
         before = self.policy.get_state()
-        u = self.policy.predict(obs)
+        u = self.command(obs)
         self.policy.set_state(before)
         return u
 
@@ -153,4 +197,4 @@ class BaseController:
         self.policy.set_state(dict(state))
 
 
-__all__ = ["BASES", "SCALE_MAX", "BaseController", "ResidualOptions"]
+__all__ = ["BASES", "SCALE_MAX", "BaseController", "ResidualOptions", "one_blas_thread"]

@@ -431,6 +431,7 @@ def train(
         cfg["total_timesteps"] = int(timesteps)
     out = _writable_folder(out)
     torch.set_num_threads(cfg["torch_threads"])
+    _one_blas_thread()
     env = make_training_env(cfg)
     cls = {"ppo": PPO, "sac": SAC}[cfg["algo"]]
     try:
@@ -453,6 +454,17 @@ def train(
     meta = {"algo": cfg["algo"], "config": cfg, "status": "training", "total_timesteps": cfg["total_timesteps"]}
     _write_meta(out, meta)
     return _learn(model, env, cfg, out, meta, progress=progress, fresh=True)
+
+
+def _one_blas_thread() -> None:
+    """numpy's BLAS on one thread for the training process (threadpoolctl, when installed): its
+    only users are small products (the LQR base controller of residual control, VecNormalize),
+    and its idle threads spin beside the env's stepping threads."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        return
+    threadpool_limits(1, user_api="blas")
 
 
 def _zero_action_init(cfg: dict[str, Any]):
@@ -492,6 +504,7 @@ def resume(run: str | Path, *, progress: bool = True) -> dict[str, Any]:
     if ckpt["vecnormalize"] is None:
         raise ConfigError(f"invalid config: checkpoint {str(ckpt['model'])!r} has no VecNormalize statistics beside it")
     torch.set_num_threads(cfg["torch_threads"])
+    _one_blas_thread()
     from stable_baselines3.common.vec_env import VecMonitor
 
     from accd_gym.sb3 import AccdVecEnv
