@@ -138,6 +138,8 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
     ## Arguments
 
     ``render_mode``: ``"rgb_array"`` (side and top views, off-screen) or ``"human"`` (a window);
+    ``residual``, ``history``: residual control on a base controller and observation history
+    (:mod:`accd_gym.agent_io`; off by default; they change the observation's layout);
     ``**config``: the configuration keys below (e.g. ``capture_window=60.0``,
     ``tether="uhmwpe-300m-24mm"``, ``wake={"enabled": False}``): a section takes a dict of its
     keys (merged with the defaults), ``tether`` also a preset name. Unknown keys and values
