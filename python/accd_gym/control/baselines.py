@@ -203,6 +203,14 @@ class GuidancePolicy:
         flaps = np.stack([pitch + roll_cmd, pitch - roll_cmd, yaw - roll_cmd, yaw + roll_cmd], axis=1)
         return np.clip(flaps, -1.0, 1.0).astype(np.float32)
 
+    def get_state(self) -> dict[str, np.ndarray]:
+        """The integrators per env (a copy; empty before the first :meth:`predict`)."""
+        return {} if self._integral is None else {"integral": self._integral.copy()}
+
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        """Restores a state of :meth:`get_state`."""
+        self._integral = np.array(state["integral"], dtype=np.float64) if state else None
+
 
 def _lqr(config: Any) -> Any:
     """The LQR baseline designed for ``config`` (:meth:`accd_gym.control.lqr.LqrPolicy.for_config`)."""

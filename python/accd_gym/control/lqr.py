@@ -364,6 +364,32 @@ class LqrPolicy:
         self._u = u
         return u.astype(np.float32)
 
+    def sent(self, offset: np.ndarray) -> None:
+        """Tells the filter that the command actually sent differs from the last :meth:`predict`'s
+        by ``offset`` ((N, 4), flap-limit units; residual control adds a correction): its next
+        prediction uses the command sent. A zero offset changes nothing, bit for bit."""
+        if self._u is not None:
+            self._u = self._u + np.asarray(offset, dtype=np.float64)
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        """The filter's state per env (copies; empty before the first :meth:`predict`): with
+        :meth:`set_state` on a policy of the same design it continues bit for bit."""
+        if self._z is None:
+            return {}
+        return {"z": self._z.copy(), "u": self._u.copy(), "fresh": self._fresh.copy()}
+
+    def set_state(self, state: Mapping[str, np.ndarray]) -> None:
+        """Restores a state of :meth:`get_state` (an empty one: every estimate starts afresh)."""
+        if not state:
+            self._z = self._u = self._fresh = None
+            return
+        z, u, fresh = (np.array(state[k]) for k in ("z", "u", "fresh"))
+        nz = self.design.f.shape[0]
+        if z.ndim != 2 or z.shape[1] != nz or u.shape != (z.shape[0], ACT_DIM) or fresh.shape != (z.shape[0],):
+            raise ConfigError(f"invalid config: LQR filter state of shapes {z.shape}, {u.shape}, {fresh.shape} does "
+                              f"not fit this design (N x {nz}, N x {ACT_DIM}, N)")
+        self._z, self._u, self._fresh = z.astype(np.float64), u.astype(np.float64), fresh.astype(bool)
+
 
 def is_lqr_tuning(path: str) -> bool:
     """Whether the JSON file ``path`` is an LQR tuning result (``"policy": "lqr"``)."""

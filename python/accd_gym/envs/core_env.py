@@ -92,7 +92,9 @@ class CoreEnvMixin:
         The bytes are a header (magic ``ACCDSNAP``, format version, the kind of env, the number
         of envs, the SHA-256 of the configuration, a CRC-32 of everything) followed by the
         postcard-encoded state; the configuration itself is not included (pickles carry it)."""
-        return self._core.get_state(self._state_kind, self._needs_reset, self._seeded)
+        state = self._core.get_state(self._state_kind, self._needs_reset, self._seeded)
+        agent = getattr(self, "_agent_io", None)  # residual control / history (accd_gym.envs.agent_io)
+        return state if agent is None else agent.pack_state(state)
 
     def set_state(self, state: bytes) -> None:
         """Restores a state from :meth:`get_state` of an env of the same class, configuration and
@@ -104,4 +106,11 @@ class CoreEnvMixin:
         and then changes nothing."""
         if not isinstance(state, (bytes, bytearray, memoryview)):
             raise StateError(f"a state is bytes from {type(self).__name__}.get_state(), got {type(state).__name__}")
-        self._needs_reset, self._seeded = self._core.set_state(bytes(state), self._state_kind)
+        state = bytes(state)
+        agent = getattr(self, "_agent_io", None)  # residual control / history (accd_gym.envs.agent_io)
+        arrays = None
+        if agent is not None:
+            state, arrays = agent.unpack_state(state)
+        self._needs_reset, self._seeded = self._core.set_state(state, self._state_kind)
+        if agent is not None:
+            agent.set_state(arrays)

@@ -112,6 +112,8 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
     ## Arguments
 
     ``render_mode``: ``"rgb_array"`` (side and top views, off-screen) or ``"human"`` (a window);
+    ``residual``, ``history``: residual control on a base controller and observation history
+    (:mod:`accd_gym.envs.agent_io`; off by default; they change the observation's layout);
     ``**config``: the configuration keys below (e.g. ``capture_window=60.0``,
     ``tether="uhmwpe-300m-24mm"``, ``wake={"enabled": False}``): a section takes a dict of its
     keys (merged with the defaults), ``tether`` also a preset name. Unknown keys and values
@@ -148,11 +150,15 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
         self.render_mode = render_mode
         # Validated once; a user aerodynamic table is kept as its contents: pickles and saved
         # states need no file.
+        from accd_gym.envs.agent_io import AgentIO, split_agent_options
+
+        self.agent_options, config = split_agent_options(config)
         valid = valid_config(config)
         self._config = json.loads(valid.to_json())
         self.metadata = dict(self.metadata, render_fps=1.0 / self._config["agent_step"])
         self._core = _core.BatchEnv(valid, 1, random_seed(), "next_step", 1)
-        self.observation_space = observation_space()
+        self._agent_io = AgentIO.create(self.agent_options, self._config, 1)
+        self.observation_space = observation_space() if self._agent_io is None else self._agent_io.observation_space
         self.action_space = action_space()
         self._viewer = None
 
@@ -169,6 +175,8 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
             seed = check_seed(seed)
         super().reset(seed=seed)
         obs, wake = self._reset_core(seed, options)
+        if self._agent_io is not None:
+            obs = self._agent_io.begin(obs)
         info = self._reset_info(0, wake[0])
         if self.render_mode == "human":
             self.render()
@@ -179,7 +187,11 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
         if self._needs_reset:
             raise gym.error.ResetNeeded("call reset() before step() (at the start and after an episode ends)")
         a = check_actions(action, 1, single=True)
+        if self._agent_io is not None:
+            a = self._agent_io.command(a)
         obs, reward, terminated, truncated, _final, info, wake, _reset = self._core.step(a)
+        if self._agent_io is not None:
+            obs, _ = self._agent_io.advance(obs)
         term, trunc = bool(terminated[0]), bool(truncated[0])
         self._needs_reset = term or trunc
         out_info = info_dicts(info, wake)[0]
@@ -218,12 +230,13 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
         return {
             "render_mode": self.render_mode,
             "config": self._config,
+            "agent": self.agent_options.to_dict(),
             "state": self.get_state(),
             "np_random": self._np_random,
         }
 
     def __setstate__(self, d: dict[str, Any]) -> None:
-        self.__init__(render_mode=d["render_mode"], **d["config"])
+        self.__init__(render_mode=d["render_mode"], **d["config"], **d.get("agent", {}))
         self.set_state(d["state"])
         self._np_random = d["np_random"]
 

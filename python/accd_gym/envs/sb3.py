@@ -12,6 +12,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices,
 from accd_gym import _core
 from accd_gym.envs.config import valid_config, with_arguments
 from accd_gym.envs.core_env import CoreEnvMixin
+from accd_gym.envs.agent_io import AgentIO, split_agent_options
 from accd_gym.errors import ConfigError
 from accd_gym.envs.task import (
     DIVERGED_COLUMN,
@@ -61,7 +62,12 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
     envs step on ``num_threads`` threads (0: one per core). Works under ``VecMonitor`` and
     ``VecNormalize``.
 
-    Arguments besides ``num_envs``, ``seed``, ``num_threads``, ``copy`` and ``render_mode``: the
+    Residual control and observation history (``residual=``, ``history=``; off by default): the
+    env options of :mod:`accd_gym.envs.agent_io`; ``terminal_observation`` is then the agent's
+    observation of the ended episode's last state.
+
+    Arguments besides ``num_envs``, ``seed``, ``num_threads``, ``copy``, ``render_mode``, ``residual`` and
+    ``history``: the
     configuration keys (as for the single env), a section a dict of its keys, ``tether`` also a
     preset name:
 
@@ -90,14 +96,17 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         self.render_mode = render_mode
         # Validated once; a user aerodynamic table is kept as its contents: pickles and saved
         # states need no file.
+        self.agent_options, config = split_agent_options(config)
         valid = valid_config(config)
         self._config = json.loads(valid.to_json())
         base = random_seed(n) if seed is None else check_base_seed(seed, n)
         self._core = _core.BatchEnv(valid, n, base, "same_step", threads)
+        self._agent_io = AgentIO.create(self.agent_options, self._config, self._core.num_envs)
         self._actions: Optional[np.ndarray] = None
         self._base_seed: Optional[int] = None if seed is None else base
         self._pending_options: dict[str, Any] = {}
-        super().__init__(self._core.num_envs, observation_space(), action_space())
+        space = observation_space() if self._agent_io is None else self._agent_io.observation_space
+        super().__init__(self._core.num_envs, space, action_space())
         self.metadata["render_fps"] = 1.0 / self._config["agent_step"]
 
     def seed(self, seed: Optional[int] = None) -> Sequence[Optional[int]]:
@@ -119,6 +128,8 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
     def reset(self) -> np.ndarray:
         """Starts new episodes in every env (with the pending seed and options)."""
         obs, wake = self._reset_core(self._base_seed, self._pending_options)
+        if self._agent_io is not None:
+            obs = self._agent_io.begin(obs)
         self._pending_options = {}
         self._base_seed = None
         self.reset_infos = [self._reset_info(i, w) for i, w in enumerate(wake.tolist())]
@@ -132,9 +143,12 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         """Steps every env with the stored actions; see the class docs for the returns."""
         if self._actions is None:
             raise RuntimeError("step_wait() without step_async()")
-        obs, reward, terminated, truncated, final_obs, info, wake, _ = self._core.step(self._actions)
+        actions = self._actions if self._agent_io is None else self._agent_io.command(self._actions)
+        obs, reward, terminated, truncated, final_obs, info, wake, _ = self._core.step(actions)
         self._actions = None
         dones = terminated | truncated
+        if self._agent_io is not None:
+            obs, final_obs = self._agent_io.advance(obs, dones, final_obs, dones)
         infos = info_dicts(info, wake)
         for i in np.flatnonzero(info[:, DIVERGED_COLUMN]):  # ended and replaced in this step
             infos[i]["divergence"] = self._core.final_divergence(int(i))
@@ -187,6 +201,7 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
             "copy": self.copy,
             "render_mode": self.render_mode,
             "config": self._config,
+            "agent": self.agent_options.to_dict(),
             "state": self.get_state(),
             # What seed() and set_options() left for the next reset().
             "base_seed": self._base_seed,
@@ -195,7 +210,7 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
 
     def __setstate__(self, d: dict[str, Any]) -> None:
         self.__init__(d["num_envs"], num_threads=d["num_threads"], copy=d.get("copy", True), render_mode=d["render_mode"],
-                      **d["config"])
+                      **d["config"], **d.get("agent", {}))
         self.set_state(d["state"])
         self._base_seed = d["base_seed"]
         self._pending_options = d["pending_options"]

@@ -14,6 +14,7 @@ from gymnasium.vector.utils import batch_space
 from accd_gym import _core
 from accd_gym.envs.config import valid_config, with_arguments
 from accd_gym.envs.core_env import CoreEnvMixin
+from accd_gym.envs.agent_io import AgentIO, split_agent_options
 from accd_gym.errors import ConfigError
 from accd_gym.envs.task import (
     EVENT_NAMES,
@@ -103,8 +104,14 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
     (ConfigError naming the argument otherwise: ``"3"``, ``2.7`` and ``True`` are refused). ``render_mode="rgb_array"``:
     ``render()`` returns a tuple of one RGB frame per env, as ``SyncVectorEnv`` does.
 
+    **Residual control and observation history** (``residual=``, ``history=``; off by default):
+    the env options of :mod:`accd_gym.envs.agent_io` (the base controller and the history of each env
+    restart with its episode, automatic resets included; ``final_obs`` are the agent's
+    observations too). The observation then has the layout given there and in
+    ``docs/environment.md``; the arrays are new each step.
+
     **Arguments** besides ``num_envs``, ``seed``, ``num_threads``, ``autoreset_mode``,
-    ``copy``, ``render_mode`` and ``max_episode_steps``: the configuration keys (as for the single env),
+    ``copy``, ``render_mode``, ``max_episode_steps``, ``residual`` and ``history``: the configuration keys (as for the single env),
     a section a dict of its keys, ``tether`` also a preset name:
 
     {CONFIG_ARGUMENTS}
@@ -145,19 +152,21 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
             )
         # Validated once; a user aerodynamic table is kept as its contents: pickles and saved
         # states need no file.
+        self.agent_options, config = split_agent_options(config)
         valid = valid_config(config)
         self._config = json.loads(valid.to_json())
         self._randomized = bool(self._config["randomization"]["enabled"])
         check_max_episode_steps(max_episode_steps, self._config)
         self._core = _core.BatchEnv(valid, n, random_seed(n), _MODES[mode], threads)
         self.num_envs = self._core.num_envs
+        self._agent_io = AgentIO.create(self.agent_options, self._config, self.num_envs)
         self.render_mode = render_mode
         self.metadata = {
             "autoreset_mode": mode,
             "render_modes": ["rgb_array"],
             "render_fps": 1.0 / self._config["agent_step"],
         }
-        self.single_observation_space = observation_space()
+        self.single_observation_space = observation_space() if self._agent_io is None else self._agent_io.observation_space
         self.single_action_space = action_space()
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
@@ -195,6 +204,8 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
                     current[i] = per_env[i]
             self._env_seeds = tuple(current)
         obs, wake = self._reset_core(seeds, options or None, mask)
+        if self._agent_io is not None:
+            obs = self._agent_io.begin(obs, mask)
         selected = np.ones(self.num_envs, dtype=bool) if mask is None else mask.copy()
         wake_seed = wake.astype(np.int64)
         wake_seed[~selected] = 0
@@ -269,8 +280,14 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         if self._needs_reset:
             raise gym.error.ResetNeeded("call reset() before step()")
         a = check_actions(actions, self.num_envs)
+        if self._agent_io is not None:
+            a = self._agent_io.command(a)
         obs, reward, terminated, truncated, final_obs, info, wake, autoreset = self._core.step(a)
         mode = self.metadata["autoreset_mode"]
+        if self._agent_io is not None:
+            ended = (terminated | truncated) if mode == AutoresetMode.SAME_STEP else None
+            started = autoreset if mode == AutoresetMode.NEXT_STEP else ended
+            obs, final_obs = self._agent_io.advance(obs, started, final_obs, ended)
         wake_seed = wake.astype(np.int64)
         if mode == AutoresetMode.NEXT_STEP:
             stepped = ~autoreset
@@ -366,6 +383,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
             "copy": self.copy,
             "render_mode": self.render_mode,
             "config": self._config,
+            "agent": self.agent_options.to_dict(),
             "state": self.get_state(),
         }
 
@@ -377,6 +395,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
             copy=d.get("copy", True),
             render_mode=d["render_mode"],
             **d["config"],
+            **d.get("agent", {}),
         )
         self.set_state(d["state"])
 

@@ -98,6 +98,7 @@ def run_episode_range(
     (``tests/test_distributed.py`` checks both; PyTorch gives other last bits for batches of
     1-3 rows than for 4 or more, which is why the batch size is fixed).
     """
+    from accd_gym.envs.agent_io import physics_config
     from accd_gym.envs.vector import InAirCaptureVectorEnv
 
     start, stop = check_count(start, "start", 0), check_count(stop, "stop", 0)
@@ -106,7 +107,9 @@ def run_episode_range(
         raise ConfigError(f"invalid config: episode range {start}..{stop} is empty or negative; need 0 <= start < stop")
     if wake_seeds is not None and len(wake_seeds) < stop:
         raise ConfigError(f"invalid config: {len(wake_seeds)} wake seeds for episodes up to {stop - 1}; need at least {stop}")
-    env = InAirCaptureVectorEnv(batch, autoreset_mode="disabled", num_threads=num_threads, **(config or {}))
+    # The env options (residual control, history) are the policy's (SB3Policy applies those of its
+    # run): the episodes run on the plain env.
+    env = InAirCaptureVectorEnv(batch, autoreset_mode="disabled", num_threads=num_threads, **physics_config(config))
     pending = iter(range(start, stop))
     ep_of = np.full(batch, -1)  # episode index each env runs; -1: a repeat whose result is dropped
     last = np.zeros(batch, dtype=np.int64)  # the last real episode each env ran (repeated when idle)

@@ -25,9 +25,16 @@ class SB3Policy:
     A model trained with VecNormalize acts on normalised observations: without its statistics it
     would see raw ones and act wrongly, so a missing statistics file is a ConfigError unless
     ``allow_unnormalized=True`` (then observations are passed raw, with a warning).
+
+    A model trained with the env options ``residual``/``history`` (:mod:`accd_gym.envs.agent_io`, read
+    from the run's ``run.json``) gets the observations it was trained on and its actions are
+    turned into flap commands as in training: the policy keeps the base controller (designed
+    for ``config``, the env configuration it runs on) and the history per env, restarted by
+    :meth:`reset`, so it runs on the plain env. :attr:`agent_options` holds them.
     """
 
-    def __init__(self, path: str | Path, device: str = "cpu", *, allow_unnormalized: bool = False) -> None:
+    def __init__(self, path: str | Path, device: str = "cpu", *, allow_unnormalized: bool = False,
+                 config: Optional[Any] = None) -> None:
         import warnings
 
         p = Path(path)
@@ -75,6 +82,12 @@ class SB3Policy:
         from accd_gym.learning.training import model_algo
 
         self._device = device
+        self.agent_options = _agent_options_of(model_path)
+        from accd_gym.envs.agent_io import physics_config
+
+        self._config = physics_config(config)
+        self._io: Any = None
+        self._started: Optional[np.ndarray] = None
         self._model_path = str(model_path)
         self._stats_path = str(stats_path)
         self._model_bytes = model_path.read_bytes()
@@ -83,6 +96,13 @@ class SB3Policy:
         self._run_algo = _run_algo(model_path)
         self.algo = self._run_algo or model_algo(self._model_bytes, self._model_path)
         self._load()
+        expected = self.agent_options.observation_space().shape
+        if self.model.observation_space.shape != expected:
+            raise ConfigError(
+                f"invalid config: policy {str(path)!r} observes shape {self.model.observation_space.shape}, the env "
+                f"options {self.agent_options.to_dict() or 'none'} give {expected}; a model trained with residual/history "
+                "options is evaluated from its run folder (run.json holds them)"
+            )
         if self._stats_bytes is None:
             warnings.warn(f"policy {str(path)!r}: no VecNormalize statistics; observations are passed unnormalised",
                           stacklevel=2)
@@ -92,10 +112,11 @@ class SB3Policy:
         ConfigError naming the file that is damaged or of another env or algorithm."""
         from accd_gym.learning.training import load_model, load_statistics
 
-        self.model = load_model(self._model_bytes, self._model_path, self._run_algo, device=self._device)
+        obs_dim = self.agent_options.observation_space().shape[0]
+        self.model = load_model(self._model_bytes, self._model_path, self._run_algo, obs_dim, device=self._device)
         self.normalizer = None
         if self._stats_bytes is not None:
-            self.normalizer = load_statistics(self._stats_bytes, self._stats_path)
+            self.normalizer = load_statistics(self._stats_bytes, self._stats_path, obs_dim=obs_dim)
             self.normalizer.training = False
 
     def __getstate__(self) -> dict[str, Any]:
@@ -107,16 +128,42 @@ class SB3Policy:
         self._load()
 
     def predict(self, obs: Any) -> np.ndarray:
-        """Deterministic actions (N, 4) for raw observations (N, 25), normalised as in training."""
+        """Deterministic flap commands (N, 4) for raw observations (N, 25), normalised as in
+        training (with residual/history options: augmented, and the actions made commands, as
+        the env did in training)."""
         o = np.asarray(obs, dtype=np.float32)
+        if self.agent_options.enabled:
+            o = self._agent_observation(o)
         if self.normalizer is not None and self.normalizer.norm_obs:
             o = self.normalizer.normalize_obs(o)
         actions, _ = self.model.predict(o, deterministic=True)
-        return np.clip(np.asarray(actions, dtype=np.float32), -1.0, 1.0)
+        actions = np.clip(np.asarray(actions, dtype=np.float32), -1.0, 1.0)
+        return actions if self._io is None else self._io.command(actions)
+
+    def _agent_observation(self, obs: np.ndarray) -> np.ndarray:
+        """The observations the model was trained on, advancing the per-env agent state (a new
+        batch size starts every env afresh)."""
+        from accd_gym.envs.agent_io import AgentIO
+
+        if obs.ndim != 2:
+            raise ValueError(f"observations have shape {obs.shape}, expected (N, 25)")
+        if self._io is None or self._io.num_envs != obs.shape[0]:
+            self._io = AgentIO(self.agent_options, self._config, obs.shape[0])
+            self._started = None
+            return self._io.begin(obs)
+        started, self._started = self._started, None
+        return self._io.advance(obs, started)[0]
 
     def reset(self, mask: Optional[np.ndarray] = None) -> None:
-        """Feed-forward policies keep no state."""
-
+        """The envs ``mask`` selects (all when None) start new episodes: their base controller and
+        history restart at the next :meth:`predict` (nothing to do without env options)."""
+        if self._io is None:
+            return
+        rows = np.ones(self._io.num_envs, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+        if rows.shape != (self._io.num_envs,):
+            self._io = None  # another batch: every env starts afresh
+            return
+        self._started = rows if self._started is None else (self._started | rows)
 
 def _run_status(run: Path) -> str:
     """The ``status`` of a run folder's run.json ("unknown" without one or with a damaged one)."""
@@ -147,6 +194,21 @@ def _run_algo(model_path: Path) -> Optional[str]:
     return None
 
 
+
+def _agent_options_of(model_path: Path) -> Any:
+    """The env options (residual, history) the model was trained with, from its run.json."""
+    from accd_gym.envs.agent_io import AgentOptions, split_agent_options
+    from accd_gym.files import read_user_json
+
+    for folder in (model_path.parent, model_path.parent.parent):
+        meta = folder / "run.json"
+        if meta.exists():
+            doc = read_user_json(meta, "run summary")
+            env = doc.get("config", {}).get("env", {}) if isinstance(doc, dict) else {}
+            return split_agent_options(env)[0] if isinstance(env, dict) else AgentOptions()
+    return AgentOptions()
+
+
 def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False, config: Optional[Any] = None) -> Any:
     """A policy from a baseline name (``zero``, ``random``, ``guidance``, ``lqr``), a tuning file
     (``training/guidance_tuning*.json``: the guidance controller with its winning gains;
@@ -156,6 +218,9 @@ def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False, c
     policy will run on; the LQR is designed for it."""
     from accd_gym.control.baselines import BASELINES, guidance_from_tuning, make_baseline
 
+    from accd_gym.envs.agent_io import physics_config
+
+    config = physics_config(config)
     if spec in BASELINES:
         return make_baseline(spec, seed, config)
     if spec.endswith(".json") and Path(spec).is_file():
@@ -169,5 +234,5 @@ def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False, c
 
         if is_rllib_run(spec):
             return RLlibPolicy(spec)
-        return SB3Policy(spec, allow_unnormalized=allow_unnormalized)
+        return SB3Policy(spec, allow_unnormalized=allow_unnormalized, config=config)
     return make_baseline(spec, seed, config)  # raises ConfigError naming the allowed names

@@ -18,12 +18,18 @@ update_threads     PPO: threads PyTorch uses in the gradient updates, when the e
                    fixed number, never "per core": the trained policy can depend on it (on an
                    AMD EPYC, 1 and 2 give the same bits, 3 and 4 others; BENCHMARKS.md)
 seed               seed of the env (training wake seeds only) and of the algorithm (default 0)
-env                environment config overrides (see :mod:`accd_gym.config`)
+env                environment config overrides (see :mod:`accd_gym.config`) and the env options
+                   ``residual`` and ``history`` (:mod:`accd_gym.envs.agent_io`)
 vec_normalize      ``VecNormalize`` options: ``norm_obs``, ``norm_reward`` (PPO; false for SAC),
                    ``clip_obs``, ``clip_reward``
 algo_kwargs        keyword arguments of ``PPO``/``SAC`` (``learning_rate``, ``n_steps``, ``gamma``...)
 policy_kwargs      ``net_arch`` (list of ints, or dict ``pi``/``vf``/``qf``), ``activation_fn``
                    (``"tanh"``/``"relu"``), ``log_std_init``
+zero_action_init   true: the policy's last action layer starts at zero
+                   (:class:`accd_gym.learning.callbacks.ZeroActionInit`; PPO: ``action_net``, SAC: the
+                   actor's mean, and its log-std layer constant at ``policy_kwargs.log_std_init``
+                   when given), so that the deterministic policy starts with zero actions: with
+                   ``env.residual`` it starts as the base controller, bit for bit (default false)
 checkpoint_every   environment steps between checkpoints (model + VecNormalize statistics)
 device             PyTorch device (default ``"cpu"``: the networks are small)
 ================== ================================================================================
@@ -78,6 +84,7 @@ DEFAULTS: dict[str, Any] = {
     "policy_kwargs": {},
     "checkpoint_every": 100_000,
     "device": "cpu",
+    "zero_action_init": False,
 }
 _ALGOS = ("ppo", "sac")
 _ACTIVATIONS = ("tanh", "relu", "elu")
@@ -114,6 +121,9 @@ def validate_config(raw: dict[str, Any]) -> dict[str, Any]:
     for key in ("env", "vec_normalize", "algo_kwargs", "policy_kwargs"):
         if not isinstance(cfg[key], dict):
             raise ConfigError(f"invalid config: `{key}` = {cfg[key]!r} is outside the allowed range: a JSON object")
+    if not isinstance(cfg["zero_action_init"], bool):
+        raise ConfigError(f"invalid config: `zero_action_init` = {cfg['zero_action_init']!r} is outside the allowed "
+                          "range: true or false")
     if not isinstance(cfg["device"], str):
         raise ConfigError(f"invalid config: `device` = {cfg['device']!r} is outside the allowed range: a device name such as 'cpu'")
     _check_algo_kwargs(cfg["algo"], cfg["algo_kwargs"])
@@ -155,11 +165,14 @@ def _check_net_arch(policy_kwargs: dict[str, Any]) -> None:
 
 
 def check_training_env(env: dict[str, Any]) -> None:
-    """ConfigError for a bad env override or one that fixes a held-out wake seed (training may
-    only draw training wake seeds); shared by every trainer."""
+    """ConfigError for a bad env override (or env option, :mod:`accd_gym.envs.agent_io`) or one that
+    fixes a held-out wake seed (training may only draw training wake seeds); shared by every
+    trainer."""
+    from accd_gym.envs.agent_io import split_agent_options
     from accd_gym.envs.config import env_config
 
-    full = env_config(env)  # raises ConfigError naming the bad env field
+    _, physics = split_agent_options(env)  # raises ConfigError naming a bad residual/history option
+    full = env_config(physics)  # raises ConfigError naming the bad env field
     from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS
 
     fixed = ([full["wake_seed"]] if full["wake_seed"] is not None else []) + list(full["wake_seeds"] or [])
@@ -408,12 +421,13 @@ def model_algo(data: bytes, name: str) -> Optional[str]:
     return None
 
 
-def load_model(data: bytes, name: str, algo: Optional[str], **kwargs: Any) -> Any:
+def load_model(data: bytes, name: str, algo: Optional[str], obs_dim: Optional[int] = None, **kwargs: Any) -> Any:
     """The PPO or SAC model in the bytes of a saved model zip (``name``: its file, for the
     messages), loaded with ``kwargs`` (``env``, ``device``, ...). ``algo``: what the run's
     run.json says (None: what the zip holds). ConfigError naming the file when it is damaged,
     holds another algorithm than ``algo``, does not load, or is a model of another environment
-    (observation or action shape other than accd-gym's)."""
+    (observation or action shape other than accd-gym's: ``obs_dim`` observations, the plain env's
+    by default; more with the env options ``residual`` and ``history``)."""
     from stable_baselines3 import PPO, SAC
 
     from accd_gym.envs.task import ACT_DIM, OBS_DIM
@@ -434,16 +448,19 @@ def load_model(data: bytes, name: str, algo: Optional[str], **kwargs: Any) -> An
                           f"({_reason(e)})") from None
     obs = getattr(model.observation_space, "shape", None)
     act = getattr(model.action_space, "shape", None)
-    if obs != (OBS_DIM,) or act != (ACT_DIM,):
+    obs_dim = OBS_DIM if obs_dim is None else obs_dim
+    if obs != (obs_dim,) or act != (ACT_DIM,):
         raise ConfigError(f"invalid config: {name!r} is a model of another environment: observations of shape "
-                          f"{obs}, actions {act}; accd-gym's are ({OBS_DIM},) and ({ACT_DIM},)")
+                          f"{obs}, actions {act}; this env's are ({obs_dim},) and ({ACT_DIM},) (a model trained with the "
+                          "env options residual/history is evaluated from its run folder, whose run.json holds them)")
     return model
 
 
-def load_statistics(data: bytes, name: str, venv: Any = None) -> Any:
+def load_statistics(data: bytes, name: str, venv: Any = None, obs_dim: Optional[int] = None) -> Any:
     """The ``VecNormalize`` statistics pickled in ``data`` (``name``: its file, for the messages),
     attached to ``venv`` when given. ConfigError naming the file when it is empty, truncated,
-    holds something else, or holds statistics of another environment."""
+    holds something else, or holds statistics of another environment (``obs_dim`` observations,
+    the plain env's by default)."""
     import pickle
 
     from stable_baselines3.common.vec_env import VecNormalize
@@ -461,9 +478,10 @@ def load_statistics(data: bytes, name: str, venv: Any = None) -> Any:
         raise ConfigError(f"invalid config: {name!r} holds a {type(stats).__name__}, not VecNormalize statistics")
     shape = getattr(getattr(stats, "observation_space", None), "shape", None)
     mean = getattr(getattr(stats, "obs_rms", None), "mean", None)
-    if shape != (OBS_DIM,) or (stats.norm_obs and getattr(mean, "shape", None) != (OBS_DIM,)):
+    obs_dim = OBS_DIM if obs_dim is None else obs_dim
+    if shape != (obs_dim,) or (stats.norm_obs and getattr(mean, "shape", None) != (obs_dim,)):
         raise ConfigError(f"invalid config: {name!r} holds VecNormalize statistics of another environment "
-                          f"(observations of shape {shape}; accd-gym's are ({OBS_DIM},))")
+                          f"(observations of shape {shape}; this env's are ({obs_dim},))")
     if venv is not None:
         try:
             stats.set_venv(venv)
@@ -575,6 +593,7 @@ def train(
         cfg["total_timesteps"] = int(timesteps)
     out = files.writable_folder(out)
     torch.set_num_threads(cfg["torch_threads"])
+    _one_blas_thread()
     env = make_training_env(cfg)
     cls = {"ppo": PPO, "sac": SAC}[cfg["algo"]]
     try:
@@ -597,6 +616,26 @@ def train(
     meta = {"algo": cfg["algo"], "config": cfg, "status": "training", "total_timesteps": cfg["total_timesteps"]}
     _write_meta(out, meta)
     return _learn(model, env, cfg, out, meta, progress=progress, fresh=True)
+
+
+def _one_blas_thread() -> None:
+    """numpy's BLAS on one thread for the training process (threadpoolctl, when installed): its
+    only users are small products (the LQR base controller of residual control, VecNormalize),
+    and its idle threads spin beside the env's stepping threads."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        return
+    threadpool_limits(1, user_api="blas")
+
+
+def _zero_action_init(cfg: dict[str, Any]):
+    """The callback zeroing the last action layer at the start (``zero_action_init``), or None."""
+    if not cfg["zero_action_init"]:
+        return None
+    from accd_gym.learning.callbacks import ZeroActionInit
+
+    return ZeroActionInit()
 
 
 def resume(run: str | Path, *, progress: bool = True, report: Optional[Callable[[str], None]] = None) -> dict[str, Any]:
@@ -628,6 +667,7 @@ def resume(run: str | Path, *, progress: bool = True, report: Optional[Callable[
             warnings.warn(line, stacklevel=3)
 
     torch.set_num_threads(cfg["torch_threads"])
+    _one_blas_thread()
     skipped: list[str] = []
     loaded = None
     for ckpt in found:
@@ -662,10 +702,12 @@ def _load_checkpoint(ckpt: dict[str, Any], cfg: dict[str, Any], out: Path) -> tu
         raise ConfigError(f"invalid config: checkpoint {str(ckpt['model'])!r} has no VecNormalize statistics beside it")
     base = AccdVecEnv(num_envs=cfg["num_envs"], seed=cfg["seed"], num_threads=cfg["num_threads"], **cfg["env"])
     try:
+        obs_dim = base.observation_space.shape[0]
         env = load_statistics(ckpt["vecnormalize"].read_bytes(), str(ckpt["vecnormalize"]),
-                              VecMonitor(base, info_keywords=("captured",)))
+                              VecMonitor(base, info_keywords=("captured",)), obs_dim=obs_dim)
         env.training = True
-        model = load_model(ckpt["model"].read_bytes(), str(ckpt["model"]), cfg["algo"], env=env, device=cfg["device"],
+        model = load_model(ckpt["model"].read_bytes(), str(ckpt["model"]), cfg["algo"], obs_dim, env=env,
+                           device=cfg["device"],
                            tensorboard_log=str(out / "tb"))
         if ckpt["replay_buffer"] is not None and hasattr(model, "load_replay_buffer"):
             try:
@@ -697,6 +739,9 @@ def _learn(model: Any, env: Any, cfg: dict[str, Any], out: Path, meta: dict[str,
     start_steps = 0 if fresh else int(model.num_timesteps)
     stop = _StopRequest()
     callbacks = [_checkpoint_callback(cfg, out), _capture_callback(), stop.callback()]
+    init = _zero_action_init(cfg) if fresh else None
+    if init is not None:
+        callbacks.insert(0, init)
     split = _thread_split(cfg["torch_threads"], cfg["update_threads"])  # PPO only: validate_config
     if split is not None:
         callbacks.append(split)

@@ -1,0 +1,200 @@
+"""Residual control: the flap command sent is a base controller's plus the agent's bounded correction.
+
+An env option of every env class (``residual={"base": "lqr", "scale": 0.3}``; see
+:mod:`accd_gym.envs.agent_io`, which applies it together with the observation history)::
+
+    u_sent = clip(u_base(obs history) + scale * clip(a, -1, 1), -1, 1)
+
+``a`` is the agent's action (the env's action space is unchanged, [-1, 1]^4), ``u_base`` the
+command of the base controller (:data:`BASES`: ``"lqr"``, :class:`accd_gym.lqr.LqrPolicy`
+designed for the env's configuration, or ``"guidance"``, :class:`accd_gym.baselines.GuidancePolicy`
+with its tuned gains) computed from the observations the agent gets (with sensors, the sensed
+ones: the base controllers read nothing else). The base controller's state (the LQR's Kalman
+filter, the guidance's integrators) starts afresh with every episode of its env, automatic
+resets included, is told the command actually sent (the LQR's filter predicts with it), and is
+part of the env's pickles and ``get_state()``. A zero action reproduces the base controller's
+episodes bit for bit. With ``observe_base`` (default) the base command is appended to the
+observation (the agent sees what it corrects; the LQR's command carries its filter's estimate).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from accd_gym.errors import ConfigError
+
+#: Base controllers by name: factories taking the env's full configuration (a dict).
+BASES: dict[str, Callable[[Mapping[str, Any]], Any]] = {}
+
+
+def _lqr(config: Mapping[str, Any]) -> Any:
+    from accd_gym.control.lqr import LqrPolicy
+
+    return LqrPolicy.for_config(dict(config))
+
+
+def _guidance(config: Mapping[str, Any]) -> Any:
+    from accd_gym.control.baselines import GuidancePolicy
+
+    return GuidancePolicy()
+
+
+BASES.update(lqr=_lqr, guidance=_guidance)
+
+#: The allowed range of ``residual.scale`` (flap-limit units): (0, SCALE_MAX]; 2 lets a
+#: correction reach any command from any base command.
+SCALE_MAX = 2.0
+
+
+@dataclass(frozen=True)
+class ResidualOptions:
+    """The ``residual`` env option, validated: ``base`` (a name of :data:`BASES`), ``scale``
+    (the bound of the correction, flap-limit units, in (0, 2]) and ``observe_base`` (whether the
+    base command is appended to the observation)."""
+
+    base: str = "lqr"
+    scale: float = 0.3
+    observe_base: bool = True
+
+    @classmethod
+    def parse(cls, value: Any) -> "ResidualOptions | None":
+        """The options from the env argument ``residual``: None or False (off), True (the
+        defaults), a base name, or a dict of the fields; ConfigError naming the field, the value
+        and the allowed range otherwise."""
+        if value is None or value is False:
+            return None
+        if value is True:
+            return cls()
+        if isinstance(value, str):
+            value = {"base": value}
+        if not isinstance(value, Mapping):
+            raise ConfigError(f"invalid config: `residual` = {value!r} is outside the allowed range: None, a base name "
+                              f"({', '.join(map(repr, BASES))}) or a dict with keys 'base', 'scale', 'observe_base'")
+        unknown = set(value) - {"base", "scale", "observe_base"}
+        if unknown:
+            raise ConfigError(f"invalid config: `residual` key(s) {sorted(unknown)} outside the allowed set "
+                              "['base', 'observe_base', 'scale']")
+        base = value.get("base", cls.base)
+        if base not in BASES:
+            raise ConfigError(f"invalid config: `residual.base` = {base!r} is outside the allowed range: one of "
+                              f"{', '.join(map(repr, BASES))}")
+        scale = value.get("scale", cls.scale)
+        if (isinstance(scale, bool) or not isinstance(scale, (int, float, np.integer, np.floating))
+                or not math.isfinite(float(scale)) or not 0.0 < float(scale) <= SCALE_MAX):
+            raise ConfigError(f"invalid config: `residual.scale` = {scale!r} is outside the allowed range (0, {SCALE_MAX:g}] "
+                              "(flap-limit units)")
+        observe = value.get("observe_base", cls.observe_base)
+        if not isinstance(observe, (bool, np.bool_)):
+            raise ConfigError(f"invalid config: `residual.observe_base` = {observe!r} is outside the allowed range: "
+                              "true or false")
+        return cls(base=str(base), scale=float(scale), observe_base=bool(observe))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The options as the env argument (JSON values)."""
+        return {"base": self.base, "scale": self.scale, "observe_base": self.observe_base}
+
+
+class _OneBlasThread:
+    """The context of :func:`one_blas_thread`: numpy's BLAS set to one thread inside, its thread
+    count restored on exit (through threadpoolctl's controller of it; nothing without one)."""
+
+    def __init__(self) -> None:
+        self._libs: list[Any] = []
+        try:
+            from threadpoolctl import ThreadpoolController
+        except ImportError:
+            return
+        self._libs = [c for c in ThreadpoolController().lib_controllers
+                      if c.user_api == "blas" and "numpy" in str(getattr(c, "filepath", ""))]
+        self._saved: list[int] = []
+
+    def __enter__(self) -> "_OneBlasThread":
+        self._saved = [c.get_num_threads() for c in self._libs]
+        for c, n in zip(self._libs, self._saved):
+            if n != 1:
+                c.set_num_threads(1)
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        for c, n in zip(self._libs, self._saved):
+            if n != 1:
+                c.set_num_threads(n)
+
+
+_BLAS: "_OneBlasThread | None" = None
+
+
+def one_blas_thread() -> Any:
+    """A context in which numpy's BLAS runs on the calling thread alone (threadpoolctl; a no-op
+    without it, or when BLAS has one thread already, as in ``accd-gym train``). The base
+    controller's small matrix products gain nothing from BLAS threads, whose spinning workers
+    would take the cores from the env's stepping threads (an LQR step of 64 envs: about 1 ms on
+    one thread, 10-25 ms with OpenBLAS's threads beside the physics on a busy machine). Per-row
+    results do not depend on it (OpenBLAS splits rows and columns, not the sums)."""
+    global _BLAS
+    if _BLAS is None:
+        _BLAS = _OneBlasThread()
+    return _BLAS
+
+
+class BaseController:
+    """A base controller of a batch of ``num_envs`` envs: the policy of :data:`BASES` with the
+    row bookkeeping residual control needs (restart rows, partial starts, state snapshots)."""
+
+    def __init__(self, options: ResidualOptions, config: Mapping[str, Any]) -> None:
+        self.options = options
+        self.policy = BASES[options.base](config)
+
+    def restart(self, rows: "np.ndarray | None") -> None:
+        """Rows (a bool mask; None: all) whose next observation starts an episode."""
+        self.policy.reset(rows)
+
+    def command(self, obs: np.ndarray) -> np.ndarray:
+        """The base commands (N, 4) float32 for the batch's observations; advances every row."""
+        with one_blas_thread():
+            return self.policy.predict(obs)
+
+    def command_rows(self, obs: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """The base commands of the batch with only the rows ``rows`` selects advanced (the
+        others keep their state; their commands in the result are meaningless). Computed on the
+        whole batch, as :meth:`command` does, so that a row's command has the bits it would have
+        there."""
+        before = self.policy.get_state()
+        u = self.command(obs)
+        if before and not rows.all():
+            after = self.policy.get_state()
+            merged = {}
+            for k, new in after.items():
+                old = before[k]
+                sel = rows.reshape((-1,) + (1,) * (new.ndim - 1))
+                merged[k] = np.where(sel, new, old) if old.shape == new.shape else new
+            self.policy.set_state(merged)
+        return u
+
+    def peek(self, obs: np.ndarray) -> np.ndarray:
+        """The base commands for ``obs`` without advancing any row (e.g. for an ended episode's
+        last observation)."""
+        before = self.policy.get_state()
+        u = self.command(obs)
+        self.policy.set_state(before)
+        return u
+
+    def sent(self, offset: np.ndarray) -> None:
+        """The commands sent differ from the last ones by ``offset`` (N, 4); nothing when zero."""
+        if hasattr(self.policy, "sent") and np.count_nonzero(offset):
+            self.policy.sent(offset)
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        """The controller's per-row state arrays (copies)."""
+        return self.policy.get_state()
+
+    def set_state(self, state: Mapping[str, np.ndarray]) -> None:
+        """Restores :meth:`get_state`'s arrays."""
+        self.policy.set_state(dict(state))
+
+
+__all__ = ["BASES", "SCALE_MAX", "BaseController", "ResidualOptions", "one_blas_thread"]

@@ -1,0 +1,54 @@
+"""stable-baselines3 callbacks of the training recipes (imports stable-baselines3 and torch).
+
+:class:`ZeroActionInit` starts a policy at zero actions: with residual control
+(:mod:`accd_gym.envs.residual`) the agent then starts as its base controller, bit for bit, and
+learns a correction from there. ``accd-gym train`` adds it for ``"zero_action_init": true``;
+rl-zoo3 takes it as ``callback: accd_gym.learning.callbacks.ZeroActionInit`` (the residual recipes of
+:mod:`accd_gym.zoo` do).
+"""
+
+from __future__ import annotations
+
+from typing import Optional
+
+import torch
+from stable_baselines3.common.callbacks import BaseCallback
+
+
+def zero_action_init(model, log_std: Optional[float] = None) -> None:
+    """Zeroes the last layer of ``model``'s action mean (PPO, A2C: ``policy.action_net``; SAC,
+    TQC: ``actor.mu``), so that its deterministic action is exactly zero for every observation.
+    For SAC/TQC without gSDE the log-std layer is made constant at ``log_std`` (weights zero,
+    bias ``log_std``) when given (PPO's initial std is ``policy_kwargs.log_std_init``).
+    TypeError for a model with neither layer."""
+    policy = model.policy
+    with torch.no_grad():
+        if hasattr(policy, "action_net"):
+            layer = policy.action_net
+        elif hasattr(policy, "actor") and hasattr(policy.actor, "mu"):
+            layer = policy.actor.mu
+            std = getattr(policy.actor, "log_std", None)
+            if log_std is not None and isinstance(std, torch.nn.Linear):
+                std.weight.zero_()
+                std.bias.fill_(float(log_std))
+        else:
+            raise TypeError(f"zero_action_init: {type(policy).__name__} has no action_net or actor.mu")
+        if isinstance(layer, torch.nn.Sequential):  # SAC's mu with gSDE: Linear (+ Hardtanh)
+            layer = layer[0]
+        layer.weight.zero_()
+        layer.bias.zero_()
+
+
+class ZeroActionInit(BaseCallback):
+    """At the start of a fresh training (no steps yet), :func:`zero_action_init` on the model,
+    with ``log_std`` from the model's ``policy_kwargs.log_std_init`` (SAC/TQC)."""
+
+    def _on_training_start(self) -> None:
+        if self.model.num_timesteps == 0:
+            zero_action_init(self.model, self.model.policy_kwargs.get("log_std_init"))
+
+    def _on_step(self) -> bool:
+        return True
+
+
+__all__ = ["ZeroActionInit", "zero_action_init"]
