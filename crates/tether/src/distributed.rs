@@ -46,6 +46,7 @@
 use nalgebra::{Matrix3, Vector3};
 
 use crate::chain::ChainState;
+use crate::dynamics::AxialSolve;
 use crate::error::{Result, TetherError};
 
 type V3 = Vector3<f64>;
@@ -137,7 +138,9 @@ fn singular(time: f64, segment: usize) -> TetherError {
 }
 
 /// The O(n) recursion (module documentation): q'' into `qdd`, the tensions (n + 1 values) into
-/// `tensions` if given.
+/// `tensions` if given. With `axial` (a stage of a linearly implicit step,
+/// [`crate::dynamics::AxialStage`]) every element's force is evaluated at the stage's arguments
+/// and its stretch entry of `H` gains the added mass.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn solve(
     time: f64,
@@ -148,6 +151,7 @@ pub(crate) fn solve(
     work: &mut [Articulated],
     qdd: &mut [f64],
     tensions: Option<&mut [f64]>,
+    axial: Option<AxialSolve<'_>>,
 ) -> Result<()> {
     let n = chain.segments();
     let mut a = M3::identity() * c.tip_mass;
@@ -156,14 +160,21 @@ pub(crate) fn solve(
         let sg = segment(c, chain, q, qd, k);
         let (force, extra) = (chain.force.get(k), chain.extra.get(k));
         let ajt = a * sg.jt;
-        let h = sg.jc.transpose() * sg.jc * c.m
+        let mut h = sg.jc.transpose() * sg.jc * c.m
             + sg.jt.transpose() * ajt
             + sg.jr.transpose() * sg.jr * c.rod_inertia;
         let cm = sg.jc * c.m + ajt;
         let mut g = sg.jc.transpose() * (force - sg.c0 * c.m)
             + sg.jt.transpose() * (b - a * sg.t0)
             + sg.jr.transpose() * extra;
-        g.x -= c.k * sg.s + c.c * sg.sd;
+        match &axial {
+            None => g.x -= c.k * sg.s + c.c * sg.sd,
+            Some(a) => {
+                let i = stretch_index(n, k);
+                g.x -= c.k * a.stretch[i] + c.c * a.stretch_rate[i];
+                h[(0, 0)] += a.added_mass;
+            }
+        }
         let chol = h.cholesky().ok_or_else(|| singular(time, k + 1))?;
         let y = chol.solve(&g);
         let gm = chol.solve(&cm.transpose());
