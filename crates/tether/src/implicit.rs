@@ -324,12 +324,12 @@ impl Rosenbrock {
             q[r] = yq;
             qd[r] = yv;
         }
-        for r in 0..x.len() {
-            let mut y = x[r];
+        for (r, x) in x.iter_mut().enumerate() {
+            let mut y = *x;
             for (i, b) in WEIGHTS.iter().enumerate() {
                 y += b * self.kx[i][r];
             }
-            x[r] = y;
+            *x = y;
         }
         let end = t + h;
         for (what, v) in [("q", &*q), ("qd", &*qd), ("x", &*x)] {
@@ -337,7 +337,7 @@ impl Rosenbrock {
                 .iter()
                 .copied()
                 .enumerate()
-                .find(|(_, v)| !(v.abs() <= STATE_BOUND))
+                .find(|(_, v)| v.is_nan() || v.abs() > STATE_BOUND)
             {
                 return Err(TetherError::Diverged {
                     time: end,
