@@ -160,7 +160,7 @@ impl Sym {
 
     /// `U S U^T` for the orthonormal frame `U = [u0, u1, u2]` (columns).
     #[inline(always)]
-    fn to_global(&self, u0: &V3, u1: &V3, u2: &V3) -> Sym {
+    fn in_frame(&self, u0: &V3, u1: &V3, u2: &V3) -> Sym {
         // Columns of S U^T's transpose: r_i = sum_j S_ij u_j, then U S U^T = sum_i u_i r_i^T.
         let r0 = u0 * self.xx + u1 * self.xy + u2 * self.xz;
         let r1 = u0 * self.xy + u1 * self.yy + u2 * self.yz;
@@ -314,7 +314,7 @@ pub(crate) fn solve(
         let y = x_inv.mul(&g_w);
         let r = V3::new(g_w.x - added * y.x, g_w.y - eps * y.y, g_w.z - eps * y.z);
         b = f1 + f2 - (u0 * r.x + u1 * r.y + u2 * r.z);
-        a = local.to_global(&u0, &u1, &u2);
+        a = local.in_frame(&u0, &u1, &u2);
         let art = &mut work[k];
         art.x_inv = x_inv;
         art.e_d = added;
