@@ -95,6 +95,51 @@ fn stage_fraction(i: usize) -> f64 {
     ALPHA[i].iter().sum()
 }
 
+/// Where a stage's point and the springs' arguments go.
+struct StagePoint<'a> {
+    q: &'a mut [f64],
+    qd: &'a mut [f64],
+    uv: &'a mut [f64],
+    stretch: &'a mut [f64],
+    stretch_rate: &'a mut [f64],
+}
+
+/// Stage `i`'s point `Y_i = y_0 + sum_{j<i} alpha_ij k_j`, `u = sum_{j<i} gamma_ij k_j`, and the
+/// springs' arguments `s~ = q_i + u_q + gamma h (v_i + u_v)`, `s~' = v_i + u_v` (for every
+/// coordinate; the model reads the stretches), from the `I = i` earlier stages.
+#[inline(always)]
+fn stage_point<const I: usize>(
+    i: usize,
+    q: &[f64],
+    qd: &[f64],
+    kq: [&[f64]; I],
+    kv: [&[f64]; I],
+    out: StagePoint<'_>,
+    gh: f64,
+) {
+    let n = q.len();
+    let (a, g) = (&ALPHA[i], &GAMMAS[i]);
+    let qd = &qd[..n];
+    let kq: [&[f64]; I] = kq.map(|k| &k[..n]);
+    let kv: [&[f64]; I] = kv.map(|k| &k[..n]);
+    let (sq, sqd, uv) = (&mut out.q[..n], &mut out.qd[..n], &mut out.uv[..n]);
+    let (stretch, rate) = (&mut out.stretch[..n], &mut out.stretch_rate[..n]);
+    for r in 0..n {
+        let (mut yq, mut yv, mut uq, mut u) = (q[r], qd[r], 0.0, 0.0);
+        for j in 0..I {
+            yq += a[j] * kq[j][r];
+            yv += a[j] * kv[j][r];
+            uq += g[j] * kq[j][r];
+            u += g[j] * kv[j][r];
+        }
+        sq[r] = yq;
+        sqd[r] = yv;
+        uv[r] = u;
+        rate[r] = yv + u;
+        stretch[r] = yq + uq + gh * (yv + u);
+    }
+}
+
 /// A [`System`] whose second-order coordinates include axial spring-dampers the Rosenbrock
 /// step treats implicitly: it solves a stage with them ([`AxialStage`]).
 pub trait AxialSystem: System {
@@ -267,21 +312,28 @@ impl Rosenbrock {
                     uv,
                     ..
                 } = self;
-                let (a, g) = (&ALPHA[i], &GAMMAS[i]);
-                for r in 0..dim {
-                    let (mut yq, mut yv, mut uq, mut u) = (q[r], qd[r], 0.0, 0.0);
-                    for j in 0..i {
-                        yq += a[j] * kq[j][r];
-                        yv += a[j] * kv[j][r];
-                        uq += g[j] * kq[j][r];
-                        u += g[j] * kv[j][r];
-                    }
-                    sq[r] = yq;
-                    sqd[r] = yv;
-                    uv[r] = u;
-                    stretch_rate[r] = yv + u;
-                    stretch[r] = yq + uq + gh * (yv + u);
+                let out = StagePoint {
+                    q: sq,
+                    qd: sqd,
+                    uv,
+                    stretch,
+                    stretch_rate,
+                };
+                match i {
+                    0 => stage_point::<0>(i, q, qd, [], [], out, gh),
+                    1 => stage_point::<1>(i, q, qd, [&kq[0]], [&kv[0]], out, gh),
+                    2 => stage_point::<2>(i, q, qd, [&kq[0], &kq[1]], [&kv[0], &kv[1]], out, gh),
+                    _ => stage_point::<3>(
+                        i,
+                        q,
+                        qd,
+                        [&kq[0], &kq[1], &kq[2]],
+                        [&kv[0], &kv[1], &kv[2]],
+                        out,
+                        gh,
+                    ),
                 }
+                let (a, _) = (&ALPHA[i], &GAMMAS[i]);
                 for r in 0..sx.len() {
                     let mut y = x[r];
                     for j in 0..i {
@@ -306,7 +358,8 @@ impl Rosenbrock {
                 &mut self.kv[i],
                 &mut self.kx[i],
             )?;
-            let (kq, kv, uv, sqd) = (&mut self.kq[i], &mut self.kv[i], &self.uv, &self.qd);
+            let (kq, kv) = (&mut self.kq[i][..dim], &mut self.kv[i][..dim]);
+            let (uv, sqd) = (&self.uv[..dim], &self.qd[..dim]);
             for r in 0..dim {
                 kv[r] *= h;
                 kq[r] = h * (sqd[r] + uv[r]) + gh * kv[r];
@@ -315,11 +368,14 @@ impl Rosenbrock {
                 *v *= h;
             }
         }
+        let (q, qd) = (&mut q[..dim], &mut qd[..dim]);
+        let kq: [&[f64]; 4] = std::array::from_fn(|i| &self.kq[i][..dim]);
+        let kv: [&[f64]; 4] = std::array::from_fn(|i| &self.kv[i][..dim]);
         for r in 0..dim {
             let (mut yq, mut yv) = (q[r], qd[r]);
             for (i, b) in WEIGHTS.iter().enumerate() {
-                yq += b * self.kq[i][r];
-                yv += b * self.kv[i][r];
+                yq += b * kq[i][r];
+                yv += b * kv[i][r];
             }
             q[r] = yq;
             qd[r] = yv;
