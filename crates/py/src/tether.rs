@@ -243,6 +243,14 @@ impl PyTether {
         self.inner.config().elasticity.name()
     }
 
+    /// How a step integrates: ``"explicit"`` (classical RK4, substepped for the fastest mode,
+    /// the default) or ``"implicit_axial"`` (the Rosenbrock-W method ROS34PW2 with the axial
+    /// spring-dampers implicit, so that stiff axial elements step at the default 0.01 s).
+    #[getter]
+    fn scheme(&self) -> &'static str {
+        self.inner.config().scheme.name()
+    }
+
     /// Number of generalized coordinates: 2n + 1 (attachment elasticity) or 3n (distributed).
     #[getter]
     fn dofs(&self) -> usize {

@@ -17,7 +17,8 @@
 use std::sync::Arc;
 
 use accd_tether::{
-    Atmosphere, Lockstep, LockstepWork, Rk4, Surroundings, System, TetherModel, TetherState,
+    Atmosphere, AxialStage, AxialSystem, Lockstep, LockstepWork, Rk4, Rosenbrock, Surroundings,
+    System, TetherModel, TetherState,
 };
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
@@ -187,6 +188,33 @@ impl System for Coupled<'_> {
     }
 }
 
+/// The stage solve of the linearly implicit step ([`accd_tether::Scheme::ImplicitAxial`]): the
+/// tether's with its axial spring-dampers implicit, the ACCD's rates explicit, as in
+/// [`System::derivatives`].
+impl AxialSystem for Coupled<'_> {
+    fn derivatives_axial(
+        &mut self,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        x: &[f64],
+        axial: &AxialStage<'_>,
+        qdd: &mut [f64],
+        xd: &mut [f64],
+    ) -> accd_tether::Result<()> {
+        let (quat, omega) = states_to_parts(x);
+        self.stage.accd = AccdState {
+            attitude: UnitQuaternion::new_normalize(quat),
+            omega,
+        };
+        let loads = self
+            .model
+            .accelerations_axial(time, q, qd, axial, &self.stage, qdd)?;
+        accd_rates(&self.inertia, (quat, omega), &loads, xd);
+        Ok(())
+    }
+}
+
 impl Lockstep for Coupled<'_> {
     fn derivatives_four(
         systems: &mut [&mut Self; 4],
@@ -299,6 +327,8 @@ pub struct CaptureSim {
     boom_nominal: V3,
     disturbance: Box<dyn AirDisturbance>,
     rk4: Rk4,
+    /// The Rosenbrock-W buffers, for [`accd_tether::Scheme::ImplicitAxial`] only.
+    rosenbrock: Option<Rosenbrock>,
     /// Accelerations computed along with the tensions.
     qdd: Vec<f64>,
     derived: Derived,
@@ -328,6 +358,7 @@ impl Clone for CaptureSim {
             boom_nominal: self.boom_nominal,
             disturbance: self.disturbance.clone_box(),
             rk4: self.rk4.clone(),
+            rosenbrock: self.rosenbrock.clone(),
             qdd: self.qdd.clone(),
             derived: self.derived.clone(),
             held: self.held.clone(),
@@ -391,6 +422,8 @@ impl CaptureSim {
             actuators: Actuators::default(),
             disturbance,
             rk4,
+            rosenbrock: (tether_config.scheme == accd_tether::Scheme::ImplicitAxial)
+                .then(|| Rosenbrock::new(dofs, ACCD_STATES)),
             qdd: vec![0.0; dofs],
             derived: Derived {
                 centres: vec![V3::zeros(); tether_config.segments],
@@ -690,8 +723,11 @@ impl CaptureSim {
             std::array::from_fn(|j| Some(sims[j].begin_step(commands[j])));
         // The air of every step (what `parts` may fail on) before any is lent out: a step that
         // cannot start, or a group with one, runs one by one.
-        let together =
-            (0..4).all(|j| matches!(starts[j], Some(Ok(_))) && sims[j].air_at_step().is_ok());
+        let together = (0..4).all(|j| {
+            matches!(starts[j], Some(Ok(_)))
+                && sims[j].air_at_step().is_ok()
+                && sims[j].rosenbrock.is_none()
+        });
         if !together {
             return std::array::from_fn(|j| {
                 let start = starts[j].take().unwrap()?;
@@ -789,6 +825,29 @@ impl CaptureSim {
         let mut q = std::mem::take(&mut self.tether.q);
         let mut qd = std::mem::take(&mut self.tether.qd);
         let (inertia, choose) = (self.inertia, self.substep_rule(start.time));
+        if let Some(mut rosenbrock) = self.rosenbrock.take() {
+            // The substeps from the state alone (the stage matrix depends on the step length).
+            let result = self.parts(start.hold).and_then(|(stage, model, _)| {
+                let substeps = choose.substeps(model, &q, &qd)?;
+                let mut system = Coupled {
+                    model,
+                    stage,
+                    inertia,
+                };
+                rosenbrock.advance(
+                    &mut system,
+                    start.time,
+                    start.dt,
+                    substeps,
+                    &mut q,
+                    &mut qd,
+                    &mut x,
+                )?;
+                Ok(())
+            });
+            self.rosenbrock = Some(rosenbrock);
+            return self.end_step(start, q, qd, &x, result);
+        }
         let result = self.parts(start.hold).and_then(|(stage, model, rk4)| {
             let mut system = Coupled {
                 model,
@@ -1023,7 +1082,8 @@ impl SubstepRule {
             return Err(accd_tether::TetherError::Diverged {
                 time: self.time,
                 reason: format!(
-                    "the tether's fastest mode needs {k} RK4 substeps per step (at most {})",
+                    "the tether's fastest mode needs {k} {} substeps per step (at most {})",
+                    model.config().scheme.integrator(),
                     accd_tether::config::MAX_SUBSTEPS
                 ),
             });

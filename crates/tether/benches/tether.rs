@@ -3,7 +3,9 @@
 //! n = 10, 30, 100, 300 and the dense O(n^3) reference at n = 10, 30, 100; and the distributed
 //! elasticity (`elasticity: "distributed"`) by both solvers at n = 30, 100, where `rk4_step` is one
 //! step of the largest stable length (its stiff axial modes allow about 1e-5 s at n = 30 with
-//! Table 3's damping; printed when the bench starts).
+//! Table 3's damping; printed when the bench starts); and `implicit_axial`: one step at the
+//! default 0.01 s of explicit RK4 (attachment) beside the implicit scheme (attachment and
+//! distributed) at n = 30, 100.
 //!
 //! Run: `cargo bench -p accd-tether --bench tether -- --warm-up-time 1 --measurement-time 3`
 //! (results and machine in BENCHMARKS.md at the repository root).
@@ -11,7 +13,9 @@
 use std::hint::black_box;
 
 use accd_tether::config::{StepLoad, RK4_STABILITY_LIMIT};
-use accd_tether::{reference, Elasticity, LockstepWork, Solver, Tether, TetherConfig, TetherModel};
+use accd_tether::{
+    reference, Elasticity, LockstepWork, Scheme, Solver, Tether, TetherConfig, TetherModel,
+};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 
 /// The towed reference case with `n` segments and the given solver, advanced 20 s so that the
@@ -197,5 +201,40 @@ fn bench(c: &mut Criterion) {
     dist.finish();
 }
 
-criterion_group!(benches, bench);
+/// The implicit scheme (`scheme: "implicit_axial"`) beside explicit RK4, Table 3's towed tether
+/// at the default 0.01 s (the towed state of [`towed`] after 20 s; the distributed one from it
+/// as in [`towed_distributed`], then 5 s of its own steps): one step of each, side by side.
+fn implicit_axial(c: &mut Criterion) {
+    let mut group = c.benchmark_group("implicit_axial");
+    for n in [30usize, 100] {
+        let (att, flow) = towed(n, Solver::Recursive);
+        let implicit = |cfg: &TetherConfig| TetherConfig {
+            scheme: Scheme::ImplicitAxial,
+            ..cfg.clone()
+        };
+        let mut explicit = att.clone();
+        let mut attachment = Tether::new(&implicit(att.config())).unwrap();
+        attachment.set_state(att.state().clone()).unwrap();
+        let (dist, _) = towed_distributed(n, Solver::Recursive);
+        let mut distributed = Tether::new(&TetherConfig {
+            time_step: att.config().time_step,
+            ..implicit(dist.config())
+        })
+        .unwrap();
+        distributed.set_state(dist.state().clone()).unwrap();
+        distributed.step_many(500, &flow).unwrap();
+        for (name, tether) in [
+            ("attachment_rk4_step", &mut explicit),
+            ("attachment_implicit_step", &mut attachment),
+            ("distributed_implicit_step", &mut distributed),
+        ] {
+            group.bench_with_input(BenchmarkId::new(name, n), &n, |b, _| {
+                b.iter(|| tether.step(black_box(&flow)).unwrap())
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench, implicit_axial);
 criterion_main!(benches);

@@ -73,10 +73,68 @@ accd_spec::config_struct! {
         #[serde(skip_serializing_if = "DragVelocity::is_relative")]
         pub drag_velocity: DragVelocity = DragVelocity::Relative, "", "",
             "which velocity the segments' drag is computed from: \"relative\" or \"free_stream\" (Eq. 9 read literally)";
+        /// `"explicit"`: classical RK4 for every mode, substepped for the fastest (the axial
+        /// element's included). `"implicit_axial"`: the linearly implicit Rosenbrock-W method
+        /// ROS34PW2 (order 3, L-stable, [`crate::implicit`]) with the axial spring-dampers in its
+        /// matrix, so that stiff axial elements (the distributed elasticity, or k up to 1e12 N/m)
+        /// run at the step the slow dynamics need; the other modes are explicit in it, with
+        /// their own stability limit ([`ROSENBROCK_STABILITY_LIMIT`]). Omitted from the JSON when
+        /// it is the default.
+        #[serde(skip_serializing_if = "Scheme::is_explicit")]
+        pub scheme: Scheme = Scheme::Explicit, "", "",
+            "time integration: \"explicit\" (RK4, the axial elements substepped explicitly) or \"implicit_axial\" (Rosenbrock-W ROS34PW2 with the axial spring-dampers implicit)";
     }
 }
 
-accd_spec::no_range!(Elasticity, DragVelocity);
+accd_spec::no_range!(Elasticity, DragVelocity, Scheme);
+
+/// How a step integrates the chain ([`TetherConfig::scheme`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Scheme {
+    /// Classical RK4 ([`crate::Rk4`]) for every mode, substepped for the fastest: the default.
+    #[default]
+    Explicit,
+    /// The Rosenbrock-W method ROS34PW2 ([`crate::Rosenbrock`]) with the axial spring-dampers
+    /// (the attachment element, or every element of the distributed elasticity) in its matrix.
+    ImplicitAxial,
+}
+
+impl Scheme {
+    /// Whether this is the default, [`Scheme::Explicit`].
+    pub fn is_explicit(&self) -> bool {
+        *self == Scheme::Explicit
+    }
+
+    /// The integrator's name: `"RK4"` or `"ROS34PW2"`.
+    pub fn integrator(&self) -> &'static str {
+        match self {
+            Scheme::Explicit => "RK4",
+            Scheme::ImplicitAxial => "ROS34PW2",
+        }
+    }
+
+    /// The name used in JSON.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Scheme::Explicit => "explicit",
+            Scheme::ImplicitAxial => "implicit_axial",
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for Scheme {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        let name = String::deserialize(d)?;
+        match name.as_str() {
+            "explicit" => Ok(Scheme::Explicit),
+            "implicit_axial" => Ok(Scheme::ImplicitAxial),
+            other => Err(serde::de::Error::custom(format!(
+                "invalid value of `scheme`: {other:?}; allowed: \"explicit\" or \"implicit_axial\""
+            ))),
+        }
+    }
+}
 
 /// Which velocity the segments' aerodynamic drag sees ([`TetherConfig::drag_velocity`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
@@ -174,6 +232,13 @@ impl<'de> Deserialize<'de> for Elasticity {
 /// linearised chain ([`TetherConfig::fastest_rate`]). Classical RK4 is stable up to 2.83 on the
 /// imaginary axis and 2.79 on the negative real axis; 2.5 leaves a margin for the estimate.
 pub const RK4_STABILITY_LIMIT: f64 = 2.5;
+
+/// The largest `|lambda| dt` a step of [`Scheme::ImplicitAxial`] may take over the modes it
+/// treats explicitly (everything but the axial spring-dampers). With its matrix acting as the
+/// identity on them, ROS34PW2 is an explicit four-stage method of order 3 there, stable up to
+/// 1.50 on the imaginary axis and 1.99 on the negative real axis; 1.3 leaves the margin
+/// [`RK4_STABILITY_LIMIT`] leaves RK4.
+pub const ROSENBROCK_STABILITY_LIMIT: f64 = 1.3;
 
 /// The most RK4 substeps one step of [`TetherConfig::time_step`] is split into; a configuration
 /// needing more is refused with the largest stable step in the message.
@@ -300,6 +365,7 @@ impl TetherConfig {
             time_step: 0.01,
             elasticity: Elasticity::Attachment,
             drag_velocity: DragVelocity::Relative,
+            scheme: Scheme::Explicit,
         }
     }
 
@@ -481,6 +547,11 @@ impl TetherConfig {
                     * load.airspeed.abs()
                     / mu,
         );
+        if self.scheme == Scheme::ImplicitAxial {
+            // The axial spring-dampers are in the Rosenbrock matrix (their modes damped, not
+            // resolved): only the other modes bound the step.
+            return zigzag + 2.0 * load.max_rate.abs();
+        }
         let m_a = load.axial_mass.max(self.segment_mass());
         let axial = mode(self.axial_stiffness / m_a, self.axial_damping() / m_a);
         let fastest = zigzag.max(axial);
@@ -499,15 +570,25 @@ impl TetherConfig {
         fastest + 2.0 * load.max_rate.abs()
     }
 
-    /// RK4 substeps per [`TetherConfig::time_step`] that keep `|lambda| dt / k` within
-    /// [`RK4_STABILITY_LIMIT`] under `load` (at least 1). Not capped: compare with
+    /// The largest `|lambda| dt` of the modes [`TetherConfig::fastest_rate`] counts that a step
+    /// of this configuration's [`TetherConfig::scheme`] may take: [`RK4_STABILITY_LIMIT`] or
+    /// [`ROSENBROCK_STABILITY_LIMIT`].
+    pub fn stability_limit(&self) -> f64 {
+        match self.scheme {
+            Scheme::Explicit => RK4_STABILITY_LIMIT,
+            Scheme::ImplicitAxial => ROSENBROCK_STABILITY_LIMIT,
+        }
+    }
+
+    /// Substeps per [`TetherConfig::time_step`] that keep `|lambda| dt / k` within the scheme's
+    /// [`TetherConfig::stability_limit`] under `load` (at least 1). Not capped: compare with
     /// [`MAX_SUBSTEPS`].
     pub fn substeps_for(&self, load: &StepLoad) -> usize {
         let r = self.fastest_rate(load) * self.time_step;
         if !r.is_finite() {
             return usize::MAX;
         }
-        ((r / RK4_STABILITY_LIMIT).ceil() as usize).max(1)
+        ((r / self.stability_limit()).ceil() as usize).max(1)
     }
 
     /// Checks that the step can be kept stable by substepping for a straight chain at rest
@@ -525,7 +606,13 @@ impl TetherConfig {
         if k <= MAX_SUBSTEPS {
             return Ok(());
         }
-        let stable = RK4_STABILITY_LIMIT / self.fastest_rate(&load);
+        let stable = self.stability_limit() / self.fastest_rate(&load);
+        let implicit = TetherConfig {
+            scheme: Scheme::ImplicitAxial,
+            ..self.clone()
+        };
+        let implicit_takes_it =
+            self.scheme == Scheme::Explicit && implicit.substeps_for(&load) <= MAX_SUBSTEPS;
         Err(TetherError::invalid_config(
             "time_step",
             self.time_step,
@@ -534,9 +621,9 @@ impl TetherConfig {
                  segments of {:.3} m, which with mass_per_length = {} kg/m, flexural_rigidity = {} \
                  N m^2, joint_damping_per_mass = {}, axial_stiffness = {} N/m, \
                  axial_damping_per_mass = {} and an estimated peak tension of {:.3e} N give a \
-                 fastest mode needing {k} RK4 substeps (at most {MAX_SUBSTEPS} are taken; the \
-                 largest stable step is {stable:.3e} s): use fewer segments, a longer tether or a \
-                 shorter time_step{}",
+                 fastest mode needing {k} {} substeps (at most {MAX_SUBSTEPS} are \
+                 taken; the largest stable step is {stable:.3e} s): use fewer segments, a longer \
+                 tether or a shorter time_step{}",
                 stable * MAX_SUBSTEPS as f64,
                 self.segments,
                 self.length,
@@ -547,9 +634,10 @@ impl TetherConfig {
                 self.axial_stiffness,
                 self.axial_damping_per_mass,
                 tension,
-                if self.is_distributed() {
-                    " (elasticity = distributed: its axial elements n k, n c_s are the stiff \
-                     modes; the attachment model steps far coarser)"
+                self.scheme.integrator(),
+                if implicit_takes_it {
+                    " (the axial elements are the stiff modes: scheme = \"implicit_axial\" \
+                     integrates them implicitly and takes this step)"
                 } else {
                     ""
                 }

@@ -36,6 +36,26 @@
 //! `z'' = H^-1 (g - C^T a_k)`, `a_{k+1} = a_k + t0 + J_t z''`; the tension at the inboard end of
 //! segment k is `P_k . e_k` (which the element's equation makes equal to `n k s_k + n c_s s_k'`).
 //!
+//! *As implemented*, the sweep works in the segment's orthonormal frame `U = [e, E_phi / cos psi,
+//! E_psi]`, where the Jacobians are diagonal scalings: `J_c = U D_c`, `J_t = U D_t`,
+//! `J_r = U D_r` with `D_c = diag(1, rho_c cos psi, rho_c)`, `D_t = diag(1, rho_t cos psi, rho_t)`,
+//! `D_r = diag(0, cos psi, 1)`. In the outer end's coordinates `w = D_t z` (`D_t` is invertible
+//! away from the chart's singularity), with `A^ = U^T A_{k+1} U`,
+//!
+//! ```text
+//! X = D_t^-1 H D_t^-1 = A^ + diag(m + d, delta, delta),   delta = (m rho_c^2 + I) / rho_t^2
+//! D_t^-1 C^T = (X - E) U^T,   E = diag(d, eps, eps),   eps = delta - m rho_c / rho_t
+//! A_k = U (diag(d, sigma, sigma) - E X^-1 E) U^T,      sigma = m + delta - 2 m rho_c / rho_t
+//! g_w = D_t^-1 g,  y = X^-1 g_w,  b_k = F - m c0 + b_{k+1} - A_{k+1} t0 - U (g_w - E y)
+//! forward: w'' = y - a^ + X^-1 E a^ (a^ = U^T a_k),  z'' = D_t^-1 w''
+//! ```
+//!
+//! (`d` is the mass a linearly implicit stage adds to the stretch's diagonal, zero in a
+//! right-hand side: then `A_k` has no inertia along `e`, the element being massless, and
+//! `sigma - eps^2 / delta = m I / (m rho_c^2 + I)` is the rod's `m / 4` at its end.) `X` is
+//! inverted by its cofactors; a 3x3 symmetric product each way between the frames is all the
+//! sweep's matrix algebra.
+//!
 //! **Dense, O(n^3)** ([`crate::Solver::Dense`], the oracle): the mass matrix from the same
 //! Jacobians, block `(k, k) = m J_c^T J_c + M_k J_t^T J_t + I J_r^T J_r` and block
 //! `(k, j < k) = (m J_c,k + M_k J_t,k)^T J_t,j` with `M_k = m (n - 1 - k) + M_t` the mass beyond
@@ -46,6 +66,7 @@
 use nalgebra::{Matrix3, Vector3};
 
 use crate::chain::ChainState;
+use crate::dynamics::AxialSolve;
 use crate::error::{Result, TetherError};
 
 type V3 = Vector3<f64>;
@@ -83,18 +104,96 @@ pub(crate) struct Constants {
     pub c: f64,
 }
 
-/// What the backward sweep leaves per segment.
+/// A symmetric 3x3 matrix by its six entries.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Sym {
+    xx: f64,
+    yy: f64,
+    zz: f64,
+    xy: f64,
+    xz: f64,
+    yz: f64,
+}
+
+impl Sym {
+    #[inline(always)]
+    fn diagonal(d: f64) -> Self {
+        Sym {
+            xx: d,
+            yy: d,
+            zz: d,
+            ..Sym::default()
+        }
+    }
+
+    #[inline(always)]
+    fn mul(&self, v: &V3) -> V3 {
+        V3::new(
+            self.xx * v.x + self.xy * v.y + self.xz * v.z,
+            self.xy * v.x + self.yy * v.y + self.yz * v.z,
+            self.xz * v.x + self.yz * v.y + self.zz * v.z,
+        )
+    }
+
+    /// The inverse of a positive definite matrix by its cofactors, or `None` where a leading
+    /// minor is not positive (or NaN).
+    #[inline(always)]
+    fn inverse_spd(&self) -> Option<Sym> {
+        let c_xx = self.yy * self.zz - self.yz * self.yz;
+        let c_xy = self.xz * self.yz - self.xy * self.zz;
+        let c_xz = self.xy * self.yz - self.xz * self.yy;
+        let minor2 = self.xx * self.yy - self.xy * self.xy;
+        let det = self.xx * c_xx + self.xy * c_xy + self.xz * c_xz;
+        if !(self.xx > 0.0 && minor2 > 0.0 && det > 0.0) {
+            return None;
+        }
+        let inv = 1.0 / det;
+        Some(Sym {
+            xx: c_xx * inv,
+            yy: (self.xx * self.zz - self.xz * self.xz) * inv,
+            zz: minor2 * inv,
+            xy: c_xy * inv,
+            xz: c_xz * inv,
+            yz: (self.xy * self.xz - self.xx * self.yz) * inv,
+        })
+    }
+
+    /// `U S U^T` for the orthonormal frame `U = [u0, u1, u2]` (columns).
+    #[inline(always)]
+    fn in_frame(&self, u0: &V3, u1: &V3, u2: &V3) -> Sym {
+        // Columns of S U^T's transpose: r_i = sum_j S_ij u_j, then U S U^T = sum_i u_i r_i^T.
+        let r0 = u0 * self.xx + u1 * self.xy + u2 * self.xz;
+        let r1 = u0 * self.xy + u1 * self.yy + u2 * self.yz;
+        let r2 = u0 * self.xz + u1 * self.yz + u2 * self.zz;
+        let entry = |a: usize, b: usize| u0[a] * r0[b] + u1[a] * r1[b] + u2[a] * r2[b];
+        Sym {
+            xx: entry(0, 0),
+            yy: entry(1, 1),
+            zz: entry(2, 2),
+            xy: entry(0, 1),
+            xz: entry(0, 2),
+            yz: entry(1, 2),
+        }
+    }
+}
+
+/// What the backward sweep leaves per segment for the forward sweep (module documentation,
+/// "as implemented").
 #[derive(Debug, Clone, Copy, Default)]
 pub(crate) struct Articulated {
-    /// `H^-1 g`.
+    /// `X^-1` in the segment's frame.
+    x_inv: Sym,
+    /// `E = diag(d, eps, eps)`: `d` and `eps`.
+    e_d: f64,
+    e_eps: f64,
+    /// `X^-1 g_w`.
     y: V3,
-    /// `H^-1 C^T`.
-    g: M3,
-    /// The outer end's bias and Jacobian, `t0` and `J_t`.
+    /// The outer end's bias `t0` (relative to the joint).
     t0: V3,
-    jt: M3,
-    /// `A_k` and `b_k` of the segment's joint.
-    a: M3,
+    /// `1 / rho_t`.
+    inv_rho_t: f64,
+    /// `A_k` and `b_k` of the segment's joint (kept only when tensions are asked for).
+    a: Sym,
     b: V3,
 }
 
@@ -137,7 +236,9 @@ fn singular(time: f64, segment: usize) -> TetherError {
 }
 
 /// The O(n) recursion (module documentation): q'' into `qdd`, the tensions (n + 1 values) into
-/// `tensions` if given.
+/// `tensions` if given. With `axial` (a stage of a linearly implicit step,
+/// [`crate::dynamics::AxialStage`]) every element's force is evaluated at the stage's arguments
+/// and its stretch entry of `H` gains the added mass.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn solve(
     time: f64,
@@ -148,50 +249,104 @@ pub(crate) fn solve(
     work: &mut [Articulated],
     qdd: &mut [f64],
     tensions: Option<&mut [f64]>,
+    axial: Option<AxialSolve<'_>>,
 ) -> Result<()> {
     let n = chain.segments();
-    let mut a = M3::identity() * c.tip_mass;
+    let (l, m) = (c.l, c.m);
+    let want_tensions = tensions.is_some();
+    let added = axial.as_ref().map_or(0.0, |a| a.added_mass);
+    let mut a = Sym::diagonal(c.tip_mass);
     let mut b = chain.tip_force;
+    let work = &mut work[..n];
     for k in (0..n).rev() {
-        let sg = segment(c, chain, q, qd, k);
-        let (force, extra) = (chain.force.get(k), chain.extra.get(k));
-        let ajt = a * sg.jt;
-        let h = sg.jc.transpose() * sg.jc * c.m
-            + sg.jt.transpose() * ajt
-            + sg.jr.transpose() * sg.jr * c.rod_inertia;
-        let cm = sg.jc * c.m + ajt;
-        let mut g = sg.jc.transpose() * (force - sg.c0 * c.m)
-            + sg.jt.transpose() * (b - a * sg.t0)
-            + sg.jr.transpose() * extra;
-        g.x -= c.k * sg.s + c.c * sg.sd;
-        let chol = h.cholesky().ok_or_else(|| singular(time, k + 1))?;
-        let y = chol.solve(&g);
-        let gm = chol.solve(&cm.transpose());
-        let a_next = a + M3::identity() * c.m - cm * gm;
-        let a_next = (a_next + a_next.transpose()) * 0.5;
-        let b_next = force + b - sg.c0 * c.m - a * sg.t0 - cm * y;
-        work[k] = Articulated {
-            y,
-            g: gm,
-            t0: sg.t0,
-            jt: sg.jt,
-            a: a_next,
-            b: b_next,
+        let i = stretch_index(n, k);
+        let (s, sd) = (q[i], qd[i]);
+        let spring = match &axial {
+            None => c.k * s + c.c * sd,
+            Some(ax) => c.k * ax.stretch[i] + c.c * ax.stretch_rate[i],
         };
-        a = a_next;
-        b = b_next;
+        let cos_psi = chain.cos_psi[k];
+        let (u0, u1, u2) = (
+            chain.e.get(k),
+            chain.e_phi.get(k) / cos_psi,
+            chain.e_psi.get(k),
+        );
+        let (rho_c, rho_t) = (s + 0.5 * l, s + l);
+        let inv_rho_t = 1.0 / rho_t;
+        let drift = chain.e_dot.get(k) * (2.0 * sd);
+        let w = chain.w.get(k);
+        let c0 = drift + w * rho_c;
+        let t0 = drift + w * rho_t;
+        // A in the segment's frame.
+        let (a0, a1, a2) = (a.mul(&u0), a.mul(&u1), a.mul(&u2));
+        let delta = (m * rho_c * rho_c + c.rod_inertia) * inv_rho_t * inv_rho_t;
+        let gp = m * rho_c * inv_rho_t;
+        let x = Sym {
+            xx: u0.dot(&a0) + m + added,
+            yy: u1.dot(&a1) + delta,
+            zz: u2.dot(&a2) + delta,
+            xy: u0.dot(&a1),
+            xz: u0.dot(&a2),
+            yz: u1.dot(&a2),
+        };
+        let x_inv = x.inverse_spd().ok_or_else(|| singular(time, k + 1))?;
+        let eps = delta - gp;
+        let sigma = m + delta - 2.0 * gp;
+        // A_k = U (diag(d, sigma, sigma) - E X^-1 E) U^T.
+        let local = Sym {
+            xx: added - added * added * x_inv.xx,
+            yy: sigma - eps * eps * x_inv.yy,
+            zz: sigma - eps * eps * x_inv.zz,
+            xy: -added * eps * x_inv.xy,
+            xz: -added * eps * x_inv.xz,
+            yz: -eps * eps * x_inv.yz,
+        };
+        // The bias: g_w = D_t^-1 g, y = X^-1 g_w, b_k = f1 + f2 - U (g_w - E y).
+        let f1 = chain.force.get(k) - c0 * m;
+        let f2 = b - a.mul(&t0);
+        let extra = chain.extra.get(k);
+        let ratio = rho_c * inv_rho_t;
+        let g_w = V3::new(
+            u0.dot(&f1) + u0.dot(&f2) - spring,
+            u1.dot(&f1) * ratio + u1.dot(&f2) + u1.dot(&extra) * inv_rho_t,
+            u2.dot(&f1) * ratio + u2.dot(&f2) + u2.dot(&extra) * inv_rho_t,
+        );
+        let y = x_inv.mul(&g_w);
+        let r = V3::new(g_w.x - added * y.x, g_w.y - eps * y.y, g_w.z - eps * y.z);
+        b = f1 + f2 - (u0 * r.x + u1 * r.y + u2 * r.z);
+        a = local.in_frame(&u0, &u1, &u2);
+        let art = &mut work[k];
+        art.x_inv = x_inv;
+        art.e_d = added;
+        art.e_eps = eps;
+        art.y = y;
+        art.t0 = t0;
+        art.inv_rho_t = inv_rho_t;
+        if want_tensions {
+            art.a = a;
+            art.b = b;
+        }
     }
     let mut acc = V3::zeros();
     let mut tensions = tensions;
-    for (k, art) in work.iter().enumerate().take(n) {
+    for (k, art) in work.iter().enumerate() {
+        let cos_psi = chain.cos_psi[k];
+        let (u0, u1, u2) = (
+            chain.e.get(k),
+            chain.e_phi.get(k) / cos_psi,
+            chain.e_psi.get(k),
+        );
         if let Some(t) = tensions.as_deref_mut() {
-            t[k] = (art.b - art.a * acc).dot(&chain.e.get(k));
+            t[k] = (art.b - art.a.mul(&acc)).dot(&u0);
         }
-        let z = art.y - art.g * acc;
-        for (i, v) in z.iter().enumerate() {
-            qdd[index(n, k, i)] = *v;
-        }
-        acc += art.t0 + art.jt * z;
+        // w'' = y - a_loc + X^-1 E a_loc, z'' = D_t^-1 w''.
+        let a_loc = V3::new(u0.dot(&acc), u1.dot(&acc), u2.dot(&acc));
+        let ea = V3::new(art.e_d * a_loc.x, art.e_eps * a_loc.y, art.e_eps * a_loc.z);
+        let wdd = art.y - a_loc + art.x_inv.mul(&ea);
+        qdd[stretch_index(n, k)] = wdd.x;
+        qdd[1 + 2 * k] = wdd.y * art.inv_rho_t / cos_psi;
+        qdd[2 + 2 * k] = wdd.z * art.inv_rho_t;
+        acc += art.t0 + u0 * wdd.x + u1 * wdd.y + u2 * wdd.z;
     }
     if let Some(t) = tensions {
         t[n] = (chain.tip_force - acc * c.tip_mass).dot(&chain.e.get(n - 1));

@@ -96,6 +96,39 @@ pub enum Solver {
     Dense,
 }
 
+/// The axial part of one stage of a linearly implicit step ([`crate::implicit`]): where the
+/// axial elements' springs and dampers are evaluated, and the step-scaled stiffness and damping
+/// added to their rows of the mass matrix.
+///
+/// [`TetherModel::accelerations_axial`] solves
+///
+/// ```text
+/// (M(q) + (gamma_h c + gamma_h^2 k) P^T P) x = Q(t, q, q')  with every element's force
+///                                                            -k s~ - c s~' in place of -k s - c s'
+/// ```
+///
+/// where `P` picks the stretch coordinates, `(k, c)` are one element's stiffness and damping
+/// ([`TetherConfig::element_stiffness`], [`TetherConfig::element_damping`]) and `(s~, s~')` are
+/// the stretch entries of `stretch` and `stretch_rate`. The kinematics (lever arms, drift) use
+/// `q` and `q'` as always. With `gamma_h = 0` and `(s~, s~') = (s, s')` this is `M q'' = Q`.
+#[derive(Debug, Clone, Copy)]
+pub struct AxialStage<'a> {
+    /// Full-length (dofs) array whose stretch entries the springs are evaluated at, m.
+    pub stretch: &'a [f64],
+    /// Full-length (dofs) array whose stretch entries the dampers are evaluated at, m/s.
+    pub stretch_rate: &'a [f64],
+    /// The step-scaled factor `gamma h`, s.
+    pub gamma_h: f64,
+}
+
+/// The axial stage as the solvers read it: the springs' arguments and the added mass, kg.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct AxialSolve<'a> {
+    pub stretch: &'a [f64],
+    pub stretch_rate: &'a [f64],
+    pub added_mass: f64,
+}
+
 /// The tether's equations of motion, with the constants derived from a [`TetherConfig`] and
 /// preallocated work buffers: evaluating the right-hand side allocates nothing.
 #[derive(Debug, Clone)]
@@ -465,6 +498,84 @@ impl TetherModel {
         }
     }
 
+    /// The solve of one linearly implicit stage ([`AxialStage`]): the accelerations with the
+    /// axial elements' forces at the stage's arguments and their rows of the mass matrix
+    /// augmented by `gamma_h c + gamma_h^2 k`, by the configured [`Solver`]. Leaves
+    /// [`TetherModel::axial_mass`] that of `M` itself. Allocates nothing (the dense solver on
+    /// first use).
+    pub fn accelerations_axial<S: Surroundings + ?Sized>(
+        &mut self,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        stage: &AxialStage<'_>,
+        surroundings: &S,
+        qdd: &mut [f64],
+    ) -> Result<S::TipReport> {
+        self.check_len("stretch", stage.stretch)?;
+        self.check_len("stretch_rate", stage.stretch_rate)?;
+        let (k, c) = if self.distributed {
+            (self.element_k, self.element_c)
+        } else {
+            (self.k, self.c_s)
+        };
+        let gh = stage.gamma_h;
+        let axial = AxialSolve {
+            stretch: stage.stretch,
+            stretch_rate: stage.stretch_rate,
+            added_mass: gh * c + gh * gh * k,
+        };
+        match self.solver {
+            Solver::Recursive => {
+                self.solve_recursive_axial(time, q, qd, surroundings, qdd, None, Some(axial))
+            }
+            Solver::Dense => self.dense_axial(time, q, qd, surroundings, qdd, &axial),
+        }
+    }
+
+    /// [`TetherModel::accelerations_axial`] by the dense formulation: `M` and `Q` as
+    /// [`TetherModel::accelerations_dense`] assembles them, the stretch rows' forces moved to
+    /// the stage's arguments and their diagonal augmented, solved by Cholesky.
+    fn dense_axial<S: Surroundings + ?Sized>(
+        &mut self,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        surroundings: &S,
+        qdd: &mut [f64],
+        axial: &AxialSolve<'_>,
+    ) -> Result<S::TipReport> {
+        self.check_len("q", q)?;
+        self.check_len("qd", qd)?;
+        self.check_len("qdd", qdd)?;
+        let report = self.prepare::<Plain, S>(time, q, qd, surroundings)?;
+        let dim = self.dofs();
+        let (elements, k, c) = if self.distributed {
+            let cst = self.distributed_constants();
+            if self.ws.mass.len() != dim * dim {
+                self.ws.mass.resize(dim * dim, 0.0);
+            }
+            distributed::generalized_forces(&cst, &self.ws.chain, q, qd, qdd);
+            distributed::assemble_mass(&cst, &self.ws.chain, q, &mut self.ws.mass);
+            (self.n, self.element_k, self.element_c)
+        } else {
+            self.generalized_forces(q, qd, qdd);
+            self.assemble_mass(q[0]);
+            (1, self.k, self.c_s)
+        };
+        for e in 0..elements {
+            let i = stretch_index(self.n, e);
+            qdd[i] += k * (q[i] - axial.stretch[i]) + c * (qd[i] - axial.stretch_rate[i]);
+            self.ws.mass[i * dim + i] += axial.added_mass;
+        }
+        cholesky_in_place(&mut self.ws.mass, dim).map_err(|col| TetherError::Diverged {
+            time,
+            reason: format!("mass matrix lost positive definiteness at column {col}"),
+        })?;
+        cholesky_solve(&self.ws.mass, dim, qdd);
+        Ok(report)
+    }
+
     /// [`TetherModel::accelerations`] by the O(n) articulated-body recursion, whatever the
     /// configured solver.
     pub fn accelerations_recursive<S: Surroundings + ?Sized>(
@@ -538,17 +649,37 @@ impl TetherModel {
         qdd: &mut [f64],
         tensions: Option<&mut [f64]>,
     ) -> Result<S::TipReport> {
+        self.solve_recursive_axial(time, q, qd, surroundings, qdd, tensions, None)
+    }
+
+    /// [`TetherModel::solve_recursive`], with the axial stage of a linearly implicit step if
+    /// given ([`TetherModel::accelerations_axial`]).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn solve_recursive_axial<S: Surroundings + ?Sized>(
+        &mut self,
+        time: f64,
+        q: &[f64],
+        qd: &[f64],
+        surroundings: &S,
+        qdd: &mut [f64],
+        tensions: Option<&mut [f64]>,
+        axial: Option<AxialSolve<'_>>,
+    ) -> Result<S::TipReport> {
         #[cfg(target_arch = "x86_64")]
         if crate::arith::has_avx2_fma() {
             // SAFETY: the processor has AVX2 and FMA, checked just above.
-            return unsafe { self.solve_recursive_avx2(time, q, qd, surroundings, qdd, tensions) };
+            return unsafe {
+                self.solve_recursive_avx2(time, q, qd, surroundings, qdd, tensions, axial)
+            };
         }
-        self.solve_recursive_body::<Plain, S>(time, q, qd, surroundings, qdd, tensions)
+        self.solve_recursive_body::<Plain, S>(time, q, qd, surroundings, qdd, tensions, axial)
     }
 
     /// [`TetherModel::solve_recursive_body`] compiled for AVX2 and FMA, with fused multiply-adds.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
+    #[allow(clippy::too_many_arguments)]
     unsafe fn solve_recursive_avx2<S: Surroundings + ?Sized>(
         &mut self,
         time: f64,
@@ -557,6 +688,7 @@ impl TetherModel {
         surroundings: &S,
         qdd: &mut [f64],
         tensions: Option<&mut [f64]>,
+        axial: Option<AxialSolve<'_>>,
     ) -> Result<S::TipReport> {
         self.solve_recursive_body::<crate::arith::Fused, S>(
             time,
@@ -565,9 +697,11 @@ impl TetherModel {
             surroundings,
             qdd,
             tensions,
+            axial,
         )
     }
 
+    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn solve_recursive_body<M: Madd, S: Surroundings + ?Sized>(
         &mut self,
@@ -577,6 +711,7 @@ impl TetherModel {
         surroundings: &S,
         qdd: &mut [f64],
         tensions: Option<&mut [f64]>,
+        axial: Option<AxialSolve<'_>>,
     ) -> Result<S::TipReport> {
         self.check_len("q", q)?;
         self.check_len("qd", qd)?;
@@ -585,18 +720,42 @@ impl TetherModel {
             let c = self.distributed_constants();
             let report = self.prepare::<M, S>(time, q, qd, surroundings)?;
             let ws = &mut self.ws;
-            distributed::solve(time, &c, &ws.chain, q, qd, &mut ws.axial, qdd, tensions)?;
+            distributed::solve(
+                time,
+                &c,
+                &ws.chain,
+                q,
+                qd,
+                &mut ws.axial,
+                qdd,
+                tensions,
+                axial,
+            )?;
             return Ok(report);
         }
         let constants = self.chain_constants();
         let report = self.prepare::<M, S>(time, q, qd, surroundings)?;
         let ws = &mut self.ws;
+        // The spring's arguments and the added mass: the state's and none, or the stage's.
+        let spring = match axial {
+            None => recursive::Spring {
+                s: q[0],
+                sd: qd[0],
+                added_mass: 0.0,
+            },
+            Some(a) => recursive::Spring {
+                s: a.stretch[0],
+                sd: a.stretch_rate[0],
+                added_mass: a.added_mass,
+            },
+        };
         self.axial_mass = recursive::solve::<M>(
             time,
             &constants,
             &ws.chain,
             q[0],
             qd[0],
+            spring,
             &mut ws.articulated,
             qdd,
             tensions,
@@ -1271,6 +1430,7 @@ mod tests {
                     &flow,
                     &mut lanes,
                     Some(&mut lane_t),
+                    None,
                 );
                 let lane_mass = model.axial_mass();
                 let reference = model.solve_recursive_body::<FusedScalar, _>(
@@ -1280,6 +1440,7 @@ mod tests {
                     &flow,
                     &mut scalar,
                     Some(&mut scalar_t),
+                    None,
                 );
                 assert_eq!(solved.is_ok(), reference.is_ok(), "n = {n}, case {case}");
                 if reference.is_err() {
@@ -1295,7 +1456,7 @@ mod tests {
                 assert_eq!(lane_mass.to_bits(), model.axial_mass().to_bits());
                 // Without the tensions (the integrator's path) as well.
                 model
-                    .solve_recursive_body::<Fused, _>(0.5, &q, &qd, &flow, &mut lanes, None)
+                    .solve_recursive_body::<Fused, _>(0.5, &q, &qd, &flow, &mut lanes, None, None)
                     .unwrap();
                 assert_eq!(bits(&lanes), bits(&scalar), "q'' without tensions, n = {n}");
                 compared += 1;
@@ -1453,13 +1614,13 @@ mod tests {
             };
             let mut plain = vec![0.0; dim];
             model
-                .solve_recursive_body::<Plain, _>(0.5, &q, &qd, &flow, &mut plain, None)
+                .solve_recursive_body::<Plain, _>(0.5, &q, &qd, &flow, &mut plain, None, None)
                 .unwrap();
             check(&plain, "plain");
             let mut fused = vec![0.0; dim];
             model
                 .solve_recursive_body::<crate::arith::Fused, _>(
-                    0.5, &q, &qd, &flow, &mut fused, None,
+                    0.5, &q, &qd, &flow, &mut fused, None, None,
                 )
                 .unwrap();
             check(&fused, "fused");

@@ -12,9 +12,10 @@
 //! * [`TetherConfig`] — serde configuration with validation and the paper's presets;
 //! * [`TetherState`] — time, coordinates, rates;
 //! * [`TetherModel`] — the equations of motion (M(q) q'' = Q), with preallocated buffers;
-//! * [`Rk4`] — the one fixed-step integrator, over a [`System`] of second-order coordinates and
-//!   first-order states (the tether in its surroundings, [`InSurroundings`], or the capture
-//!   simulation above it);
+//! * [`Rk4`] — the default fixed-step integrator, over a [`System`] of second-order coordinates
+//!   and first-order states (the tether in its surroundings, [`InSurroundings`], or the capture
+//!   simulation above it); [`Rosenbrock`] — the linearly implicit one of
+//!   [`Scheme::ImplicitAxial`], with the axial spring-dampers implicit ([`implicit`]);
 //! * [`Surroundings`] — what the caller supplies: air velocity and density at any point, the
 //!   aircraft's acceleration, the force on the tip;
 //! * [`Tether`] — the three together, for stepping; [`Tether::step_four`] steps four at once,
@@ -32,6 +33,7 @@ pub mod direction;
 pub mod distributed;
 pub mod dynamics;
 pub mod error;
+pub mod implicit;
 pub mod integrator;
 pub mod material;
 pub mod recursive;
@@ -42,10 +44,11 @@ pub mod tether;
 mod trig;
 
 pub use atmosphere::Atmosphere;
-pub use config::{DragVelocity, Elasticity, TetherConfig, STANDARD_GRAVITY};
+pub use config::{DragVelocity, Elasticity, Scheme, TetherConfig, STANDARD_GRAVITY};
 pub use direction::DirectionJet;
-pub use dynamics::{Energy, LockstepWork, Solver, TetherModel};
+pub use dynamics::{AxialStage, Energy, LockstepWork, Solver, TetherModel};
 pub use error::{Result, TetherError};
+pub use implicit::{AxialSystem, Rosenbrock};
 pub use integrator::{InSurroundings, Lockstep, Rk4, System};
 pub use material::Material;
 pub use state::TetherState;

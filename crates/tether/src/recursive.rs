@@ -174,6 +174,17 @@ pub(crate) struct ChainConstants {
     pub c_s: f64,
 }
 
+/// The axial element's spring and damper as one solve sees them: the stretch and rate they are
+/// evaluated at (the state's own in a right-hand side) and the mass added to the stretch's
+/// diagonal of `M` (zero in a right-hand side; `gamma h c_s + (gamma h)^2 k` in a stage of a
+/// linearly implicit step, [`crate::dynamics::AxialStage`]).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Spring {
+    pub s: f64,
+    pub sd: f64,
+    pub added_mass: f64,
+}
+
 fn singular(time: f64, segment: usize) -> TetherError {
     TetherError::Diverged {
         time,
@@ -182,7 +193,8 @@ fn singular(time: f64, segment: usize) -> TetherError {
 }
 
 /// Solves the equations of motion in O(n) from the kinematics and loads in `chain`: the backward
-/// sweep (tip to root), the root's 3x3 system and the forward sweep. Writes `q''` into `qdd` and,
+/// sweep (tip to root), the root's 3x3 system and the forward sweep, with the axial element's
+/// force and added mass as `spring` gives them. Writes `q''` into `qdd` and,
 /// if given, the tensions (n + 1 values, as [`crate::TetherModel::tensions`]) into `tensions`.
 /// Returns the effective axial mass `1 / (M^-1)_00`, kg (see [`root_axial_mass`]).
 #[allow(clippy::too_many_arguments)]
@@ -193,6 +205,7 @@ pub(crate) fn solve<M: Madd>(
     chain: &ChainState,
     s: f64,
     sd: f64,
+    spring: Spring,
     work: &mut [Articulated],
     qdd: &mut [f64],
     tensions: Option<&mut [f64]>,
@@ -232,7 +245,8 @@ pub(crate) fn solve<M: Madd>(
     );
     let own = m * rho_c * rho_c + c.rod_inertia;
     let rho_t2 = rho_t * rho_t;
-    let m11 = m + dot::<M>(&e1, &ae);
+    let m11_own = m + dot::<M>(&e1, &ae);
+    let m11 = m11_own + spring.added_mass;
     let m12 = rho_t * dot::<M>(&e1, &aep);
     let m13 = rho_t * dot::<M>(&e1, &aes);
     let m22 = M::madd(own, cos2, rho_t2 * dot::<M>(&e_phi, &aep));
@@ -244,7 +258,7 @@ pub(crate) fn solve<M: Madd>(
     let f1 = axpy::<M>(&c0, -m, &force);
     let f2 = b_vec - a_mat.mul::<M>(&t0);
     let moment = axpy::<M>(&f1, rho_c, &axpy::<M>(&f2, rho_t, &extra));
-    let r0 = dot::<M>(&e1, &(f1 + f2)) - M::madd(c.k, s, c.c_s * sd);
+    let r0 = dot::<M>(&e1, &(f1 + f2)) - M::madd(c.k, spring.s, c.c_s * spring.sd);
     let (r1, r2) = (dot::<M>(&e_phi, &moment), dot::<M>(&e_psi, &moment));
     let d1 = m11;
     let (l21, l31) = (m12 / d1, m13 / d1);
@@ -254,7 +268,7 @@ pub(crate) fn solve<M: Madd>(
     if !(d1 > 0.0 && d2 > 0.0 && d3 > 0.0) {
         return Err(singular(time, 1));
     }
-    let axial_mass = root_axial_mass(m11, m12, m13, m22, m23, m33);
+    let axial_mass = root_axial_mass(m11_own, m12, m13, m22, m23, m33);
     let y2 = M::madd(-l21, r0, r1);
     let y3 = M::madd(-l32, y2, M::madd(-l31, r0, r2));
     let z2 = y3 / d3;

@@ -5,6 +5,7 @@ use nalgebra::Vector3;
 use crate::config::{StepLoad, TetherConfig};
 use crate::dynamics::{Energy, LockstepWork, TetherModel};
 use crate::error::{Result, TetherError};
+use crate::implicit::Rosenbrock;
 use crate::integrator::{InSurroundings, Rk4};
 use crate::state::TetherState;
 use crate::surroundings::Surroundings;
@@ -18,6 +19,8 @@ use crate::surroundings::Surroundings;
 /// chain's fastest mode needs at the current attachment tension and air
 /// ([`TetherConfig::substeps_for`]): one for Table 3's n = 30 at 0.01 s, so its steps are plain
 /// RK4 steps; two or more for fine discretizations (n = 300) that a single step would blow up.
+/// With [`crate::Scheme::ImplicitAxial`] the steps are ROS34PW2 steps ([`crate::implicit`]),
+/// substepped for the modes other than the axial ones.
 ///
 /// Time is kept as `origin + steps * dt` (the origin is the time of the last state set from
 /// outside), free of the drift of summing dt: the rule of the capture simulation too.
@@ -26,6 +29,8 @@ pub struct Tether {
     model: TetherModel,
     state: TetherState,
     rk4: Rk4,
+    /// The Rosenbrock-W buffers, for [`crate::Scheme::ImplicitAxial`] only.
+    rosenbrock: Option<Rosenbrock>,
     qdd: Vec<f64>,
     /// Time of the last state set from outside, s.
     time_origin: f64,
@@ -46,6 +51,8 @@ impl Tether {
         };
         Ok(Tether {
             rk4: Rk4::new(model.dofs(), 0),
+            rosenbrock: (config.scheme == crate::Scheme::ImplicitAxial)
+                .then(|| Rosenbrock::new(model.dofs(), 0)),
             qdd: vec![0.0; model.dofs()],
             model,
             state,
@@ -90,7 +97,7 @@ impl Tether {
         self.config().time_step
     }
 
-    /// RK4 substeps the next step takes, from the state and the air at the attachment
+    /// Substeps the next step takes, from the state and the air at the attachment
     /// ([`StepLoad::of_state`] with the state's effective axial mass, [`TetherModel::axial_mass`],
     /// [`TetherConfig::substeps_for`]). Evaluates the accelerations at the current state for it
     /// (a step does that as its first stage anyway).
@@ -123,6 +130,15 @@ impl Tether {
             surroundings,
         };
         let s = &mut self.state;
+        if let Some(rosenbrock) = &mut self.rosenbrock {
+            // The substeps from the state alone: the stage matrix depends on the step length,
+            // and the modes left explicit do not need the axial mass.
+            let k = substeps_at(system.model, time, density, airspeed, &s.q, &s.qd)?;
+            rosenbrock.advance(&mut system, time, dt, k, &mut s.q, &mut s.qd, &mut [])?;
+            self.steps += 1;
+            s.time = self.time_origin + self.steps as f64 * dt;
+            return Ok(());
+        }
         let choose = |system: &InSurroundings<'_, S>, q: &[f64], qd: &[f64]| {
             substeps_at(system.model, time, density, airspeed, q, qd)
         };
@@ -282,7 +298,7 @@ impl Tether {
 /// The RK4 substeps of a step from `(q, qd)` at `time` (the chain's fastest mode under the
 /// step's load, with the state's effective axial mass from the first stage); more than
 /// [`crate::config::MAX_SUBSTEPS`] is a divergence.
-fn substeps_at(
+pub(crate) fn substeps_at(
     model: &TetherModel,
     time: f64,
     density: f64,
@@ -298,8 +314,9 @@ fn substeps_at(
         return Err(TetherError::Diverged {
             time,
             reason: format!(
-                "the chain's fastest mode needs {k} RK4 substeps per step (at most {}): \
+                "the chain's fastest mode needs {k} {} substeps per step (at most {}): \
                  the tension or the rates are beyond what this discretization can follow",
+                c.scheme.integrator(),
                 crate::config::MAX_SUBSTEPS
             ),
         });

@@ -132,3 +132,31 @@ fn distributed_stepping_does_not_allocate() {
     let after = allocations();
     assert_eq!(after - before, 0, "{} allocations", after - before);
 }
+
+#[test]
+fn implicit_axial_stepping_does_not_allocate() {
+    let (cfg, flow) = reference::towed_table3();
+    for elasticity in [
+        accd_tether::Elasticity::Attachment,
+        accd_tether::Elasticity::Distributed,
+    ] {
+        let cfg = accd_tether::TetherConfig {
+            elasticity,
+            scheme: accd_tether::Scheme::ImplicitAxial,
+            ..cfg.clone()
+        };
+        let mut tether = Tether::new(&cfg).unwrap();
+        tether.step(&flow).unwrap();
+        let before = allocations();
+        for _ in 0..50 {
+            tether.step(&flow).unwrap();
+        }
+        let after = allocations();
+        assert_eq!(
+            after - before,
+            0,
+            "{elasticity:?}: {} allocations",
+            after - before
+        );
+    }
+}
