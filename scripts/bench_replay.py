@@ -1,4 +1,4 @@
-"""Times recording and replay (issue 17): record_episodes against run_episodes on the same 16
+"""Times recording and replay: record_episodes against run_episodes on the same 16
 episodes (neutral flaps, 2 threads, best of 3), a 70 s episode's page, MP4 and .npz, and one
 headless-Chromium screenshot. Prints one line each. Usage: python scripts/bench_replay.py"""
 import time, os

@@ -1,4 +1,4 @@
-"""The performance targets (issue 12) against one run of ``scripts/bench.sh``, as a markdown table.
+"""The performance targets against one run of ``scripts/bench.sh``, as a markdown table.
 
 Reads what that run wrote: ``physics.json`` (``bench_physics.py``: MuJoCo's bare chain, the
 tether and the capture system side by side in one process), ``envs_default.json``

@@ -23,5 +23,5 @@ if [ "${CI:-}" = "true" ] && ! command -v chromium >/dev/null && [ ! -x /usr/lib
   $SUDO apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends chromium >/dev/null
 fi
-echo "== pytest"
-"$ACCD_PY" -m pytest -q tests
+echo "== pytest (two workers; the slowest tests listed at the end)"
+"$ACCD_PY" -m pytest -q -n 2 --durations=15 tests

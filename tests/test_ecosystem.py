@@ -144,7 +144,7 @@ def test_mypy_strict_passes_on_a_users_script_and_catches_typos(tmp_path):
     assert 'type "type[AccdVecEnv]"' in bad.stdout, bad.stdout  # AccdVecEnv is a class, not Any
 
 
-# -- input the envs refuse (issue 13, env strictness) ---------------------------------------------
+# -- input the envs refuse (env strictness) ---------------------------------------------
 
 
 @pytest.mark.parametrize("bad", [1.9, "7", True, -1, 2**63, [3, "x"]])

@@ -224,7 +224,7 @@ def test_state_snapshot_restores_exactly_and_envs_pickle():
         assert np.array_equal(x[0], y[0]) and np.array_equal(x[0], z[0])
         assert x[1:4] == y[1:4] == z[1:4]
     other = gym.make(ENV_ID, capture_window=3.0, initial={"settle_time": 20.0}).unwrapped
-    # Was ConfigError; issue 11 item 3: every foreign state is a StateError naming what differs.
+    # Every foreign state is a StateError naming what differs.
     with pytest.raises(accd_gym.StateError, match="another configuration"):
         other.set_state(state)
 
@@ -286,7 +286,7 @@ def test_out_of_range_actions_are_clipped():
 
 
 def test_a_diverging_episode_ends_with_a_flag_not_nan():
-    # RK4 at 0.1 s is far beyond the stability limit of the tether's axial element; since issue 13
+    # RK4 at 0.1 s is far beyond the stability limit of the tether's axial element;
     # the tether substeps through it, so the divergence comes from a stiff ACCD roll (a roll
     # damping far beyond any body's).
     table = json.loads(accd_gym.default_aero_table_json())
@@ -371,7 +371,7 @@ def test_observation_is_read_by_name():
 
 
 def test_python_code_reads_the_observation_by_name():
-    """No numeric slices of the observation in the package (issue 11: names, never indices)."""
+    """No numeric slices of the observation in the package (names, never indices)."""
     import re
     from pathlib import Path
 
@@ -388,7 +388,7 @@ def test_python_code_reads_the_observation_by_name():
 
 @pytest.mark.parametrize("make", ["single", "vector", "sb3"])
 def test_an_env_construction_validates_its_config_once(make):
-    """Issue 11: the configuration is validated once per env construction (it used to be eight
+    """The configuration is validated once per env construction (it used to be eight
     times), from one crossing of the keyword arguments into Rust."""
     from accd_gym import _core
     from accd_gym.envs.sb3 import AccdVecEnv

@@ -1,4 +1,4 @@
-"""Issue 18 items 3-5: the Python `Tether` under the distributed elasticity, `accd-gym study fig9`
+"""The Python `Tether` under the distributed elasticity, `accd-gym study fig9`
 against closed forms of Table 1's chain, and the tension comparison's building blocks.
 
 Everything here runs in seconds; the long studies (``tension``, ``sweep``) are exercised on

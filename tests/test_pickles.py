@@ -1,4 +1,4 @@
-"""Pickles of every env class are self-contained (issue 13, item 7): a user aerodynamic table is
+"""Pickles of every env class are self-contained: a user aerodynamic table is
 carried as its contents (the file may be gone when the pickle is loaded), and seeds and wake
 options given before a reset survive the pickle."""
 

@@ -1,4 +1,4 @@
-"""Recorded episodes (issue 17, item 1): a recording equals the env's own outputs step for step,
+"""Recorded episodes: a recording equals the env's own outputs step for step,
 reading it leaves the episode unchanged, its geometry is consistent, and the .npz loads without
 accd-gym."""
 

@@ -1,4 +1,4 @@
-"""Issue 13 (reliability): regression tests named after each failure the issue lists: no panic
+"""Reliability: a regression test for each failure found: no panic
 across the boundary, interruptible native loops, memory budgeting, stable steps for every valid
 tether discretization, finite outputs after a divergence, strict inputs, readable errors."""
 
@@ -225,7 +225,7 @@ def test_one_env_beyond_the_budget_names_the_history_distance():
 @pytest.mark.parametrize(
     "tether",
     # 10 and 50 kg/m (24 mm) diverged 16-18 s into the settle until the substep estimate took the
-    # effective axial mass 1 / (M^-1)_00 (issue 13)
+    # effective axial mass 1 / (M^-1)_00
     [{"segments": 100}, {"segments": 300}, {"tangential_drag_coefficient": 1.0}, {"length": 10.0},
      {"time_step": 0.05}, {"mass_per_length": 10.0},
      {"mass_per_length": 50.0, "breaking_tension": 5e6}],
@@ -235,7 +235,7 @@ def test_configs_that_validate_build_and_step(tether):
     import warnings
 
     agent_step = max(0.1, tether.get("time_step", 0.01))
-    # The boom is placed relative to each config's equilibrium (issue 16): no limit needs relaxing
+    # The boom is placed relative to each config's equilibrium: no limit needs relaxing
     # (a fixed boom was 62 m from tangential_drag_coefficient = 1's equilibrium, 89-183 m from the
     # heavy tethers': see test_an_equilibrium_outside_the_episode_limits_is_a_warning_naming_the_limit)
     limits = {}
@@ -481,7 +481,7 @@ def test_cli_parse_errors_are_one_line(argv, capsys):
 
 @pytest.mark.parametrize("seed", ["12", 1.9, True, [1, 2], -1])
 def test_sb3_vec_env_seeds_are_integers(seed):
-    # issue 13: reset(seed="12") seeded [1, 2]
+    # reset(seed="12") seeded [1, 2]
     with pytest.raises(ConfigError, match="seed"):
         accd_gym.AccdVecEnv(num_envs=2, seed=seed, **SHORT)
     env = accd_gym.AccdVecEnv(num_envs=2, seed=np.int64(3), num_threads=1, **SHORT)

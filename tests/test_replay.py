@@ -1,4 +1,4 @@
-"""Replay pages, videos and the replay commands (issue 17, items 2 and 3).
+"""Replay pages, videos and the replay commands.
 
 The browser tests open a page in Debian's headless ``chromium`` from a ``file://`` URL with the
 network offline, and check: no JavaScript error, no request beyond the file itself, the 3D views

@@ -1,4 +1,4 @@
-"""The sensor model of the observation (``sensors``, issue 16 item 2) through the Python envs.
+"""The sensor model of the observation (``sensors``) through the Python envs.
 
 Switching the sensors on changes the observation only: rewards, flags and info values are
 bitwise those of the same seeds and actions without them. The single env, the native gymnasium

@@ -1,4 +1,4 @@
-"""The state format (issue 11, item 3): a snapshot is a header (magic, format version, kind of
+"""The state format: a snapshot is a header (magic, format version, kind of
 env, number of envs, config hash, CRC-32) and a serde-encoded payload. Every corrupted,
 truncated or foreign blob raises StateError naming what is wrong and changes nothing; a good one
 restores bit for bit."""

@@ -128,7 +128,7 @@ def test_max_tension_runs_at_the_documented_step_and_at_0_01_s_now_that_steps_su
         study.simulate_max_tension(study.MaxTensionCase(duration_s=12.0, time_step=0.0025))
     )
     assert fine["peak_tension_N"] == pytest.approx(finer["peak_tension_N"], rel=1e-3)
-    # Plain RK4 diverged at 0.01 s here (the test asserted SimulationError before issue 13); the
+    # Plain RK4 diverged at 0.01 s here; the
     # substepped step now follows the stiff transverse mode and agrees with the documented step.
     coarse = study.max_tension_metrics(study.simulate_max_tension(study.MaxTensionCase(duration_s=12.0, time_step=0.01)))
     assert coarse["peak_tension_N"] == pytest.approx(fine["peak_tension_N"], rel=1e-3)

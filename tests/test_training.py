@@ -1,4 +1,4 @@
-"""Training, held-out evaluation, baselines and rollouts (issue 7): short runs, sane results, files written."""
+"""Training, held-out evaluation, baselines and rollouts: short runs, sane results, files written."""
 
 import json
 

@@ -1,4 +1,4 @@
-"""Issue 13, item 6: training survives interruption. SIGINT or SIGTERM during ``accd-gym train``
+"""Training survives interruption. SIGINT or SIGTERM during ``accd-gym train``
 writes a checkpoint with the normalization statistics and the envs' state and marks the run
 interrupted; ``--resume`` continues to the same total; evaluating the unfinished run uses the
 latest checkpoint and says so; a model without its statistics is refused unless asked for."""

@@ -146,7 +146,7 @@ def test_accd_vec_env_steps_exactly_as_dummy_vec_env():
 
 
 def test_a_wake_seed_list_is_covered_by_the_batch_with_list_seeds_too():
-    """Issue 14, item 2: with per-env seeds every env took the same entry, skipping most of it."""
+    """With per-env seeds every env took the same entry, skipping most of it."""
     vec = accd_gym.InAirCaptureVectorEnv(3, **CONFIG)
     wakes = list(range(1_000_000_000, 1_000_000_009))
     _, info = vec.reset(seed=[10, 11, 12], options={"wake_seeds": wakes})

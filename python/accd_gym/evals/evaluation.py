@@ -4,13 +4,12 @@ Every policy sees the same episodes: episode ``k`` is the first episode of a sin
 ``seed + k`` (initial conditions and RLV motion; ``seed`` is :data:`EVAL_BASE_SEED` by default)
 with wake seed ``wake_seeds[k]``, by default the first ``K`` of
 :data:`accd_gym.HELD_OUT_WAKE_SEEDS`, which training never draws. That definition depends on
-nothing else: not on ``num_envs`` (earlier versions gave env ``i``'s ``e``-th episode the seeds of
-``(seed + i, e)``, so their results changed with ``num_envs``), and not on how the episodes are
-split over Ray workers (:mod:`accd_gym.distributed`), which therefore reproduce the local results
-bit for bit (see :func:`run_episode_range` for the one condition on the policy).
+nothing else: not on ``num_envs``, and not on how the episodes are split over Ray workers
+(:mod:`accd_gym.evals.distributed`), which therefore reproduce the local results bit for bit (see
+:func:`accd_gym.evals.episodes.run_episode_range` for the one condition on the policy).
 
 A *policy* is any object with ``predict(obs_batch) -> actions`` ((N, 25) -> (N, 4)) and
-optionally ``reset(mask)`` (or ``start_episodes(mask, episode_indices)``): the baselines of :mod:`accd_gym.baselines` and :class:`SB3Policy`
+optionally ``reset(mask)`` (or ``start_episodes(mask, episode_indices)``): the baselines of :mod:`accd_gym.control.baselines` and :class:`~accd_gym.evals.policies.SB3Policy`
 (a stable-baselines3 model with its VecNormalize statistics).
 """
 

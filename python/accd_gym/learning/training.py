@@ -12,13 +12,12 @@ num_envs           parallel episodes in the AccdVecEnv (default 16)
 num_threads        threads stepping the envs (0: one per core)
 torch_threads      threads PyTorch uses (default 1: leaves the cores to the physics)
 update_threads     PPO: threads PyTorch uses in the gradient updates, when the envs are idle
-                   (0, the default: ``torch_threads``). 2 on an idle 2-core machine: 5-8 % faster
-                   end to end; with another process on one of the cores, 2.5x slower updates
-                   (PyTorch's threads wait for each other), so only for dedicated machines. A
-                   fixed number, never "per core": the trained policy can depend on it (on an
-                   AMD EPYC, 1 and 2 give the same bits, 3 and 4 others; BENCHMARKS.md)
+                   (0, the default: ``torch_threads``). Faster on a dedicated machine, much
+                   slower when another process shares the cores (PyTorch's threads wait for each
+                   other; BENCHMARKS.md). A fixed number, never "per core": the trained policy's
+                   last bits can depend on it.
 seed               seed of the env (training wake seeds only) and of the algorithm (default 0)
-env                environment config overrides (see :mod:`accd_gym.config`) and the env options
+env                environment config overrides (see :mod:`accd_gym.envs.config`) and the env options
                    ``residual`` and ``history`` (:mod:`accd_gym.envs.agent_io`)
 vec_normalize      ``VecNormalize`` options: ``norm_obs``, ``norm_reward`` (PPO; false for SAC),
                    ``clip_obs``, ``clip_reward``

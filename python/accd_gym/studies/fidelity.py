@@ -508,7 +508,7 @@ def run_tension(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[di
         "safety_factor_on_peak": breaking / peak,
     }
     lines = [
-        "## tension (issue 18 item 4)",
+        "## tension",
         "",
         "![tension](tension.png)",
         "",
@@ -816,7 +816,7 @@ def run_sweep(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[dict
         return "no" + (" (release only)" if row["slower_after_release"] else (" (pitch only)" if row["slower_after_pitch"] else ""))
 
     lines = [
-        "## sweep (issue 18 item 5)",
+        "## sweep",
         "",
         "![sweep](sweep.png)",
         "",
