@@ -5,7 +5,7 @@ Stage 1 (the default GRID) wrote training/guidance_tuning.json; stage 2 refined 
 (training/guidance_tuning_stage2.json, the grid is stored in the file).
 Scores every gain set by capture rate (ties: lower median miss distance) on wake seeds
 1000..1000+episodes-1 (inside TRAINING_WAKE_SEEDS) with base seed 7, and writes every result and
-the winner to JSON. The winner's gains are the defaults of accd_gym.baselines.GuidanceGains.
+the winner to JSON. The winner's gains are the defaults of accd_gym.control.baselines.GuidanceGains.
 """
 
 import argparse

@@ -1,4 +1,4 @@
-"""Tunes the LQR baseline (accd_gym.lqr.LqrTuning) by a grid search on TRAINING wake seeds only.
+"""Tunes the LQR baseline (accd_gym.control.lqr.LqrTuning) by a grid search on TRAINING wake seeds only.
 
 Usage: python scripts/tune_lqr.py [--episodes 48] [--env JSON] [--grid JSON] [--base JSON]
        [--out training/lqr_tuning.json]

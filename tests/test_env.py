@@ -319,7 +319,7 @@ def test_environment_doc_carries_the_cores_observation_table():
 def test_config_docs_are_generated_from_the_declarations():
     """docs/environment.md and the three env docstrings carry the configuration table generated
     from the Rust declarations (one per field); regenerate the docs section with
-    ``accd_gym.config.config_table_markdown()`` when a declaration changes."""
+    ``accd_gym.envs.config.config_table_markdown()`` when a declaration changes."""
     import re
     from pathlib import Path
 

@@ -1,4 +1,4 @@
-"""accd_gym.linearize and the LQR baseline (accd_gym.lqr).
+"""accd_gym.linearize and the LQR baseline (accd_gym.control.lqr).
 
 The linear model is checked against the nonlinear step it was taken from (errors shrink
 quadratically with the perturbation where the dynamics are smooth; crates/sim/tests/linearize.rs

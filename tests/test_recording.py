@@ -207,7 +207,7 @@ def test_format_doc_lists_every_array_as_recorded():
 
     doc = (Path(__file__).parents[1] / "docs" / "recording-format.md").read_text()
     table = fields_markdown()
-    assert table in doc, "docs/recording-format.md: regenerate the table with accd_gym.recording.fields_markdown()"
+    assert table in doc, "docs/recording-format.md: regenerate the table with accd_gym.replays.recording.fields_markdown()"
     (rec,) = record_episodes("zero", 1, config=dict(SHORT, capture_window=1.0), seed=BASE, num_envs=1)
     rows = [r.split("|")[1:4] for r in table.splitlines()[2:]]
     assert {name.strip(" `") for name, _, _ in rows} == set(rec.arrays)

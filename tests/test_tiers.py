@@ -1,4 +1,4 @@
-"""The benchmark tiers (accd_gym.tiers) and randomized physics as users meet them: registered ids,
+"""The benchmark tiers (accd_gym.envs.tiers) and randomized physics as users meet them: registered ids,
 overrides merged section by section, generated docs, per-episode parameters that are a function of
 the wake seed alone (so training and held-out parameter sets are disjoint like the wake seeds), the
 same in every env class and batch size."""

@@ -81,7 +81,7 @@ else:
 
     def __getattr__(name: str) -> Any:
         """Imports :class:`AccdVecEnv` (and with it stable-baselines3) on first use, and the modules
-        of the deprecated flat paths (``accd_gym.vector``: :mod:`accd_gym._aliases`); hidden from
+        of the deprecated flat paths (``accd_gym.envs.vector``: :mod:`accd_gym._aliases`); hidden from
         type checkers, which see the import above and nothing else."""
         if name == "AccdVecEnv":
             try:

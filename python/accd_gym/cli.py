@@ -303,7 +303,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="continue the interrupted run in folder RUN from its latest checkpoint to its total")
     p.add_argument("--timesteps", type=_positive("--timesteps"), help="override the config's total_timesteps")
     p.add_argument("--seed", type=_seed, help="override the config's seed")
-    p.add_argument("--tier", choices=list(TIERS), help="a benchmark tier (accd_gym.tiers): trained on with the config's env overrides on top")
+    p.add_argument("--tier", choices=list(TIERS), help="a benchmark tier (accd_gym.envs.tiers): trained on with the config's env overrides on top")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_train)
     p = sub.add_parser("evaluate", help="evaluate policies on held-out wake seeds: JSON, plots, markdown")
@@ -315,7 +315,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--num-threads", type=_nonnegative("--num-threads"), default=0,
                    help="threads stepping the envs (default 0: one per core)")
     p.add_argument("--env", help="environment config overrides as JSON, e.g. '{\"capture_window\": 30}'")
-    p.add_argument("--tier", choices=list(TIERS), help="a benchmark tier (accd_gym.tiers): its config, under --env")
+    p.add_argument("--tier", choices=list(TIERS), help="a benchmark tier (accd_gym.envs.tiers): its config, under --env")
     p.add_argument("--allow-unnormalized", action="store_true",
                    help="evaluate a model without its vecnormalize.pkl (observations passed raw)")
     p.add_argument("--replay", type=_nonnegative("--replay"), default=0, metavar="K",
@@ -337,7 +337,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--num-threads", type=_nonnegative("--num-threads"), default=0,
                    help="threads stepping the envs (default 0: one per core)")
     p.add_argument("--env", help="environment config overrides as JSON")
-    p.add_argument("--tier", choices=list(TIERS), help="a benchmark tier (accd_gym.tiers): its config, under --env")
+    p.add_argument("--tier", choices=list(TIERS), help="a benchmark tier (accd_gym.envs.tiers): its config, under --env")
     p.add_argument("--only", type=_nonnegative("--only"), action="append", metavar="K",
                    help="write only episode K of the --episodes run (repeatable; the others run unrecorded)")
     p.add_argument("--video", action="store_true", help="also write an MP4 per episode (imageio-ffmpeg)")
@@ -371,7 +371,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--num-threads", type=_nonnegative("--num-threads"), default=0,
                    help="threads stepping the envs (default 0: one per core)")
     p.add_argument("--env", help="environment config overrides as JSON")
-    p.add_argument("--tier", choices=list(TIERS), help="a benchmark tier (accd_gym.tiers): its config, under --env")
+    p.add_argument("--tier", choices=list(TIERS), help="a benchmark tier (accd_gym.envs.tiers): its config, under --env")
     p.add_argument("--allow-unnormalized", action="store_true",
                    help="run a model without its vecnormalize.pkl (observations passed raw)")
     p.add_argument("--json", action="store_true", help="also print every episode's metrics as JSON")

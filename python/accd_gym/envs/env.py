@@ -49,7 +49,7 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
     ## Observation Space
 
     ``Box(-10, 10, (25,), float32)``. Each value is a physical quantity times the scale below,
-    clipped to [-10, 10]; vectors in the TA frame. ``accd_gym.task.OBSERVATION_TABLE`` holds this
+    clipped to [-10, 10]; vectors in the TA frame. ``accd_gym.envs.task.OBSERVATION_TABLE`` holds this
     table in code.
 
     {OBSERVATION_TABLE}
@@ -62,7 +62,7 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
     body rates with per-episode biases and white noise, position/velocity and tension with white
     noise, and the whole vector ``sensors.delay_steps`` agent steps old. The reward, the episode
     end and ``info`` use the true state; the physics is bitwise that of the same seeds without
-    sensors (the sensors draw from their own stream). ``accd_gym.config.SENSORS_TIER`` is the
+    sensors (the sensors draw from their own stream). ``accd_gym.envs.config.SENSORS_TIER`` is the
     recommended benchmark setting. Models, assumptions and sources: ``docs/environment.md``,
     "Sensors", and the keys ``sensors.*`` below.
 
@@ -103,7 +103,7 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
     ## Seeds
 
     ``reset(seed=s)`` seeds the env: episode ``e`` after it draws its initial-condition, wake and
-    RLV seeds from ``(s, env index 0, e)`` (see ``accd_gym.task``). Training wake seeds come from
+    RLV seeds from ``(s, env index 0, e)`` (see ``accd_gym.envs.task``). Training wake seeds come from
     ``TRAINING_WAKE_SEEDS`` = [0, 10^9); ``HELD_OUT_WAKE_SEEDS`` = [10^9, 10^9 + 1000) are never
     drawn. ``reset(options={"wake_seed": w})`` fixes the wake seed, ``{"wake_seeds": [...]}``
     cycles through a list, ``{"wake_seed": None}`` returns to training draws; options persist over

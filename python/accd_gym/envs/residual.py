@@ -6,8 +6,8 @@ An env option of every env class (``residual={"base": "lqr", "scale": 0.3}``; se
     u_sent = clip(u_base(obs history) + scale * clip(a, -1, 1), -1, 1)
 
 ``a`` is the agent's action (the env's action space is unchanged, [-1, 1]^4), ``u_base`` the
-command of the base controller (:data:`BASES`: ``"lqr"``, :class:`accd_gym.lqr.LqrPolicy`
-designed for the env's configuration, or ``"guidance"``, :class:`accd_gym.baselines.GuidancePolicy`
+command of the base controller (:data:`BASES`: ``"lqr"``, :class:`accd_gym.control.lqr.LqrPolicy`
+designed for the env's configuration, or ``"guidance"``, :class:`accd_gym.control.baselines.GuidancePolicy`
 with its tuned gains) computed from the observations the agent gets (with sensors, the sensed
 ones: the base controllers read nothing else). The base controller's state (the LQR's Kalman
 filter, the guidance's integrators) starts afresh with every episode of its env, automatic

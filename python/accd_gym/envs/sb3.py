@@ -32,7 +32,7 @@ from accd_gym.envs.task import (
 class AccdVecEnv(CoreEnvMixin, VecEnv):
     """``num_envs`` In-Air Capturing episodes as a stable-baselines3 ``VecEnv``, stepped by Rust.
 
-    The task is that of :class:`accd_gym.env.InAirCaptureEnv` (see its docstring for the
+    The task is that of :class:`accd_gym.envs.env.InAirCaptureEnv` (see its docstring for the
     observation, action, reward and episode-end tables). It behaves as SB3's ``DummyVecEnv`` of
     single envs (``tests/test_vector_equivalence.py`` compares them step by step,
     ``tests/test_vector_rollouts.py`` whole rollouts of every registered tier):

@@ -48,7 +48,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
     """``num_envs`` In-Air Capturing episodes stepped together by the Rust core, on threads.
 
     The task (actions, observations, reward, episode end, seeds) is that of
-    :class:`accd_gym.env.InAirCaptureEnv`. The vector env behaves as gymnasium's
+    :class:`accd_gym.envs.env.InAirCaptureEnv`. The vector env behaves as gymnasium's
     ``SyncVectorEnv`` of single envs (``gymnasium.make_vec(..., vectorization_mode="sync")``):
     the same observations, rewards, flags and infos, dtypes included, in every autoreset mode and
     with partial resets (``tests/test_vector_equivalence.py`` compares them step by step,
@@ -218,7 +218,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         The new episode is the first one of a single env reset with ``seed=seed`` and
         ``options={"wake_seed": wake_seed}`` (``wake_seed=None``: a training draw of that seed),
         bit for bit; the other envs are left as they are and the batch's wake schedule for
-        later resets is kept. Held-out evaluation (:mod:`accd_gym.evaluation`) starts episode
+        later resets is kept. Held-out evaluation (:mod:`accd_gym.evals.evaluation`) starts episode
         ``k`` this way, which makes it independent of the batch size and of its place in a batch.
         """
         i = self._env_index(i)

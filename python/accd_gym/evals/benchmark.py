@@ -1,4 +1,4 @@
-"""The benchmark suite (``accd-gym benchmark``): every tier (:mod:`accd_gym.tiers`), learned policies
+"""The benchmark suite (``accd-gym benchmark``): every tier (:mod:`accd_gym.envs.tiers`), learned policies
 trained with several seeds, every baseline, the same held-out episodes, one report.
 
 ``accd-gym benchmark --config training/benchmark.json --out runs/benchmark`` calls :func:`run`:
@@ -20,7 +20,7 @@ trained with several seeds, every baseline, the same held-out episodes, one repo
    per tier and policy the capture rate (learned: the interquartile mean over seeds with a 95 %
    stratified bootstrap interval, and every seed's rate; baselines: the rate with its Wilson
    interval), the median miss distance and time to capture, and the paired exact McNemar test
-   (:func:`accd_gym.evaluation.mcnemar_exact`) of the best learned run against the best
+   (:func:`accd_gym.evals.evaluation.mcnemar_exact`) of the best learned run against the best
    classical baseline on the same episodes; a performance profile over every (tier, seed) run.
    ``--docs`` also writes the report to docs/benchmark.md and the plot to docs/figures/.
 
@@ -255,7 +255,7 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
 
     Resumable: a job whose run folder holds a result of the same :func:`job_key` is not run again
     (``"reused": true``); a run interrupted while training (Ctrl+C, a killed process) continues
-    from its latest checkpoint (:func:`accd_gym.training.resume`) to the same total; anything
+    from its latest checkpoint (:func:`accd_gym.learning.training.resume`) to the same total; anything
     else starts the run afresh."""
     from accd_gym.learning import training
     from accd_gym.envs.config import read_json_object
@@ -297,7 +297,7 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
 
 def _continues(run: Path, cfg: dict[str, Any]) -> bool:
     """``run`` holds an unfinished run of the training config ``cfg`` with a checkpoint, which
-    :func:`accd_gym.training.resume` continues (it refuses finished runs and runs without a
+    :func:`accd_gym.learning.training.resume` continues (it refuses finished runs and runs without a
     checkpoint; the config check is the benchmark's: another recipe starts afresh)."""
     from accd_gym.learning import training
 

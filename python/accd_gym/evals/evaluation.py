@@ -126,9 +126,9 @@ def evaluate(
     ``wake_seeds`` defaults to the first ``episodes`` held-out wake seeds. Returns the results
     document (also in ``out/results.json``). ``replay`` = K > 0 also writes replay pages and
     recordings of K episodes per policy (best, median, worst, ...;
-    :func:`accd_gym.replay.write_evaluation_replays`) under ``out/replays/``. ``ray_address``
+    :func:`accd_gym.replays.replay.write_evaluation_replays`) under ``out/replays/``. ``ray_address``
     (``"local"``, ``"auto"`` or ``HOST:PORT``) runs the episodes as Ray tasks of ``ray_chunk``
-    episodes each (:mod:`accd_gym.distributed`): the same results bit for bit, plus
+    episodes each (:mod:`accd_gym.evals.distributed`): the same results bit for bit, plus
     ``out/ray_tasks.json`` (where each task ran, timings). ``num_threads`` is then per task (0:
     the task's CPUs).
     """

@@ -15,7 +15,7 @@ The file format (``Recording.save``) is a plain numpy ``.npz`` that loads withou
 ``docs/recording-format.md`` lists every array with its shape and unit.
 
 :func:`record_episodes` makes exactly the policy calls of
-:func:`accd_gym.evaluation.run_episodes` (same batch, seeds, episode order and same-step
+:func:`accd_gym.evals.evaluation.run_episodes` (same batch, seeds, episode order and same-step
 resets), so with the same arguments its episode ``k`` is the evaluation's episode ``k``, for
 stateful and random policies too (``tests/test_recording.py``).
 """
@@ -122,7 +122,7 @@ class Recording:
         return float(np.min(self.arrays["distance"]))
 
     def frame_data(self, k: int) -> dict[str, Any]:
-        """Sample ``k`` in the form :func:`accd_gym.render.render_frame` takes (what
+        """Sample ``k`` in the form :func:`accd_gym.envs.render.render_frame` takes (what
         ``BatchEnv.render_data`` returns), for videos made from a recording."""
         a = self.arrays
         return {
@@ -402,13 +402,13 @@ def record_episodes(
     """Runs ``policy`` for ``episodes`` episodes and returns their recordings in index order.
 
     ``policy``: an object with ``predict(obs_batch) -> actions`` (and optionally
-    ``reset(mask)``), or a spec for :func:`accd_gym.evaluation.load_policy` (a baseline name, a
+    ``reset(mask)``), or a spec for :func:`accd_gym.evals.evaluation.load_policy` (a baseline name, a
     guidance tuning file or a trained model; ``policy_seed`` seeds the random baseline).
     ``config``: env config overrides. ``seed``: the base seed of initial conditions and RLV
     motion (default the evaluation's, 20240607); ``wake_seeds``: episode ``k`` uses
     ``wake_seeds[k]`` (default the first ``episodes`` held-out wake seeds). ``num_envs``
     episodes run side by side on ``num_threads`` threads, as in
-    :func:`accd_gym.evaluation.run_episodes` with the same arguments, whose episodes these are.
+    :func:`accd_gym.evals.evaluation.run_episodes` with the same arguments, whose episodes these are.
     ``keep``: indices of the episodes to return (the others run, unrecorded).
     """
     recs = list(iter_recordings(policy, episodes, config=config, seed=seed, wake_seeds=wake_seeds,
