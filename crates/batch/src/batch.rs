@@ -13,6 +13,7 @@ use std::time::{Duration, Instant};
 use accd_sim::episode::EpisodeState;
 use accd_sim::state_format::{self, Expected, StateError, StateKind};
 use accd_sim::{EnvConfig, Episode, Equilibrium, Outcome, SimError, Valid, ACT_DIM, OBS_DIM};
+#[cfg(feature = "lockstep")]
 use accd_tether::LockstepWork;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -565,6 +566,7 @@ impl BatchEnv {
         let job = |mut rows: [Option<Row<'_>>; LANES]| {
             let steps: [bool; LANES] =
                 std::array::from_fn(|j| rows[j].as_mut().is_some_and(&prologue));
+            #[cfg(feature = "lockstep")]
             if steps.iter().all(|&s| s) {
                 let [Some(r0), Some(r1), Some(r2), Some(r3)] = &mut rows else {
                     unreachable!("all four step")
@@ -595,7 +597,11 @@ impl BatchEnv {
             }
         };
         // Runs of four rows where every thread gets at least one run; one row at a time below.
-        let run_len = if n >= LANES * self.threads { LANES } else { 1 };
+        let run_len = if cfg!(feature = "lockstep") && n >= LANES * self.threads {
+            LANES
+        } else {
+            1
+        };
         let pop = |queue| pop_rows(queue, run_len);
         // The plain step runs rayon's parallel iterator over the rows (no allocation); the
         // watched one shares them with the calling thread ([`crate::shared`]).
@@ -911,6 +917,7 @@ fn pop_rows<'q>(queue: &'q Queue<StepRows<'_>>, len: usize) -> Option<[Option<Ro
 /// Envs stepped together in a run ([`Episode::step_four`]).
 const LANES: usize = 4;
 
+#[cfg(feature = "lockstep")]
 thread_local! {
     /// The lanes' work space of the thread's runs of four (sized on its first run).
     static LOCKSTEP: std::cell::RefCell<LockstepWork> = std::cell::RefCell::new(LockstepWork::default());

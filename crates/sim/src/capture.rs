@@ -10,15 +10,15 @@
 //! the tether as the tip force, and its moment drives Euler's equations. Once per step, before
 //! the RK4 stages: the flap actuators, the boom and the air disturbance advance, and the air
 //! density is taken from ISA at the aircraft's altitude (varying linearly with depth below it).
-//! The quaternion is renormalised after each step. [`CaptureSim::step_four`] steps four
-//! simulations with their tethers' recursions four AVX2 lanes wide, each bit for bit its own
-//! step.
+//! The quaternion is renormalised after each step. With the `lockstep` feature,
+//! `CaptureSim::step_four` steps four simulations with their tethers' recursions four AVX2 lanes
+//! wide, each bit for bit its own step.
 
 use std::sync::Arc;
 
-use accd_tether::{
-    Atmosphere, Lockstep, LockstepWork, Rk4, Surroundings, System, TetherModel, TetherState,
-};
+use accd_tether::{Atmosphere, Rk4, Surroundings, System, TetherModel, TetherState};
+#[cfg(feature = "lockstep")]
+use accd_tether::{Lockstep, LockstepWork};
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -187,6 +187,7 @@ impl System for Coupled<'_> {
     }
 }
 
+#[cfg(feature = "lockstep")]
 impl Lockstep for Coupled<'_> {
     fn derivatives_four(
         systems: &mut [&mut Self; 4],
@@ -679,6 +680,7 @@ impl CaptureSim {
     /// recursion four AVX2 lanes wide ([`accd_tether::Rk4::advance_adaptive_four`]); everything
     /// else runs per simulation. Every simulation's result, error included, is bit for bit that
     /// of its own `step`. `work` is the lanes' work space (one per thread).
+    #[cfg(feature = "lockstep")]
     pub fn step_four(
         sims: [&mut CaptureSim; 4],
         commands: [[f64; 4]; 4],

@@ -5,7 +5,9 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
-use accd_tether::{LockstepWork, TetherState};
+#[cfg(feature = "lockstep")]
+use accd_tether::LockstepWork;
+use accd_tether::TetherState;
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -412,6 +414,7 @@ impl Episode {
     /// by one otherwise. Every episode's outcome, error included, is bit for bit that of its own
     /// `step_interruptible` (but for where a `stop` set meanwhile interrupts it). `work` is the
     /// lanes' work space (one per thread).
+    #[cfg(feature = "lockstep")]
     pub fn step_four(
         episodes: [&mut Episode; 4],
         actions: [&[f32]; 4],
