@@ -10,8 +10,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use accd_sim::episode::EpisodeState;
 use accd_sim::state_format::{self, Expected, StateError, StateKind};
+use accd_sim::task::episode::EpisodeState;
 use accd_sim::{EnvConfig, Episode, Equilibrium, Outcome, SimError, Valid, ACT_DIM, OBS_DIM};
 #[cfg(feature = "lockstep")]
 use accd_tether::LockstepWork;

@@ -66,7 +66,8 @@ fn each_episode_runs_the_physics_its_wake_seed_draws() {
         rope.max_tension(p.tether_diameter)
     );
     // Its own equilibrium: the one of its config, settled alone.
-    let own = Equilibrium::settle(&accd_sim::episode::drawn_config(&base, &p).unwrap()).unwrap();
+    let own =
+        Equilibrium::settle(&accd_sim::task::episode::drawn_config(&base, &p).unwrap()).unwrap();
     assert_eq!(e.equilibrium(), &own);
     // Another wake seed, other physics, another equilibrium; the same seed again, the same run.
     let first = run(&mut e, 20);

@@ -22,19 +22,19 @@ use accd_tether::{Lockstep, LockstepWork};
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::accd::{aero_loads, angular_acceleration, AccdState, Actuators, AeroLoads};
-use crate::aero::AeroModel;
-use crate::air::{AirDisturbance, AirState};
-use crate::aircraft::AircraftConfig;
-use crate::boom::{Boom, BoomState, CaptureStatus};
 use crate::config::CaptureConfig;
 use crate::error::{Result, SimError};
+use crate::physics::accd::{aero_loads, angular_acceleration, AccdState, Actuators, AeroLoads};
+use crate::physics::aero::AeroModel;
+use crate::physics::air::{AirDisturbance, AirState};
+use crate::physics::aircraft::AircraftConfig;
+use crate::physics::boom::{Boom, BoomState, CaptureStatus};
+use crate::physics::turbulence::Turbulence;
+use crate::physics::wake::{AirSampling, Wake};
+use crate::physics::wake_field::WakeField;
 use crate::rng::Seeds;
 use crate::state_format::check_len;
-use crate::turbulence::Turbulence;
 use crate::valid::Valid;
-use crate::wake::{AirSampling, Wake};
-use crate::wake_field::WakeField;
 
 type V3 = Vector3<f64>;
 

@@ -11,19 +11,20 @@ use accd_tether::TetherState;
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::accd::AccdState;
-use crate::capture::{CaptureSim, CaptureState, Snapshot};
 use crate::error::{Result, SimError};
-use crate::randomization::Parameters;
+use crate::physics::accd::AccdState;
+use crate::physics::capture::{CaptureSim, CaptureState, Snapshot};
+use crate::physics::turbulence::AmbientTurbulence;
+use crate::physics::wake::AirSampling;
 use crate::rng::{Seeds, Stream};
-use crate::sensors::{SensorState, Sensors};
 use crate::state_format::{check_len, StateError};
-use crate::task::{
-    observe, observe_sensed, tilt, EnvConfig, ObservationInputs, ACT_DIM, OBS_DIM, SENSED_LAYOUT,
+use crate::task::config::EnvConfig;
+use crate::task::observation::{
+    observe, observe_sensed, tilt, ObservationInputs, ACT_DIM, OBS_DIM, SENSED_LAYOUT,
 };
-use crate::turbulence::AmbientTurbulence;
+use crate::task::randomization::Parameters;
+use crate::task::sensors::{SensorState, Sensors};
 use crate::valid::Valid;
-use crate::wake::AirSampling;
 
 type V3 = Vector3<f64>;
 
