@@ -80,8 +80,8 @@
 //!   and comes from the vectorized loads pass (`chain.rs`).
 //! * The forward step is `a_{k+1} = (a_k + l (w_k + E_k y_k)) - E_k (l G_k a_k)`, where
 //!   `l G_k a_k` also gives `u_k`.
-//! * The three steps are written once, over a lane type ([`Lane`]): one chain per call in `f64`
-//!   ([`One`], the single model's path), or, with the `lockstep` feature on x86-64, four chains
+//! * The three steps are written once, over a lane type (`Lane`): one chain per call in `f64`
+//!   (`One`, the single model's path), or, with the `lockstep` feature on x86-64, four chains
 //!   (four envs of a batch) one per AVX2 lane (`recursive/lockstep.rs`,
 //!   `TetherModel::accelerations_four`). One chain's sweeps are a chain of dependent
 //!   operations (`B_{k+1}` -> `B E` -> `K` -> `det` -> `1/det` -> `B_k`), bound by latency; four
