@@ -1,4 +1,4 @@
-//! Randomized physics (crates/sim/src/randomization.rs): each episode's parameters come from its
+//! Randomized physics (crates/sim/src/task/randomization.rs): each episode's parameters come from its
 //! wake seed's own stream, the episode runs the physics they name (its own equilibrium, its boom
 //! placed relative to it), nothing else of the episode moves, and saved states carry their physics.
 
