@@ -5,7 +5,7 @@ bitwise those of the same seeds and actions without them. The single env, the na
 vector env and the SB3 VecEnv sense the same observations for the same seeds (against
 gymnasium's ``SyncVectorEnv`` and SB3's ``DummyVecEnv`` of single envs, exactly, across
 automatic resets). A state saved mid-episode with sensors continues bit for bit. The sensor
-statistics themselves are tested in Rust (``crates/sim/src/sensors.rs``); here one of them is
+statistics themselves are tested in Rust (``crates/sim/src/task/sensors.rs``); here one of them is
 checked across the boundary against an independent computation.
 """
 

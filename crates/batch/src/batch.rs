@@ -10,9 +10,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use accd_sim::episode::EpisodeState;
 use accd_sim::state_format::{self, Expected, StateError, StateKind};
+use accd_sim::task::episode::EpisodeState;
 use accd_sim::{EnvConfig, Episode, Equilibrium, Outcome, SimError, Valid, ACT_DIM, OBS_DIM};
+#[cfg(feature = "lockstep")]
 use accd_tether::LockstepWork;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -503,12 +504,69 @@ impl BatchEnv {
         }
     }
 
+    /// [`BatchEnv::step`] (`watch` None) or [`BatchEnv::step_interruptible`].
     fn step_watched(
         &mut self,
         actions: &[f32],
         out: StepBuffers<'_>,
         watch: Option<&mut dyn FnMut() -> bool>,
     ) -> Result<()> {
+        self.check_step(actions, &out)?;
+        let n = self.slots.len();
+        let stop = AtomicBool::new(false);
+        let stepper = RowStepper {
+            mode: self.autoreset,
+            schedule: &self.schedule,
+            n: n as u64,
+            stop: &stop,
+        };
+        // Runs of four rows where every thread gets at least one run; one row at a time below.
+        let run_len = if cfg!(feature = "lockstep") && n >= LANES * self.threads {
+            LANES
+        } else {
+            1
+        };
+        let queue = Queue::new(StepRows::new(&mut self.slots, actions, out));
+        let take_run = || match pop_rows(&queue, run_len) {
+            Some(rows) => {
+                stepper.step(rows);
+                true
+            }
+            None => false,
+        };
+        match watch {
+            None => {
+                // Rayon's parallel iterator over the runs (no allocation).
+                let pool = &self.pool;
+                run(&mut self.poisoned, || {
+                    pool.install(|| {
+                        (0..n.div_ceil(run_len))
+                            .into_par_iter()
+                            .for_each(|_| _ = take_run())
+                    })
+                })?;
+            }
+            Some(interrupted) => {
+                let threads = self.threads;
+                let share = self.env_step_time.is_some_and(|t| t < SHARE_BELOW);
+                let start = Instant::now();
+                run(&mut self.poisoned, || {
+                    share_rows(&self.pool, threads, n, share, &take_run, &stop, interrupted)
+                })?;
+                if !stop.load(Ordering::Relaxed) {
+                    self.env_step_time = Some(start.elapsed() * threads as u32 / n as u32);
+                }
+            }
+        }
+        if stop.load(Ordering::Relaxed) {
+            return Err(self.interrupted_step());
+        }
+        Ok(())
+    }
+
+    /// What a step refuses before any env steps: a poisoned or interrupted batch, buffers of the
+    /// wrong sizes, a non-finite action, an ended env under disabled autoreset.
+    fn check_step(&self, actions: &[f32], out: &StepBuffers<'_>) -> Result<()> {
         self.check_poisoned()?;
         self.check_consistent()?;
         let n = self.slots.len();
@@ -533,161 +591,21 @@ impl BatchEnv {
                 return Err(BatchError::ResetNeeded { env });
             }
         }
-        let mode = self.autoreset;
-        let schedule = &self.schedule;
-        let n64 = n as u64;
-        let stop = AtomicBool::new(false);
-        let rows = StepRows::new(&mut self.slots, actions, out);
-        // Before its step: a pending reset starts the next episode (the row is done); returns
-        // whether the row's episode steps.
-        let prologue = |row: &mut Row<'_>| -> bool {
-            let ((position, slot), _, obs, _, info, reward, terminated, truncated, wake, reset) =
-                row;
-            **reset = false;
-            slot.final_divergence = None;
-            if slot.pending_reset {
-                slot.pending_reset = false;
-                slot.index += 1;
-                let outcome = restart(slot, *position as u64, n64, schedule);
-                obs.copy_from_slice(slot.episode.observation());
-                **reward = 0.0;
-                **terminated = outcome.is_some();
-                **truncated = false;
-                **reset = true;
-                **wake = slot.episode.seeds().wake;
-                write_info(info, &outcome.unwrap_or_default(), 0);
-                return false;
-            }
-            **wake = slot.episode.seeds().wake;
-            // Interrupted: this env is left as it was.
-            !stop.load(Ordering::Relaxed)
-        };
-        // After its step: the outputs, and the automatic reset of an ended episode.
-        let epilogue = |row: &mut Row<'_>, result: std::result::Result<Outcome, SimError>| {
-            let ((position, slot), _, obs, final_obs, info, reward, terminated, truncated, _, _) =
-                row;
-            let o = match result {
-                Ok(o) => o,
-                Err(SimError::Interrupted { .. }) => return,
-                // Actions were checked; a remaining error is a divergence (a panic is a bug:
-                // it poisons the batch, see `run`).
-                Err(_) => Outcome {
-                    terminated: true,
-                    diverged: true,
-                    ..Outcome::default()
-                },
-            };
-            **reward = o.reward;
-            **terminated = o.terminated;
-            **truncated = o.truncated;
-            write_info(info, &o, slot.episode.steps());
-            obs.copy_from_slice(slot.episode.observation());
-            if o.terminated || o.truncated {
-                match mode {
-                    Autoreset::NextStep | Autoreset::Disabled => slot.pending_reset = true,
-                    Autoreset::SameStep => {
-                        final_obs.copy_from_slice(obs);
-                        if o.diverged {
-                            slot.final_divergence = slot.episode.divergence().map(str::to_owned);
-                        }
-                        slot.index += 1;
-                        restart(slot, *position as u64, n64, schedule);
-                        obs.copy_from_slice(slot.episode.observation());
-                    }
-                }
-            }
-        };
-        // A run of up to LANES rows: four that step run together (`Episode::step_four`, the
-        // tether's recursion four AVX2 lanes wide), bit for bit as one by one.
-        let job = |mut rows: [Option<Row<'_>>; LANES]| {
-            let steps: [bool; LANES] =
-                std::array::from_fn(|j| rows[j].as_mut().is_some_and(&prologue));
-            if steps.iter().all(|&s| s) {
-                let [Some(r0), Some(r1), Some(r2), Some(r3)] = &mut rows else {
-                    unreachable!("all four step")
-                };
-                let results = LOCKSTEP.with_borrow_mut(|work| {
-                    Episode::step_four(
-                        [
-                            &mut r0.0 .1.episode,
-                            &mut r1.0 .1.episode,
-                            &mut r2.0 .1.episode,
-                            &mut r3.0 .1.episode,
-                        ],
-                        [r0.1, r1.1, r2.1, r3.1],
-                        &stop,
-                        work,
-                    )
-                });
-                for (row, result) in rows.iter_mut().zip(results) {
-                    epilogue(row.as_mut().expect("all four step"), result);
-                }
-                return;
-            }
-            for (row, steps) in rows.iter_mut().zip(steps) {
-                if let (Some(row), true) = (row, steps) {
-                    let result = row.0 .1.episode.step_interruptible(row.1, &stop);
-                    epilogue(row, result);
-                }
-            }
-        };
-        // Runs of four rows where every thread gets at least one run; one row at a time below.
-        let run_len = if n >= LANES * self.threads { LANES } else { 1 };
-        let pop = |queue| pop_rows(queue, run_len);
-        // The plain step runs rayon's parallel iterator over the rows (no allocation); the
-        // watched one shares them with the calling thread ([`crate::shared`]).
-        let pool = &self.pool;
-        let queue = Queue::new(rows);
-        match watch {
-            None => run(&mut self.poisoned, || {
-                pool.install(|| {
-                    (0..n.div_ceil(run_len)).into_par_iter().for_each(|_| {
-                        if let Some(rows) = pop(&queue) {
-                            job(rows)
-                        }
-                    })
-                })
-            })?,
-            Some(interrupted) => {
-                // Long env steps (unusual configs) run on the pool alone, the caller watching.
-                let share = self.env_step_time.is_some_and(|t| t < SHARE_BELOW);
-                // (With n envs the caller takes one: more than n - 1 helpers would only be
-                // waited for.)
-                let helpers = if share {
-                    (self.threads - 1).min(n - 1)
-                } else {
-                    self.threads
-                };
-                let take_one = || pop(&queue).map(job).is_some();
-                let start = Instant::now();
-                run(&mut self.poisoned, || {
-                    run_shared(
-                        pool,
-                        helpers,
-                        share,
-                        &take_one,
-                        &stop,
-                        WATCH_INTERVAL,
-                        interrupted,
-                    )
-                })?;
-                if !stop.load(Ordering::Relaxed) {
-                    self.env_step_time = Some(start.elapsed() * self.threads as u32 / n as u32);
-                }
-            }
-        }
-        if stop.load(Ordering::Relaxed) {
-            for slot in &mut self.slots {
-                slot.interrupted = true;
-            }
-            let time = self.slots.first().map_or(0.0, |s| s.episode.sim().time());
-            return Err(SimError::Interrupted {
-                time,
-                what: format!("a step of {n} envs"),
-            }
-            .into());
-        }
         Ok(())
+    }
+
+    /// After an interrupted step: every env may be part-way through it, so each is marked to
+    /// refuse steps and saves until a reset or restore; the error of the step.
+    fn interrupted_step(&mut self) -> BatchError {
+        for slot in &mut self.slots {
+            slot.interrupted = true;
+        }
+        let time = self.slots.first().map_or(0.0, |s| s.episode.sim().time());
+        SimError::Interrupted {
+            time,
+            what: format!("a step of {} envs", self.slots.len()),
+        }
+        .into()
     }
 
     /// Fails with [`BatchError::Internal`] once a step or reset has panicked.
@@ -833,18 +751,20 @@ pub struct SlotState {
 }
 
 /// One env's share of a step: its slot, action and output rows.
-type Row<'a> = (
-    (usize, &'a mut Slot),
-    &'a [f32],
-    &'a mut [f32],
-    &'a mut [f32],
-    &'a mut [f64],
-    &'a mut f64,
-    &'a mut bool,
-    &'a mut bool,
-    &'a mut u64,
-    &'a mut bool,
-);
+struct Row<'a> {
+    /// The env's index in the batch.
+    env: usize,
+    slot: &'a mut Slot,
+    action: &'a [f32],
+    obs: &'a mut [f32],
+    final_obs: &'a mut [f32],
+    info: &'a mut [f64],
+    reward: &'a mut f64,
+    terminated: &'a mut bool,
+    truncated: &'a mut bool,
+    wake_seed: &'a mut u64,
+    autoreset: &'a mut bool,
+}
 
 /// A step's slots, actions and output buffers, lent out env by env ([`Row`]) to the threads of
 /// the step through a [`Queue`]. Holds the exclusive borrows it was made from for its lifetime.
@@ -907,18 +827,19 @@ unsafe impl Rows for StepRows<'_> {
 
     unsafe fn row(&self, i: usize) -> Row<'_> {
         use std::slice::from_raw_parts_mut as chunk;
-        (
-            (i, &mut *self.slots.add(i)),
-            &self.actions[i * ACT_DIM..(i + 1) * ACT_DIM],
-            chunk(self.obs.add(i * OBS_DIM), OBS_DIM),
-            chunk(self.final_obs.add(i * OBS_DIM), OBS_DIM),
-            chunk(self.info.add(i * info::DIM), info::DIM),
-            &mut *self.reward.add(i),
-            &mut *self.terminated.add(i),
-            &mut *self.truncated.add(i),
-            &mut *self.wake_seed.add(i),
-            &mut *self.autoreset.add(i),
-        )
+        Row {
+            env: i,
+            slot: &mut *self.slots.add(i),
+            action: &self.actions[i * ACT_DIM..(i + 1) * ACT_DIM],
+            obs: chunk(self.obs.add(i * OBS_DIM), OBS_DIM),
+            final_obs: chunk(self.final_obs.add(i * OBS_DIM), OBS_DIM),
+            info: chunk(self.info.add(i * info::DIM), info::DIM),
+            reward: &mut *self.reward.add(i),
+            terminated: &mut *self.terminated.add(i),
+            truncated: &mut *self.truncated.add(i),
+            wake_seed: &mut *self.wake_seed.add(i),
+            autoreset: &mut *self.autoreset.add(i),
+        }
     }
 }
 
@@ -945,9 +866,148 @@ fn pop_rows<'q>(queue: &'q Queue<StepRows<'_>>, len: usize) -> Option<[Option<Ro
     Some(std::array::from_fn(|_| rows.next()))
 }
 
+/// What every row of a step shares: the autoreset mode, the wake-seed schedule of new episodes,
+/// the number of envs and the flag that stops the step.
+struct RowStepper<'s> {
+    mode: Autoreset,
+    schedule: &'s WakeSchedule,
+    n: u64,
+    stop: &'s AtomicBool,
+}
+
+impl RowStepper<'_> {
+    /// Steps a run of up to [`LANES`] rows: each row's [`RowStepper::begin`], then the rows whose
+    /// episode steps, four together where all four do (`Episode::step_four`, the tether's
+    /// recursion four AVX2 lanes wide, bit for bit as one by one), and each row's
+    /// [`RowStepper::finish`].
+    fn step(&self, mut rows: [Option<Row<'_>>; LANES]) {
+        let steps: [bool; LANES] =
+            std::array::from_fn(|j| rows[j].as_mut().is_some_and(|row| self.begin(row)));
+        #[cfg(feature = "lockstep")]
+        if steps.iter().all(|&s| s) {
+            let [Some(r0), Some(r1), Some(r2), Some(r3)] = &mut rows else {
+                unreachable!("all four step")
+            };
+            let results = LOCKSTEP.with_borrow_mut(|work| {
+                Episode::step_four(
+                    [
+                        &mut r0.slot.episode,
+                        &mut r1.slot.episode,
+                        &mut r2.slot.episode,
+                        &mut r3.slot.episode,
+                    ],
+                    [r0.action, r1.action, r2.action, r3.action],
+                    self.stop,
+                    work,
+                )
+            });
+            for (row, result) in rows.iter_mut().zip(results) {
+                self.finish(row.as_mut().expect("all four step"), result);
+            }
+            return;
+        }
+        for (row, steps) in rows.iter_mut().zip(steps) {
+            if let (Some(row), true) = (row, steps) {
+                let result = row.slot.episode.step_interruptible(row.action, self.stop);
+                self.finish(row, result);
+            }
+        }
+    }
+
+    /// Before the row's step: a pending reset starts the next episode (the row is then done).
+    /// Returns whether the row's episode steps.
+    fn begin(&self, row: &mut Row<'_>) -> bool {
+        let slot = &mut *row.slot;
+        *row.autoreset = false;
+        slot.final_divergence = None;
+        if slot.pending_reset {
+            slot.pending_reset = false;
+            slot.index += 1;
+            let outcome = restart(slot, row.env as u64, self.n, self.schedule);
+            row.obs.copy_from_slice(slot.episode.observation());
+            *row.reward = 0.0;
+            *row.terminated = outcome.is_some();
+            *row.truncated = false;
+            *row.autoreset = true;
+            *row.wake_seed = slot.episode.seeds().wake;
+            write_info(row.info, &outcome.unwrap_or_default(), 0);
+            return false;
+        }
+        *row.wake_seed = slot.episode.seeds().wake;
+        // Interrupted: this env is left as it was.
+        !self.stop.load(Ordering::Relaxed)
+    }
+
+    /// After the row's step: its outputs, and the automatic reset of an ended episode.
+    fn finish(&self, row: &mut Row<'_>, result: std::result::Result<Outcome, SimError>) {
+        let o = match result {
+            Ok(o) => o,
+            Err(SimError::Interrupted { .. }) => return,
+            // Actions were checked; a remaining error is a divergence (a panic is a bug: it
+            // poisons the batch, see `run`).
+            Err(_) => Outcome {
+                terminated: true,
+                diverged: true,
+                ..Outcome::default()
+            },
+        };
+        let slot = &mut *row.slot;
+        *row.reward = o.reward;
+        *row.terminated = o.terminated;
+        *row.truncated = o.truncated;
+        write_info(row.info, &o, slot.episode.steps());
+        row.obs.copy_from_slice(slot.episode.observation());
+        if o.terminated || o.truncated {
+            match self.mode {
+                Autoreset::NextStep | Autoreset::Disabled => slot.pending_reset = true,
+                Autoreset::SameStep => {
+                    row.final_obs.copy_from_slice(row.obs);
+                    if o.diverged {
+                        slot.final_divergence = slot.episode.divergence().map(str::to_owned);
+                    }
+                    slot.index += 1;
+                    restart(slot, row.env as u64, self.n, self.schedule);
+                    row.obs.copy_from_slice(slot.episode.observation());
+                }
+            }
+        }
+    }
+}
+
+/// Runs `take_run` (which steps the next run of rows and says whether there was one) until no
+/// row is left, on the pool's threads and, where `share`, on the calling thread too, which asks
+/// `interrupted()` between its runs and while it waits ([`run_shared`]). Long env steps
+/// (unusual configs) run on the pool alone, the caller watching.
+fn share_rows(
+    pool: &rayon::ThreadPool,
+    threads: usize,
+    n: usize,
+    share: bool,
+    take_run: &(dyn Fn() -> bool + Sync),
+    stop: &AtomicBool,
+    interrupted: &mut dyn FnMut() -> bool,
+) {
+    // With n envs the caller takes one: more than n - 1 helpers would only be waited for.
+    let helpers = if share {
+        (threads - 1).min(n - 1)
+    } else {
+        threads
+    };
+    run_shared(
+        pool,
+        helpers,
+        share,
+        take_run,
+        stop,
+        WATCH_INTERVAL,
+        interrupted,
+    )
+}
+
 /// Envs stepped together in a run ([`Episode::step_four`]).
 const LANES: usize = 4;
 
+#[cfg(feature = "lockstep")]
 thread_local! {
     /// The lanes' work space of the thread's runs of four (sized on its first run).
     static LOCKSTEP: std::cell::RefCell<LockstepWork> = std::cell::RefCell::new(LockstepWork::default());

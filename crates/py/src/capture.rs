@@ -1,6 +1,6 @@
 //! `accd_gym.CaptureSim`: one capture episode's physics for scripted (non-RL) runs.
 
-use accd_sim::accd::mix;
+use accd_sim::physics::accd::mix;
 use accd_sim::{CaptureConfig, CaptureSim, Seeds, SimError, Snapshot, Valid};
 use accd_tether::TetherConfig;
 use nalgebra::Vector3;

@@ -1,5 +1,5 @@
 //! `accd_gym._core.linearize`: the discrete-time linear model of a configuration's capture
-//! dynamics about its trim ([`accd_sim::linearize`]), and the nonlinear step it was taken from.
+//! dynamics about its trim ([`accd_sim::task::linearize`]), and the nonlinear step it was taken from.
 
 use accd_sim::{Linearized, SimError, ACT_DIM};
 use nalgebra::DMatrix;
@@ -164,7 +164,7 @@ impl PyLinearization {
 }
 
 /// Linearizes the configuration's capture dynamics over one agent step about its trim
-/// (``accd_sim::linearize``); interruptible (Ctrl+C) between evaluations.
+/// (``accd_sim::task::linearize``); interruptible (Ctrl+C) between evaluations.
 #[pyfunction]
 pub fn linearize(py: Python<'_>, config: &PyEnvConfig) -> PyResult<PyLinearization> {
     let config = &config.inner;

@@ -7,7 +7,7 @@
 
 use std::path::PathBuf;
 
-use accd_sim::wake::AnalyticWake;
+use accd_sim::physics::wake::AnalyticWake;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dir = PathBuf::from(std::env::args().nth(1).unwrap_or_else(|| ".".into()));

@@ -7,13 +7,13 @@ use accd_spec::{join, out_of_range, Fields, OutOfRange, Rules};
 use accd_tether::TetherConfig;
 use serde::{Deserialize, Serialize};
 
-use crate::accd::AccdConfig;
-use crate::aircraft::AircraftConfig;
-use crate::boom::BoomConfig;
 use crate::error::{Result, SimError};
-use crate::turbulence::TurbulenceConfig;
+use crate::physics::accd::AccdConfig;
+use crate::physics::aircraft::AircraftConfig;
+use crate::physics::boom::BoomConfig;
+use crate::physics::turbulence::TurbulenceConfig;
+use crate::physics::wake::WakeConfig;
 use crate::valid::Valid;
-use crate::wake::WakeConfig;
 
 accd_spec::config_struct! {
     /// Everything that defines an episode's physics: one section a physics part. Missing keys
@@ -97,12 +97,12 @@ pub(crate) fn parse_json<T: serde::de::DeserializeOwned>(text: &str, _what: &str
 
 /// Rules between the fields of a physics configuration (each field's own range is checked by
 /// its part): the flap limit within the default aerodynamic table's deflection range (a user
-/// table is checked when loaded, [`crate::accd::AccdConfig::aero_model`]), and a tether step
+/// table is checked when loaded, [`crate::physics::accd::AccdConfig::aero_model`]), and a tether step
 /// that substepping can keep stable at the tension the tow is estimated to reach
 /// ([`accd_tether::TetherConfig::check_stability`]).
 pub fn check_cross_fields(config: &CaptureConfig) -> std::result::Result<(), OutOfRange> {
     if config.accd.aero_table.is_none() {
-        let range = crate::aero::DEFAULT_DEFLECTION_LIMIT_DEG;
+        let range = crate::physics::aero::DEFAULT_DEFLECTION_LIMIT_DEG;
         if config.accd.flap_limit_deg > range {
             return Err(out_of_range(
                 "accd.flap_limit_deg",

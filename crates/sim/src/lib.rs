@@ -9,65 +9,58 @@
 //! at the tether attachment.
 //!
 //! # Modules, by concept (no import cycle: `tests/module_graph.rs`)
-//! * configuration: [`config`] (the physics' [`CaptureConfig`], its cross-field rules, reading
-//!   JSON documents), [`valid`] (a validated configuration, what the constructors take);
-//! * tables: [`interp`] (grid look-ups), [`aero`] (the ACCD's coefficient tables),
-//!   [`table_file`] (reading a user's table file: regular files of bounded size only);
-//! * the air: [`air`] (the [`AirDisturbance`] interface), [`wake`] (mean wake: tables and the
-//!   analytic model), [`turbulence`], [`wake_field`] (wake + turbulence as one field);
-//! * bodies and scene: [`accd`] (the capturing device, flaps, loads), [`aircraft`], [`boom`];
-//! * the simulation: [`capture`] (the coupled step, one RK4 of [`accd_tether::Rk4`]), [`rng`]
-//!   (named, seeded streams), [`state_format`] (the snapshot format; each state type lives
-//!   beside its owner);
-//! * the task: [`task`] (task configuration, observation table, reward, episode end),
-//!   [`sensors`] (the opt-in sensor model of the observation), [`episode`] (one RL episode).
+//! * [`physics`]: the world of one capture, nothing of the RL task. Tables: [`physics::interp`]
+//!   (grid look-ups), [`physics::aero`] (the ACCD's coefficient tables); the air: [`physics::air`]
+//!   (the [`AirDisturbance`] interface), [`physics::wake`] (mean wake: tables and the analytic
+//!   model), [`physics::turbulence`], [`physics::wake_field`] (wake + turbulence as one field);
+//!   bodies and scene: [`physics::accd`] (the capturing device, flaps, loads),
+//!   [`physics::aircraft`], [`physics::boom`]; the coupled step: [`physics::capture`] (one RK4 of
+//!   [`accd_tether::Rk4`]).
+//! * [`task`]: the RL task on top of it. [`task::config`] (the task's [`EnvConfig`]),
+//!   [`task::observation`] (the observation table), [`task::sensors`] (the opt-in sensor model of
+//!   the observation), [`task::randomization`] (domain randomization), [`task::episode`] (one RL
+//!   episode: reset, step, reward, episode end), [`task::linearize`] (the plant linearized about
+//!   the equilibrium, for controller design).
+//! * Shared by both: [`config`] (the physics' [`CaptureConfig`], its cross-field rules, reading
+//!   JSON documents), [`valid`] (a validated configuration, what the constructors take),
+//!   [`error`], [`table_file`] (reading a user's table file: regular files of bounded size only),
+//!   [`rng`] (named, seeded streams), [`state_format`] (the snapshot format; each
+//!   state type lives beside its owner).
 
 #![warn(missing_docs)]
 
-pub mod accd;
-pub mod aero;
-pub mod air;
-pub mod aircraft;
-pub mod boom;
-pub mod capture;
 pub mod config;
-pub mod episode;
 pub mod error;
-pub mod interp;
-pub mod linearize;
-pub mod randomization;
+pub mod physics;
 pub mod rng;
-pub mod sensors;
 pub mod state_format;
 pub mod table_file;
 pub mod task;
-pub mod turbulence;
 pub mod valid;
-pub mod wake;
-pub mod wake_field;
 
-pub use accd::{AccdConfig, AccdState};
-pub use aero::AeroModel;
-pub use air::{AirDisturbance, AirState};
-pub use aircraft::AircraftConfig;
-pub use boom::{BoomConfig, BoomPlacement, CaptureStatus};
-pub use capture::{CaptureSim, CaptureState, Snapshot};
 pub use config::CaptureConfig;
-pub use episode::{Episode, Equilibrium, Outcome};
 pub use error::SimError;
-pub use linearize::{linearize, Linearization, Linearized};
-pub use randomization::{Parameters, RandomizationConfig};
-pub use rng::{NormalSampler, Seeds};
-pub use sensors::{SensorState, Sensors, SensorsConfig};
-pub use state_format::StateError;
-pub use task::{
-    observation_index, EnvConfig, ObservationField, ObservationInputs, ACT_DIM, OBSERVATION,
-    OBS_BOUND, OBS_DIM,
-};
-pub use turbulence::{AmbientTurbulence, LaneStreams, Turbulence, TurbulenceConfig};
-pub use valid::Valid;
-pub use wake::{
+pub use physics::accd::{AccdConfig, AccdState};
+pub use physics::aero::AeroModel;
+pub use physics::air::{AirDisturbance, AirState};
+pub use physics::aircraft::AircraftConfig;
+pub use physics::boom::{BoomConfig, BoomPlacement, CaptureStatus};
+pub use physics::capture::{CaptureSim, CaptureState, Snapshot};
+pub use physics::turbulence::{AmbientTurbulence, LaneStreams, Turbulence, TurbulenceConfig};
+pub use physics::wake::{
     AirSampling, AnalyticWake, Wake, WakeConfig, WakeSample, WakeTable, WakeTableData,
     WakeTableFiles, WakeTables,
 };
-pub use wake_field::WakeField;
+pub use physics::wake_field::WakeField;
+pub use rng::{NormalSampler, Seeds};
+pub use state_format::StateError;
+pub use task::config::{EnvConfig, InitialConfig, LimitsConfig, RewardConfig};
+pub use task::episode::{Episode, EpisodeState, Equilibrium, Outcome};
+pub use task::linearize::{linearize, Linearization, Linearized};
+pub use task::observation::{
+    observation_index, ObservationField, ObservationInputs, ACT_DIM, OBSERVATION, OBS_BOUND,
+    OBS_DIM,
+};
+pub use task::randomization::{Parameters, RandomizationConfig};
+pub use task::sensors::{SensorState, Sensors, SensorsConfig};
+pub use valid::Valid;

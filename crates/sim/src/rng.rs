@@ -5,7 +5,7 @@
 //!   256-bit key is four successive SplitMix64 outputs started at the seed (little-endian), and
 //!   whose ChaCha stream (nonce) is a fixed label per use ([`WAKE_LANES_STREAM`],
 //!   [`AMBIENT_STREAM`], [`RLV_STREAM`], [`SENSOR_STREAM`]; the initial conditions' label is
-//!   `crate::episode::INITIAL_STREAM`). SplitMix64's output function is a bijective avalanche
+//!   `crate::task::episode::INITIAL_STREAM`). SplitMix64's output function is a bijective avalanche
 //!   mix, so neighbouring seeds give unrelated keys; distinct labels give independent streams.
 //! * **Gaussians** ([`Stream::gaussian`]), by one of two samplers ([`NormalSampler`]):
 //!   - **Box-Muller**, written here, on two uniforms from the top 53 bits of one `u64` each,
@@ -35,7 +35,7 @@ pub const AMBIENT_STREAM: u64 = u64::from_be_bytes(*b"AMBIENT ");
 pub const RLV_STREAM: u64 = u64::from_be_bytes(*b"RLV BOOM");
 
 /// ChaCha stream label of the sensor model's noise, biases and dropouts ("SENSORS " in ASCII;
-/// keyed by the episode's initial-conditions seed, [`crate::sensors`]). No physics stream reads
+/// keyed by the episode's initial-conditions seed, [`crate::task::sensors`]). No physics stream reads
 /// it, so switching the sensors on changes no physics.
 pub const SENSOR_STREAM: u64 = u64::from_be_bytes(*b"SENSORS ");
 
@@ -204,7 +204,7 @@ mod tests {
             AMBIENT_STREAM,
             RLV_STREAM,
             SENSOR_STREAM,
-            crate::episode::INITIAL_STREAM,
+            crate::task::episode::INITIAL_STREAM,
         ];
         for (i, a) in labels.iter().enumerate() {
             assert!(labels[i + 1..].iter().all(|b| a != b), "{a:x}");

@@ -438,14 +438,14 @@ pub fn decode<T: DeserializeOwned>(bytes: &[u8], expected: &Expected) -> Result<
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::air::AirState;
-    use crate::boom::BoomState;
-    use crate::capture::CaptureState;
-    use crate::episode::EpisodeState;
+    use crate::physics::air::AirState;
+    use crate::physics::boom::BoomState;
+    use crate::physics::capture::CaptureState;
+    use crate::physics::turbulence::{LaneState, TurbulenceState};
     use crate::rng::{ChaChaState, Seeds, StreamState};
-    use crate::sensors::SensorState;
-    use crate::task::ACT_DIM;
-    use crate::turbulence::{LaneState, TurbulenceState};
+    use crate::task::episode::EpisodeState;
+    use crate::task::observation::ACT_DIM;
+    use crate::task::sensors::SensorState;
     use serde::Deserialize;
 
     #[derive(Debug, PartialEq, Serialize, Deserialize)]

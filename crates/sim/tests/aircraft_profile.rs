@@ -2,7 +2,7 @@
 //! constraint: the apparent force and the growing airspeed pull harder on the attachment, and
 //! after the manoeuvre the system settles again at the new speed.
 
-use accd_sim::aircraft::AccelerationSegment;
+use accd_sim::physics::aircraft::AccelerationSegment;
 use accd_sim::{CaptureConfig, CaptureSim, Seeds};
 
 #[test]

@@ -3,7 +3,7 @@
 //! system settles where the paper's open-loop runs settle (no wake, as in the paper's section 4);
 //! with the wake on, its mean downwash pushes the ACCD down.
 
-use accd_sim::accd::{mix, rotational_invariants};
+use accd_sim::physics::accd::{mix, rotational_invariants};
 use accd_sim::{AccdState, CaptureConfig, CaptureSim, Seeds};
 use accd_tether::{TetherConfig, TetherState};
 use nalgebra::{UnitQuaternion, Vector3};

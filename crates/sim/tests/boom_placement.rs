@@ -1,5 +1,5 @@
 //! The boom's formation is placed relative to the open-loop equilibrium of each configuration
-//! (`boom.placement`, crates/sim/src/boom.rs): the default task keeps its boom bit for bit, every
+//! (`boom.placement`, crates/sim/src/physics/boom.rs): the default task keeps its boom bit for bit, every
 //! other configuration gets the same relative geometry.
 
 use accd_sim::{BoomPlacement, EnvConfig, Equilibrium};

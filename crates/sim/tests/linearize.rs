@@ -1,4 +1,4 @@
-//! `accd_sim::linearize`: the linear model of one agent step against the nonlinear step it was
+//! `accd_sim::task::linearize`: the linear model of one agent step against the nonlinear step it was
 //! taken from. A first-order model's error of a perturbation `eps d` is `O(eps^2)` where the
 //! dynamics are smooth: halving `eps` must quarter it (the ratio is checked in [3.3, 4.7] over
 //! perturbations of 400 to 100 finite-difference steps, where the truncation error dominates the
@@ -11,7 +11,7 @@
 //! size is bounded below). A configuration with tables whose nodes avoid the trim and no wake
 //! shows the second order in every direction, flap inputs included.
 
-use accd_sim::aero::{AeroModel, CoefficientArrays, FinnedBody};
+use accd_sim::physics::aero::{AeroModel, CoefficientArrays, FinnedBody};
 use accd_sim::{EnvConfig, Linearized, ACT_DIM};
 
 fn model_of(config: EnvConfig) -> Linearized {

@@ -1,20 +1,36 @@
-//! The modules of `accd-sim` import each other without a circle (issue 11: `capture` and
-//! `wake_field` used to import each other): every `crate::module` reference outside comments and
-//! test modules is an edge, and a depth-first search finds no cycle.
+//! The modules of `accd-sim` import each other without a circle: every `crate::` path outside
+//! comments and test modules is an edge to the module it names (`crate::config` to `config`,
+//! `crate::physics::wake::Wake` to `physics::wake`), and a depth-first search finds no cycle.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
-/// Module name -> the modules its production code refers to.
-fn graph() -> BTreeMap<String, BTreeSet<String>> {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-    let mut graph = BTreeMap::new();
-    for entry in std::fs::read_dir(&src).unwrap() {
+/// Module name -> the modules its production code refers to, for the crate whose sources are in
+/// `src` (files in `src` and in its folders; a folder's `mod.rs` is the folder's module).
+fn graph(src: &Path) -> BTreeMap<String, BTreeSet<String>> {
+    let mut files = Vec::new();
+    for entry in std::fs::read_dir(src).unwrap() {
         let path = entry.unwrap().path();
+        if path.is_dir() {
+            let folder = path.file_name().unwrap().to_str().unwrap().to_string();
+            for inner in std::fs::read_dir(&path).unwrap() {
+                files.push((Some(folder.clone()), inner.unwrap().path()));
+            }
+        } else {
+            files.push((None, path));
+        }
+    }
+    let mut graph = BTreeMap::new();
+    for (folder, path) in files {
         if path.extension().and_then(|e| e.to_str()) != Some("rs") {
             continue;
         }
-        let name = path.file_stem().unwrap().to_str().unwrap().to_string();
+        let stem = path.file_stem().unwrap().to_str().unwrap().to_string();
+        let name = match folder {
+            Some(folder) if stem == "mod" => folder,
+            Some(folder) => format!("{folder}::{stem}"),
+            None => stem,
+        };
         let text = std::fs::read_to_string(&path).unwrap();
         let mut deps = BTreeSet::new();
         for line in text.lines() {
@@ -28,18 +44,38 @@ fn graph() -> BTreeMap<String, BTreeSet<String>> {
             let mut rest = line;
             while let Some(at) = rest.find("crate::") {
                 rest = &rest[at + "crate::".len()..];
-                let module: String = rest
-                    .chars()
-                    .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
-                    .collect();
-                if !module.is_empty() && module != name {
-                    deps.insert(module);
+                let module = ident(rest);
+                let mut target = module.to_string();
+                let after = &rest[module.len()..];
+                if src.join(module).is_dir() {
+                    assert!(
+                        !after.starts_with("::{"),
+                        "{}: write one `use` per module of a folder: {line}",
+                        path.display()
+                    );
+                    if let Some(inner) = after.strip_prefix("::") {
+                        let inner = ident(inner);
+                        if src.join(module).join(format!("{inner}.rs")).is_file() {
+                            target = format!("{module}::{inner}");
+                        }
+                    }
+                }
+                if !module.is_empty() && target != name {
+                    deps.insert(target);
                 }
             }
         }
         graph.insert(name, deps);
     }
     graph
+}
+
+/// The identifier at the start of `text`.
+fn ident(text: &str) -> &str {
+    let end = text
+        .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+        .unwrap_or(text.len());
+    &text[..end]
 }
 
 fn find_cycle(graph: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String>> {
@@ -87,8 +123,10 @@ fn find_cycle(graph: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String>>
 
 #[test]
 fn the_module_graph_has_no_cycle() {
-    let graph = graph();
-    assert!(graph.contains_key("capture") && graph["capture"].contains("wake_field"));
+    let graph = graph(&Path::new(env!("CARGO_MANIFEST_DIR")).join("src"));
+    assert!(graph["physics::capture"].contains("physics::wake_field"));
+    assert!(graph["task::episode"].contains("physics::capture"));
+    assert!(graph["task::config"].contains("config"));
     if let Some(cycle) = find_cycle(&graph) {
         panic!("import cycle: {}", cycle.join(" -> "));
     }
@@ -101,4 +139,36 @@ fn the_cycle_finder_finds_a_cycle() {
     graph.insert("b".to_string(), BTreeSet::from(["c".to_string()]));
     graph.insert("c".to_string(), BTreeSet::from(["a".to_string()]));
     assert_eq!(find_cycle(&graph).unwrap(), ["a", "b", "c", "a"]);
+}
+
+/// A cycle through a folder is found: `top` uses `crate::folder::inner`, which uses `crate::top`;
+/// the same references in comments and in the test module are no edges.
+#[test]
+fn a_cycle_through_a_folder_is_found() {
+    let src = std::env::temp_dir().join(format!("accd_module_graph_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&src);
+    std::fs::create_dir_all(src.join("folder")).unwrap();
+    std::fs::write(src.join("lib.rs"), "pub mod folder;\npub mod top;\n").unwrap();
+    std::fs::write(src.join("folder/mod.rs"), "pub mod inner;\n").unwrap();
+    std::fs::write(
+        src.join("top.rs"),
+        "use crate::folder::inner::Thing;\n#[cfg(test)]\nuse crate::lib;\n",
+    )
+    .unwrap();
+    let inner = src.join("folder/inner.rs");
+    std::fs::write(&inner, "// crate::top in a comment\npub struct Thing;\n").unwrap();
+    let acyclic = graph(&src);
+    assert_eq!(
+        acyclic["top"],
+        BTreeSet::from(["folder::inner".to_string()])
+    );
+    assert_eq!(find_cycle(&acyclic), None);
+    std::fs::write(&inner, "use crate::top::Other;\npub struct Thing;\n").unwrap();
+    let cycle = find_cycle(&graph(&src));
+    std::fs::remove_dir_all(&src).unwrap();
+    assert_eq!(
+        cycle.unwrap(),
+        ["folder::inner", "top", "folder::inner"],
+        "the cycle top -> folder::inner -> top"
+    );
 }

@@ -4,7 +4,7 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 
-use accd_sim::turbulence::AmbientTurbulence;
+use accd_sim::physics::turbulence::AmbientTurbulence;
 mod support;
 
 use accd_tether::{reference, Surroundings, Tether};

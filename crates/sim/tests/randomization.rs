@@ -1,4 +1,4 @@
-//! Randomized physics (crates/sim/src/randomization.rs): each episode's parameters come from its
+//! Randomized physics (crates/sim/src/task/randomization.rs): each episode's parameters come from its
 //! wake seed's own stream, the episode runs the physics they name (its own equilibrium, its boom
 //! placed relative to it), nothing else of the episode moves, and saved states carry their physics.
 
@@ -66,7 +66,8 @@ fn each_episode_runs_the_physics_its_wake_seed_draws() {
         rope.max_tension(p.tether_diameter)
     );
     // Its own equilibrium: the one of its config, settled alone.
-    let own = Equilibrium::settle(&accd_sim::episode::drawn_config(&base, &p).unwrap()).unwrap();
+    let own =
+        Equilibrium::settle(&accd_sim::task::episode::drawn_config(&base, &p).unwrap()).unwrap();
     assert_eq!(e.equilibrium(), &own);
     // Another wake seed, other physics, another equilibrium; the same seed again, the same run.
     let first = run(&mut e, 20);

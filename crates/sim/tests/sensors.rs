@@ -6,7 +6,7 @@
 mod support;
 use support::episode;
 
-use accd_sim::sensors::SensorsConfig;
+use accd_sim::task::sensors::SensorsConfig;
 use accd_sim::{observation_index, EnvConfig, Episode, Outcome};
 
 /// A 5 s window; the capture radius so small that no capture ends the episode early.

@@ -131,7 +131,7 @@ fn per_lane_states_check_their_lanes() {
     let mut s = good.clone();
     let generated = lanes(&mut s).generated;
     assert!(!generated.is_empty(), "the tether's lanes are generated");
-    let with = |f: &dyn Fn(&mut accd_sim::turbulence::LaneState)| {
+    let with = |f: &dyn Fn(&mut accd_sim::physics::turbulence::LaneState)| {
         let mut s = good.clone();
         if let AirState::Turbulence(t) = &mut s.air {
             f(t.lanes.as_mut().unwrap());

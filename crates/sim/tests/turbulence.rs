@@ -1,8 +1,8 @@
 //! Turbulence: RMS and time correlation as modelled, frozen advection, determinism and seed
 //! independence, ambient levels, and the Gaussian generator.
 
+use accd_sim::physics::turbulence::{AmbientTurbulence, LaneStreams, Turbulence, TurbulenceConfig};
 use accd_sim::rng::{stream_rng, NormalSampler, Stream, AMBIENT_STREAM, WAKE_LANES_STREAM};
-use accd_sim::turbulence::{AmbientTurbulence, LaneStreams, Turbulence, TurbulenceConfig};
 use accd_sim::SimError;
 use nalgebra::Vector3;
 use rand_core::Rng;

@@ -1,7 +1,7 @@
 //! The mean wake: the analytic default's features (paper section 2.2), interpolation in space and
 //! angle of attack, free stream outside, the JSON format and its errors.
 
-use accd_sim::wake::{
+use accd_sim::physics::wake::{
     AnalyticWake, Wake, WakeConfig, WakeTable, WakeTableData, WakeTables, TA_LENGTH_M,
 };
 use accd_sim::SimError;

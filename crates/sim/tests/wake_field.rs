@@ -1,7 +1,7 @@
 //! The wake field as the tether's surroundings: composition, and Table 3's tether flying in it.
 
-use accd_sim::turbulence::{AmbientTurbulence, TurbulenceConfig};
-use accd_sim::wake::WakeConfig;
+use accd_sim::physics::turbulence::{AmbientTurbulence, TurbulenceConfig};
+use accd_sim::physics::wake::WakeConfig;
 mod support;
 
 use accd_sim::SimError;

@@ -13,9 +13,9 @@
 use std::hint::black_box;
 
 use accd_tether::config::{StepLoad, RK4_STABILITY_LIMIT};
-use accd_tether::{
-    reference, Elasticity, LockstepWork, Scheme, Solver, Tether, TetherConfig, TetherModel,
-};
+use accd_tether::{reference, Elasticity, Scheme, Solver, Tether, TetherConfig};
+#[cfg(feature = "lockstep")]
+use accd_tether::{LockstepWork, TetherModel};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 
 /// The towed reference case with `n` segments and the given solver, advanced 20 s so that the
@@ -63,6 +63,7 @@ fn group(c: &mut Criterion, name: &str, solver: Solver, sizes: &[usize]) {
         group.bench_with_input(BenchmarkId::new("rk4_step", n), &n, |b, _| {
             b.iter(|| stepper.step(black_box(&flow)).unwrap())
         });
+        #[cfg(feature = "lockstep")]
         if solver == Solver::Recursive {
             lockstep(&mut group, &tether, &flow, n);
         }
@@ -70,6 +71,7 @@ fn group(c: &mut Criterion, name: &str, solver: Solver, sizes: &[usize]) {
     group.finish();
 }
 
+#[cfg(feature = "lockstep")]
 /// Four tethers in lockstep ([`TetherModel::accelerations_four`], [`Tether::step_four`]): the
 /// towed tether and three copies 0.1, 0.2 and 0.3 s further on, so that the four states differ.
 /// Criterion's time is that of the four; per tether divide by 4.

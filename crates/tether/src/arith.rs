@@ -11,11 +11,6 @@ type V3 = Vector3<f64>;
 
 /// `a * b + c`, fused or not.
 pub(crate) trait Madd: 'static {
-    /// Whether the hot loops may use the processor's AVX2 and FMA instructions directly (the
-    /// vectorized backward sweep, [`crate::recursive`]): only where [`Madd::madd`] is fused, so
-    /// that they give the same bits as the scalar loops.
-    const VECTORIZED: bool;
-
     fn madd(a: f64, b: f64, c: f64) -> f64;
 }
 
@@ -26,8 +21,6 @@ pub(crate) struct Plain;
 pub(crate) struct Fused;
 
 impl Madd for Plain {
-    const VECTORIZED: bool = false;
-
     #[inline(always)]
     fn madd(a: f64, b: f64, c: f64) -> f64 {
         a * b + c
@@ -35,8 +28,6 @@ impl Madd for Plain {
 }
 
 impl Madd for Fused {
-    const VECTORIZED: bool = true;
-
     #[inline(always)]
     fn madd(a: f64, b: f64, c: f64) -> f64 {
         a.mul_add(b, c)
@@ -47,12 +38,6 @@ impl Madd for Fused {
 #[inline(always)]
 pub(crate) fn dot<M: Madd>(a: &V3, b: &V3) -> f64 {
     M::madd(a.x, b.x, M::madd(a.y, b.y, a.z * b.z))
-}
-
-/// `a . b` for `a` with a zero y component.
-#[inline(always)]
-pub(crate) fn dot_xz<M: Madd>(a: &V3, b: &V3) -> f64 {
-    M::madd(a.x, b.x, a.z * b.z)
 }
 
 /// `a s + y`.
@@ -83,21 +68,6 @@ pub(crate) fn has_avx2_fma() -> bool {
     std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
 }
 
-/// [`Fused`] multiply-adds in the scalar loops only: the reference the vectorized loops are
-/// tested against bit for bit.
-#[cfg(test)]
-pub(crate) struct FusedScalar;
-
-#[cfg(test)]
-impl Madd for FusedScalar {
-    const VECTORIZED: bool = false;
-
-    #[inline(always)]
-    fn madd(a: f64, b: f64, c: f64) -> f64 {
-        a.mul_add(b, c)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -112,7 +82,5 @@ mod tests {
         assert!((axpy::<Fused>(&a, 0.7, &y) - (a * 0.7 + y)).norm() < 1e-15);
         assert!((cross::<Fused>(&a, &b) - a.cross(&b)).norm() < 1e-14);
         assert!((cross::<Plain>(&a, &b) - a.cross(&b)).norm() == 0.0);
-        let c = V3::new(0.3, 0.0, 2.9);
-        assert!((dot_xz::<Plain>(&c, &b) - c.dot(&b)).abs() < 1e-15);
     }
 }

@@ -61,7 +61,7 @@ use crate::config::TetherConfig;
 use crate::direction::DirectionJet;
 use crate::distributed::{self, stretch_index};
 use crate::error::{Result, TetherError};
-use crate::recursive::{self, Articulated, ChainConstants};
+use crate::recursive::{self, Articulated, ChainConstants, Held};
 use crate::surroundings::Surroundings;
 
 type V3 = Vector3<f64>;
@@ -162,6 +162,7 @@ pub struct TetherModel {
     ws: Workspace,
 }
 
+#[cfg(feature = "lockstep")]
 /// The work space of [`TetherModel::accelerations_four`]: the sweeps' inputs of four chains
 /// side by side and what the backward sweep leaves per segment. Sized on first use (per number
 /// of segments); one per thread that steps models four at a time.
@@ -182,7 +183,9 @@ struct Workspace {
     /// Allocated on the first dense solve only.
     mass: Vec<f64>,
     /// Per-segment results of the recursive solver's backward sweep.
-    articulated: Vec<Articulated>,
+    articulated: Vec<Articulated<f64>>,
+    /// What the tensions need of the backward sweep, per segment.
+    held: Vec<Held>,
     /// The same for the distributed elasticity (empty otherwise).
     axial: Vec<distributed::Articulated>,
     /// `L^-1 e_0` of the dense solve's Cholesky factor (sized on first use).
@@ -220,6 +223,7 @@ impl TetherModel {
                 tip_acc0: V3::zeros(),
                 mass: Vec::new(),
                 articulated: vec![Articulated::default(); n],
+                held: vec![Held::default(); n],
                 axial: if config.is_distributed() {
                     vec![distributed::Articulated::default(); n]
                 } else {
@@ -757,12 +761,14 @@ impl TetherModel {
             qd[0],
             spring,
             &mut ws.articulated,
+            &mut ws.held,
             qdd,
             tensions,
         )?;
         Ok(report)
     }
 
+    #[cfg(feature = "lockstep")]
     /// Whether four models can have their right-hand sides evaluated in lockstep
     /// ([`TetherModel::accelerations_four`] runs them four lanes wide): the processor has AVX2
     /// and FMA, and all four use the recursive solver on the lumped elasticity with the same
@@ -787,10 +793,10 @@ impl TetherModel {
     /// `(time[j], q[j], qd[j])` in `surroundings[j]`, bit for bit what `accelerations` gives for
     /// it alone. Where [`TetherModel::lockstep_eligible`] holds, the kinematics and loads run per
     /// model and the recursion's sweeps run for the four together, one per AVX2 lane
-    /// ([`crate::recursive`]'s `lockstep`), at about 1.3 times one chain's sweeps (the right-hand
-    /// side per chain 1.3x faster at n = 30, BENCHMARKS.md); otherwise one after another.
+    /// ([`crate::recursive`]'s `lockstep`); otherwise one after another.
     /// A model's error leaves the other lanes' results unchanged. Allocates nothing once `work`
     /// has been used at this number of segments.
+    #[cfg(feature = "lockstep")]
     #[allow(clippy::too_many_arguments)]
     pub fn accelerations_four<S: Surroundings + ?Sized>(
         models: [&mut TetherModel; 4],
@@ -823,7 +829,7 @@ impl TetherModel {
     }
 
     /// [`TetherModel::accelerations_four`] for eligible models with inputs of the right sizes.
-    #[cfg(target_arch = "x86_64")]
+    #[cfg(all(feature = "lockstep", target_arch = "x86_64"))]
     #[target_feature(enable = "avx2,fma")]
     #[allow(clippy::too_many_arguments)]
     unsafe fn accelerations_four_avx2<S: Surroundings + ?Sized>(
@@ -1203,7 +1209,7 @@ fn prepare_in<M: Madd, S: Surroundings + ?Sized>(
 ///
 /// # Safety
 /// The processor must have AVX2 and FMA.
-#[cfg(target_arch = "x86_64")]
+#[cfg(all(feature = "lockstep", target_arch = "x86_64"))]
 #[inline(never)]
 unsafe fn prepare_fused<S: Surroundings + ?Sized>(
     constants: &LoadConstants,
@@ -1251,6 +1257,7 @@ mod tests {
     use super::*;
 
     /// SplitMix64 as uniform numbers in `[lo, hi)`, for reproducible states.
+    #[cfg(feature = "lockstep")]
     fn splitmix(mut seed: u64) -> impl FnMut(f64, f64) -> f64 {
         move |lo: f64, hi: f64| {
             seed = seed.wrapping_add(0x9E37_79B9_7F4A_7C15);
@@ -1263,6 +1270,7 @@ mod tests {
 
     /// A random bent, spinning, out-of-plane state of `n` segments; in every third case a third
     /// of the joints folded close to back on themselves.
+    #[cfg(feature = "lockstep")]
     fn random_state(
         n: usize,
         case: usize,
@@ -1390,87 +1398,13 @@ mod tests {
         );
     }
 
-    /// The vectorized backward sweep (AVX2 and FMA, `recursive/avx2.rs`) gives the scalar
-    /// sweep's accelerations, tensions and axial mass bit for bit, on bent, folded, spinning and
-    /// out-of-plane states with a side wind and a tip force.
-    #[test]
-    fn vectorized_backward_sweep_is_bitwise_the_scalar_fused_sweep() {
-        use crate::arith::{Fused, FusedScalar};
-        use crate::reference;
-        use crate::surroundings::UniformFlow;
-        #[cfg(target_arch = "x86_64")]
-        if !crate::arith::has_avx2_fma() {
-            eprintln!("no AVX2 and FMA: the vectorized sweep is not used on this processor");
-            return;
-        }
-        let mut uniform = splitmix(0x5EED);
-        let mut compared = 0;
-        for n in [1usize, 2, 3, 7, 30, 61] {
-            let cfg = TetherConfig {
-                segments: n,
-                ..TetherConfig::table3()
-            };
-            let (cfg, towed) = reference::towed(&cfg, reference::StandInBody::accd()).unwrap();
-            let flow = UniformFlow {
-                velocity: towed.velocity + Vector3::new(0.0, 7.0, -3.0),
-                tip_force: Vector3::new(40.0, -25.0, 310.0),
-                frame_acceleration: Vector3::new(0.4, -0.2, 0.1),
-                ..towed
-            };
-            let mut model = TetherModel::new(&cfg).unwrap();
-            let dim = cfg.dofs();
-            for case in 0..40 {
-                let (q, qd) = random_state(n, case, &mut uniform);
-                let (mut lanes, mut scalar) = (vec![0.0; dim], vec![0.0; dim]);
-                let (mut lane_t, mut scalar_t) = (vec![0.0; n + 1], vec![0.0; n + 1]);
-                let solved = model.solve_recursive_body::<Fused, _>(
-                    0.5,
-                    &q,
-                    &qd,
-                    &flow,
-                    &mut lanes,
-                    Some(&mut lane_t),
-                    None,
-                );
-                let lane_mass = model.axial_mass();
-                let reference = model.solve_recursive_body::<FusedScalar, _>(
-                    0.5,
-                    &q,
-                    &qd,
-                    &flow,
-                    &mut scalar,
-                    Some(&mut scalar_t),
-                    None,
-                );
-                assert_eq!(solved.is_ok(), reference.is_ok(), "n = {n}, case {case}");
-                if reference.is_err() {
-                    continue;
-                }
-                let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-                assert_eq!(bits(&lanes), bits(&scalar), "q'', n = {n}, case {case}");
-                assert_eq!(
-                    bits(&lane_t),
-                    bits(&scalar_t),
-                    "tensions, n = {n}, case {case}"
-                );
-                assert_eq!(lane_mass.to_bits(), model.axial_mass().to_bits());
-                // Without the tensions (the integrator's path) as well.
-                model
-                    .solve_recursive_body::<Fused, _>(0.5, &q, &qd, &flow, &mut lanes, None, None)
-                    .unwrap();
-                assert_eq!(bits(&lanes), bits(&scalar), "q'' without tensions, n = {n}");
-                compared += 1;
-            }
-        }
-        assert!(compared >= 200, "only {compared} states compared");
-    }
-
     /// Four models in lockstep (`accelerations_four`, the sweeps four lanes wide) give each
     /// model's own `accelerations` bit for bit: the accelerations, the axial mass and the tip
     /// report, for four different configurations (tip mass, length, stiffness) in four different
     /// flows, on random bent, folded and spinning states; a lane whose state fails (a NaN
     /// angle, a folded chain) returns the error its single solve returns and leaves the other
     /// lanes' results as they are alone.
+    #[cfg(feature = "lockstep")]
     #[test]
     fn lockstep_solve_is_bitwise_four_single_solves() {
         use crate::reference;

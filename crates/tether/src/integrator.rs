@@ -11,7 +11,9 @@
 //! substep j starts at `t + j dt / k`. The stepper never keeps time: callers hold the clock
 //! (`origin + steps dt`, free of the drift of summing dt). Stage buffers are allocated once.
 
-use crate::dynamics::{LockstepWork, TetherModel};
+#[cfg(feature = "lockstep")]
+use crate::dynamics::LockstepWork;
+use crate::dynamics::TetherModel;
 use crate::error::{Result, TetherError};
 use crate::surroundings::Surroundings;
 
@@ -49,6 +51,7 @@ pub trait System {
     }
 }
 
+#[cfg(feature = "lockstep")]
 /// A [`System`] of which four can have their derivatives evaluated together, as
 /// [`Rk4::advance_adaptive_four`] steps them: the tether's recursion then runs four AVX2 lanes
 /// wide ([`TetherModel::accelerations_four`]).
@@ -96,6 +99,7 @@ impl<S: Surroundings + ?Sized> System for InSurroundings<'_, S> {
     }
 }
 
+#[cfg(feature = "lockstep")]
 impl<S: Surroundings + ?Sized> Lockstep for InSurroundings<'_, S> {
     fn derivatives_four(
         systems: &mut [&mut Self; 4],
@@ -378,6 +382,7 @@ impl Rk4 {
     /// substeps after its first stage; lanes that choose differently, or any state or buffer of
     /// the wrong size, finish one at a time. A failed lane's state is unchanged, as alone.
     /// Allocates nothing once `work` is sized.
+    #[cfg(feature = "lockstep")]
     #[allow(clippy::too_many_arguments)]
     pub fn advance_adaptive_four<Y, F>(
         rk4: [&mut Rk4; 4],
@@ -509,6 +514,7 @@ impl Rk4 {
 }
 
 /// One lane of [`Rk4::advance_adaptive_four`]: its integrator's buffers and its state.
+#[cfg(feature = "lockstep")]
 struct LaneRun<'a> {
     /// Whether its state and buffers have the system's sizes.
     sizes: Result<()>,
@@ -658,6 +664,7 @@ impl<'a> Stages<'a> {
     }
 }
 
+#[cfg(feature = "lockstep")]
 impl<'a> LaneRun<'a> {
     fn new<Y: System + ?Sized>(
         rk4: &'a mut Rk4,

@@ -18,9 +18,9 @@
 //!   [`Scheme::ImplicitAxial`], with the axial spring-dampers implicit ([`implicit`]);
 //! * [`Surroundings`] — what the caller supplies: air velocity and density at any point, the
 //!   aircraft's acceleration, the force on the tip;
-//! * [`Tether`] — the three together, for stepping; [`Tether::step_four`] steps four at once,
-//!   their recursions four AVX2 lanes wide ([`Lockstep`], [`LockstepWork`]), each bit for bit
-//!   its own step.
+//! * [`Tether`] — the three together, for stepping. With the `lockstep` feature (on by default),
+//!   `Tether::step_four` steps four at once, their recursions four AVX2 lanes wide on x86-64
+//!   (`Lockstep`, `LockstepWork`), each bit for bit its own step.
 //!
 //! Frames and units: SI; the towing-aircraft frame has x forward, y starboard, z down, origin at
 //! the attachment point.
@@ -46,10 +46,14 @@ mod trig;
 pub use atmosphere::Atmosphere;
 pub use config::{DragVelocity, Elasticity, Scheme, TetherConfig, STANDARD_GRAVITY};
 pub use direction::DirectionJet;
-pub use dynamics::{AxialStage, Energy, LockstepWork, Solver, TetherModel};
+#[cfg(feature = "lockstep")]
+pub use dynamics::LockstepWork;
+pub use dynamics::{AxialStage, Energy, Solver, TetherModel};
 pub use error::{Result, TetherError};
 pub use implicit::{AxialSystem, Rosenbrock};
-pub use integrator::{InSurroundings, Lockstep, Rk4, System};
+#[cfg(feature = "lockstep")]
+pub use integrator::Lockstep;
+pub use integrator::{InSurroundings, Rk4, System};
 pub use material::Material;
 pub use state::TetherState;
 pub use surroundings::{Surroundings, UniformFlow, Vacuum};

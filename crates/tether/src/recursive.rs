@@ -80,13 +80,13 @@
 //!   and comes from the vectorized loads pass (`chain.rs`).
 //! * The forward step is `a_{k+1} = (a_k + l (w_k + E_k y_k)) - E_k (l G_k a_k)`, where
 //!   `l G_k a_k` also gives `u_k`.
-//! * Where the processor has AVX2 and FMA the backward sweep runs four lanes wide
-//!   (`recursive/avx2.rs`: a 3-vector per register, `B` by its columns), bit for bit the scalar
-//!   sweep with fused multiply-adds, which stays as its reference and as the portable path.
-//! * Four chains (four envs of a batch) can run the three steps together, one per AVX2 lane
-//!   (`recursive/lockstep.rs`, [`crate::TetherModel::accelerations_four`]): latency-bound for
-//!   one chain, the sweeps then fill each other's waits; lane j is bit for bit chain j's fused
-//!   solve.
+//! * The three steps are written once, over a lane type (`Lane`): one chain per call in `f64`
+//!   (`One`, the single model's path), or, with the `lockstep` feature on x86-64, four chains
+//!   (four envs of a batch) one per AVX2 lane (`recursive/lockstep.rs`,
+//!   `TetherModel::accelerations_four`). One chain's sweeps are a chain of dependent
+//!   operations (`B_{k+1}` -> `B E` -> `K` -> `det` -> `1/det` -> `B_k`), bound by latency; four
+//!   in lockstep fill each other's waits. Lane j performs exactly the operations of the fused
+//!   single-chain solve for chain j, so its results are bit for bit those of chain j alone.
 //! * Only the directions, loads and `K`, `W`, `y` live in the sweep; everything independent per
 //!   segment (trigonometry, directions, rates, loads) is done beforehand in structure-of-arrays
 //!   passes the compiler vectorizes. Multiply-adds are fused where the processor has FMA
@@ -94,73 +94,277 @@
 //!
 //! Each sweep costs O(1) per segment with fixed-size 3x3 / 2x2 algebra and no allocation.
 
+use std::marker::PhantomData;
+use std::ops::{Add, Mul, Neg, Sub};
+
 use nalgebra::Vector3;
 
-use crate::arith::{axpy, dot, dot_xz, Madd};
+use crate::arith::Madd;
 use crate::chain::ChainState;
 use crate::error::{Result, TetherError};
 
-#[cfg(target_arch = "x86_64")]
-mod avx2;
-#[cfg(target_arch = "x86_64")]
+#[cfg(all(feature = "lockstep", target_arch = "x86_64"))]
 pub(crate) mod lockstep;
 
 type V3 = Vector3<f64>;
 
-/// A symmetric 3x3 matrix by its six entries.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub(crate) struct Sym3 {
-    xx: f64,
-    yy: f64,
-    zz: f64,
-    xy: f64,
-    xz: f64,
-    yz: f64,
+/// What the recursion needs of a number: one f64 ([`One`]), or several chains' values side by
+/// side, one per lane. Every operation acts lane by lane and rounds as its `f64` counterpart.
+pub(crate) trait Lane:
+    Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = Self> + Neg<Output = Self>
+{
+    /// Number of lanes (chains solved together).
+    const LANES: usize;
+    /// What one lane of a stored value holds (`f64`, or the lanes side by side).
+    type Stored: Copy + Default;
+
+    /// Lane j from `f(j)`.
+    fn gather(f: impl Fn(usize) -> f64) -> Self;
+    /// Every lane `v`.
+    fn splat(v: f64) -> Self;
+    /// `a b + c`, fused or not as the lane type says.
+    fn madd(a: Self, b: Self, c: Self) -> Self;
+    /// `self / o`.
+    fn div(self, o: Self) -> Self;
+    /// Per lane: not greater than zero, or NaN (`!(x > 0)`), as a bit mask (bit j for lane j).
+    fn not_positive(self) -> u32;
+    /// The lanes, in order, into `out[..LANES]`.
+    fn write(self, out: &mut [f64]);
+    /// The lanes as stored.
+    fn store(self) -> Self::Stored;
+    /// The lanes from their stored form.
+    fn load(stored: &Self::Stored) -> Self;
 }
 
-impl Sym3 {
-    #[inline(always)]
-    fn diagonal(d: f64) -> Self {
-        Sym3 {
-            xx: d,
-            yy: d,
-            zz: d,
-            ..Sym3::default()
-        }
-    }
+/// One chain's `f64`, with multiply-adds fused or not as `M` says.
+pub(crate) struct One<M>(pub f64, PhantomData<M>);
 
+impl<M> Clone for One<M> {
     #[inline(always)]
-    fn mul<M: Madd>(&self, v: &V3) -> V3 {
-        V3::new(
-            M::madd(self.xx, v.x, M::madd(self.xy, v.y, self.xz * v.z)),
-            M::madd(self.xy, v.x, M::madd(self.yy, v.y, self.yz * v.z)),
-            M::madd(self.xz, v.x, M::madd(self.yz, v.y, self.zz * v.z)),
-        )
-    }
-
-    /// `self v` for a vector with a zero y component (de/dphi).
-    #[inline(always)]
-    fn mul_xz<M: Madd>(&self, v: &V3) -> V3 {
-        V3::new(
-            M::madd(self.xx, v.x, self.xz * v.z),
-            M::madd(self.xy, v.x, self.yz * v.z),
-            M::madd(self.xz, v.x, self.zz * v.z),
-        )
+    fn clone(&self) -> Self {
+        *self
     }
 }
 
-/// What the backward sweep leaves per segment for the forward sweep and the tensions.
+impl<M> Copy for One<M> {}
+
+impl<M> One<M> {
+    #[inline(always)]
+    pub(crate) fn new(v: f64) -> Self {
+        One(v, PhantomData)
+    }
+}
+
+impl<M> Add for One<M> {
+    type Output = Self;
+    #[inline(always)]
+    fn add(self, o: Self) -> Self {
+        One::new(self.0 + o.0)
+    }
+}
+
+impl<M> Sub for One<M> {
+    type Output = Self;
+    #[inline(always)]
+    fn sub(self, o: Self) -> Self {
+        One::new(self.0 - o.0)
+    }
+}
+
+impl<M> Mul for One<M> {
+    type Output = Self;
+    #[inline(always)]
+    fn mul(self, o: Self) -> Self {
+        One::new(self.0 * o.0)
+    }
+}
+
+impl<M> Neg for One<M> {
+    type Output = Self;
+    #[inline(always)]
+    fn neg(self) -> Self {
+        One::new(-self.0)
+    }
+}
+
+impl<M: Madd> Lane for One<M> {
+    const LANES: usize = 1;
+    type Stored = f64;
+
+    #[inline(always)]
+    fn gather(f: impl Fn(usize) -> f64) -> Self {
+        One::new(f(0))
+    }
+    #[inline(always)]
+    fn splat(v: f64) -> Self {
+        One::new(v)
+    }
+    #[inline(always)]
+    fn madd(a: Self, b: Self, c: Self) -> Self {
+        One::new(M::madd(a.0, b.0, c.0))
+    }
+    #[inline(always)]
+    fn div(self, o: Self) -> Self {
+        One::new(self.0 / o.0)
+    }
+    #[inline(always)]
+    fn not_positive(self) -> u32 {
+        u32::from(self.0.is_nan() || self.0 <= 0.0)
+    }
+    #[inline(always)]
+    fn write(self, out: &mut [f64]) {
+        out[0] = self.0;
+    }
+    #[inline(always)]
+    fn store(self) -> f64 {
+        self.0
+    }
+    #[inline(always)]
+    fn load(stored: &f64) -> Self {
+        One::new(*stored)
+    }
+}
+
+/// A 3-vector.
+pub(crate) type V<L> = [L; 3];
+
+/// A symmetric 3x3 matrix by its entries xx, yy, zz, xy, xz, yz.
+pub(crate) type S3<L> = [L; 6];
+
+#[inline(always)]
+fn dot<L: Lane>(a: &V<L>, b: &V<L>) -> L {
+    L::madd(a[0], b[0], L::madd(a[1], b[1], a[2] * b[2]))
+}
+
+/// `a . b` for `a` with a zero y component, given as (x, z).
+#[inline(always)]
+fn dot_xz<L: Lane>(a: &[L; 2], b: &V<L>) -> L {
+    L::madd(a[0], b[0], a[1] * b[2])
+}
+
+/// `a s + y`.
+#[inline(always)]
+fn axpy<L: Lane>(a: &V<L>, s: L, y: &V<L>) -> V<L> {
+    [
+        L::madd(a[0], s, y[0]),
+        L::madd(a[1], s, y[1]),
+        L::madd(a[2], s, y[2]),
+    ]
+}
+
+#[inline(always)]
+fn scale<L: Lane>(a: &V<L>, s: L) -> V<L> {
+    [a[0] * s, a[1] * s, a[2] * s]
+}
+
+#[inline(always)]
+fn add3<L: Lane>(a: &V<L>, b: &V<L>) -> V<L> {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
+#[inline(always)]
+fn sub3<L: Lane>(a: &V<L>, b: &V<L>) -> V<L> {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+#[inline(always)]
+fn sym_mul<L: Lane>(b: &S3<L>, v: &V<L>) -> V<L> {
+    [
+        L::madd(b[0], v[0], L::madd(b[3], v[1], b[4] * v[2])),
+        L::madd(b[3], v[0], L::madd(b[1], v[1], b[5] * v[2])),
+        L::madd(b[4], v[0], L::madd(b[5], v[1], b[2] * v[2])),
+    ]
+}
+
+/// `b v` for `v` with a zero y component, given as (x, z).
+#[inline(always)]
+fn sym_mul_xz<L: Lane>(b: &S3<L>, v: &[L; 2]) -> V<L> {
+    [
+        L::madd(b[0], v[0], b[4] * v[1]),
+        L::madd(b[3], v[0], b[5] * v[1]),
+        L::madd(b[4], v[0], b[2] * v[1]),
+    ]
+}
+
+/// What the backward sweep leaves per segment for the forward sweep: the rows of `l G_k` and
+/// `y_k`, per lane.
 #[derive(Debug, Clone, Copy, Default)]
-pub(crate) struct Articulated {
-    /// Rows of `l G_k`: `u_k = y_k - G_k a_k` (x, y, z and a pad, so that the vectorized
-    /// sweep stores a row in one instruction).
-    lg: [[f64; 4]; 2],
-    /// `y_k`.
-    y: [f64; 2],
-    /// `B_k = A_k + (m/2) 1` (kept only when tensions are asked for).
-    inertia: Sym3,
-    /// `b_k` (kept only when tensions are asked for).
-    bias: V3,
+pub(crate) struct Articulated<T> {
+    lg: [[T; 3]; 2],
+    y: [T; 2],
+}
+
+/// `B_k` and `b_k` per segment, kept for the tensions.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Held {
+    inertia: [f64; 6],
+    bias: [f64; 3],
+}
+
+/// The recursion's inputs of a chain (or of chains side by side): the per-segment directions
+/// and loads and the root's, from the kinematics and loads pass.
+pub(crate) trait Inputs<L: Lane> {
+    /// Segment k's `E_phi` (x, z: its y component is zero), `E_psi` and convective `w`.
+    fn directions(&self, k: usize) -> ([L; 2], V<L>, V<L>);
+    /// Segment k's force `F_k`, reduced load `r_k` and `cos psi_k`.
+    fn loads(&self, k: usize) -> (V<L>, V<L>, L);
+    /// Segment 1's direction `e`, its full `E_phi` (the y component, zero, kept as an operand),
+    /// its rate `e'` and its `X`.
+    fn root(&self) -> [V<L>; 4];
+    /// The force on the tip body.
+    fn tip_force(&self) -> V<L>;
+}
+
+/// One chain's inputs, read from its [`ChainState`] (sliced to its `n` segments).
+struct ChainInputs<'a> {
+    chain: &'a ChainState,
+    n: usize,
+}
+
+impl<M: Madd> Inputs<One<M>> for ChainInputs<'_> {
+    #[inline(always)]
+    fn directions(&self, k: usize) -> ([One<M>; 2], V<One<M>>, V<One<M>>) {
+        let (c, n) = (self.chain, self.n);
+        let (ep, es, w) = (c.e_phi.view(n), c.e_psi.view(n), c.w.view(n));
+        (
+            [One::new(ep.x[k]), One::new(ep.z[k])],
+            one3(es.x[k], es.y[k], es.z[k]),
+            one3(w.x[k], w.y[k], w.z[k]),
+        )
+    }
+    #[inline(always)]
+    fn loads(&self, k: usize) -> (V<One<M>>, V<One<M>>, One<M>) {
+        let (c, n) = (self.chain, self.n);
+        let (f, r) = (c.force.view(n), c.reduced.view(n));
+        (
+            one3(f.x[k], f.y[k], f.z[k]),
+            one3(r.x[k], r.y[k], r.z[k]),
+            One::new(c.cos_psi[..n][k]),
+        )
+    }
+    #[inline(always)]
+    fn root(&self) -> [V<One<M>>; 4] {
+        let c = self.chain;
+        [&c.e, &c.e_phi, &c.e_dot, &c.extra].map(|v| {
+            let v = v.get(0);
+            one3(v.x, v.y, v.z)
+        })
+    }
+    #[inline(always)]
+    fn tip_force(&self) -> V<One<M>> {
+        let f = self.chain.tip_force;
+        one3(f.x, f.y, f.z)
+    }
+}
+
+#[inline(always)]
+fn one3<M>(x: f64, y: f64, z: f64) -> V<One<M>> {
+    [One::new(x), One::new(y), One::new(z)]
+}
+
+#[inline(always)]
+fn to_v3<M>(v: &V<One<M>>) -> V3 {
+    V3::new(v[0].0, v[1].0, v[2].0)
 }
 
 /// Constants of the chain that the recursion needs.
@@ -194,9 +398,9 @@ fn singular(time: f64, segment: usize) -> TetherError {
 
 /// Solves the equations of motion in O(n) from the kinematics and loads in `chain`: the backward
 /// sweep (tip to root), the root's 3x3 system and the forward sweep, with the axial element's
-/// force and added mass as `spring` gives them. Writes `q''` into `qdd` and,
-/// if given, the tensions (n + 1 values, as [`crate::TetherModel::tensions`]) into `tensions`.
-/// Returns the effective axial mass `1 / (M^-1)_00`, kg (see [`root_axial_mass`]).
+/// force and added mass as `spring` gives them. Writes `q''` into `qdd` and, if given, the tensions (n + 1 values, as [`crate::TetherModel::tensions`]) into `tensions`
+/// (`held`, n entries, holds what they need of the backward sweep). Returns the effective axial
+/// mass `1 / (M^-1)_00`, kg (see [`Solved::result`]).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 pub(crate) fn solve<M: Madd>(
@@ -206,210 +410,337 @@ pub(crate) fn solve<M: Madd>(
     s: f64,
     sd: f64,
     spring: Spring,
-    work: &mut [Articulated],
+    work: &mut [Articulated<f64>],
+    held: &mut [Held],
     qdd: &mut [f64],
     tensions: Option<&mut [f64]>,
 ) -> Result<f64> {
     let n = chain.segments();
-    let (l, m) = (c.l, c.m);
-    let inv_l = 1.0 / l;
-
-    // Backward sweep, tip to segment 2, on B = A + (m/2) 1: four lanes wide where the
-    // processor has AVX2 and FMA (bit for bit the fused scalar sweep), scalar otherwise.
-    let want_tensions = tensions.is_some();
+    let inputs = ChainInputs { chain, n };
     let qdd = &mut qdd[..2 * n + 1];
     let work = &mut work[..n];
-    let (bm, bias) = backward::<M>(time, c, chain, work, want_tensions)?;
-    let (ep_k, es_k, w_k) = (chain.e_phi.view(n), chain.e_psi.view(n), chain.w.view(n));
+    let held = &mut held[..n];
+    let Some(t) = tensions else {
+        let solved =
+            sweeps::<1, One<M>, _>([c], &inputs, n, [s], [sd], [spring], work, [qdd], &mut ());
+        return solved.result(time, 0);
+    };
+    let mut watch = TensionWatch {
+        held,
+        chain,
+        t: &mut t[..n + 1],
+        half_m: 0.5 * c.m,
+    };
+    let solved = sweeps::<1, One<M>, _>(
+        [c],
+        &inputs,
+        n,
+        [s],
+        [sd],
+        [spring],
+        work,
+        [qdd],
+        &mut watch,
+    );
+    let axial_mass = solved.result(time, 0)?;
+    let (r, t, m) = (&solved.root, watch.t, c.m);
+    // The pull on segment 1's base: its load less its mass times its centre's acceleration, and
+    // the outboard chain's reaction `b_1 - A_1 a_1`.
+    let e1 = to_v3(&r.e1);
+    let com = e1 * r.z0.0 + to_v3(&r.drift) + (to_v3(&r.w) + to_v3(&r.e1dd_ang)) * r.rho_c.0;
+    let pull = to_v3(&r.force) - com * m + to_v3(&r.bias) - to_v3(&sym_mul(&r.a_mat, &r.acc1));
+    t[0] = pull.dot(&e1);
+    t[n] = (chain.tip_force - to_v3(&solved.acc) * c.tip_mass).dot(&chain.e.get(n - 1));
+    Ok(axial_mass)
+}
+
+/// What [`sweeps`] shows of its steps, for the tensions: nothing by default.
+pub(crate) trait Watch<L> {
+    /// Backward step k's articulated inertia `B_k` and bias `b_k`.
+    #[inline(always)]
+    fn backward(&mut self, _k: usize, _bm: &S3<L>, _bias: &V<L>) {}
+    /// Forward step k's base acceleration `a_k`, before the step.
+    #[inline(always)]
+    fn forward(&mut self, _k: usize, _acc: &V<L>) {}
+}
+
+impl<L> Watch<L> for () {}
+
+/// The tensions of one chain: keeps `B_k` and `b_k` from the backward sweep, and writes segment
+/// k's tension `P_k . e_k` in the forward sweep, `P_k = b_k - A_k a_k` with `A_k = B_k - (m/2) 1`.
+struct TensionWatch<'a> {
+    held: &'a mut [Held],
+    chain: &'a ChainState,
+    t: &'a mut [f64],
+    half_m: f64,
+}
+
+impl<M: Madd> Watch<One<M>> for TensionWatch<'_> {
+    #[inline(always)]
+    fn backward(&mut self, k: usize, bm: &S3<One<M>>, bias: &V<One<M>>) {
+        self.held[k] = Held {
+            inertia: bm.map(|v| v.0),
+            bias: bias.map(|v| v.0),
+        };
+    }
+
+    #[inline(always)]
+    fn forward(&mut self, k: usize, acc: &V<One<M>>) {
+        let h = &self.held[k];
+        let inertia: S3<One<M>> = h.inertia.map(One::new);
+        let ba = to_v3(&sym_mul(&inertia, acc));
+        let pull = V3::from(h.bias) - ba + to_v3(acc) * self.half_m;
+        self.t[k] = pull.dot(&self.chain.e.get(k));
+    }
+}
+
+/// What the root's step leaves for the tensions.
+pub(crate) struct Root<L> {
+    e1: V<L>,
+    z0: L,
+    drift: V<L>,
+    w: V<L>,
+    e1dd_ang: V<L>,
+    rho_c: L,
+    force: V<L>,
+    bias: V<L>,
+    a_mat: S3<L>,
+    /// Segment 1's outer end's acceleration `a_1`.
+    acc1: V<L>,
+}
+
+/// The result of [`sweeps`] for `N` lanes: per lane the first segment where the backward sweep
+/// found the mass matrix singular and whether the root's system was, the axial masses, what the
+/// root leaves for the tensions and the tip's acceleration.
+pub(crate) struct Solved<const N: usize, L> {
+    failed: [Option<usize>; N],
+    root_bad: u32,
+    axial_mass: [f64; N],
+    root: Root<L>,
+    acc: V<L>,
+}
+
+impl<const N: usize, L> Solved<N, L> {
+    /// Lane j's effective axial mass `1 / (M^-1)_00`, kg, or the error of its solve at `time`.
+    ///
+    /// The backward sweep eliminates every outboard angle exactly, so the root matrix is the
+    /// Schur complement of the outboard block of `M`, and by the block-inverse formula its
+    /// inverse is the root block of `M^-1`: `(M^-1)_00 = (M_root^-1)_00`. Its reciprocal is in
+    /// turn the Schur complement of segment 1's angle block in `M_root`:
+    ///
+    /// ```text
+    /// 1 / (M^-1)_00 = m11 - [m12 m13] [[m22 m23] [m23 m33]]^-1 [m12 m13]^T.
+    /// ```
+    ///
+    /// The axial damping `c_s` acts on s alone (a rank-one damping matrix `c_s e_0 e_0^T`), so
+    /// `c_s (M^-1)_00` is exactly the rate of its damping mode. At least the segment mass
+    /// (segment 1's centre moves at s' along e whatever the angle rates), which the root's
+    /// positivity check keeps.
+    pub(crate) fn result(&self, time: f64, j: usize) -> Result<f64> {
+        match self.failed[j] {
+            Some(segment) => Err(singular(time, segment)),
+            None if self.root_bad & (1 << j) != 0 => Err(singular(time, 1)),
+            None => Ok(self.axial_mass[j]),
+        }
+    }
+}
+
+/// The backward sweep, the root's system and the forward sweep of `N` chains of `n` segments
+/// each, one per lane of `L`: lane j for chain j with constants `c[j]`, elongation `s[j]` and
+/// its rate `sd[j]`, writing `q''` into `qdd[j]` (`2 n + 1` values); `watch` sees the steps of
+/// both sweeps (for one chain's tensions). The accelerations of a lane
+/// whose mass matrix was singular (or NaN) are unspecified; [`Solved::result`] gives its error.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(crate) fn sweeps<const N: usize, L: Lane, I: Inputs<L>>(
+    c: [&ChainConstants; N],
+    inputs: &I,
+    n: usize,
+    s: [f64; N],
+    sd: [f64; N],
+    springs: [Spring; N],
+    work: &mut [Articulated<L::Stored>],
+    qdd: [&mut [f64]; N],
+    watch: &mut impl Watch<L>,
+) -> Solved<N, L> {
+    const { assert!(N == L::LANES && N <= 32) };
+    let work = &mut work[..n];
+    let mut qdd = qdd.map(|q| &mut q[..2 * n + 1]);
+    let l = L::gather(|j| c[j].l);
+    let m = L::gather(|j| c[j].m);
+    let inv_l = L::gather(|j| 1.0 / c[j].l);
+    let m6 = L::gather(|j| c[j].m / 6.0);
+    let zero = L::splat(0.0);
+
+    // Backward sweep, tip to segment 2, on B = A + (m/2) 1. A lane whose determinant is not
+    // positive (or NaN) keeps the first segment where it failed.
+    let mut failed: [Option<usize>; N] = [None; N];
+    let all = (1u32 << N) - 1;
+    let mut bad_lanes = 0u32;
+    let d = L::gather(|j| c[j].tip_mass + 0.5 * c[j].m);
+    let mut bm: S3<L> = [d, d, d, zero, zero, zero];
+    let mut bias: V<L> = inputs.tip_force();
+    for k in (1..n).rev() {
+        let (ep, es, w) = inputs.directions(k);
+        let (force, reduced, cos_psi) = inputs.loads(k);
+        // Articulated inertia: depends on the geometry only.
+        let bep = sym_mul_xz(&bm, &ep);
+        let bes = sym_mul(&bm, &es);
+        let k00 = L::madd(-(m6 * cos_psi), cos_psi, dot_xz(&ep, &bep));
+        let k01 = dot_xz(&ep, &bes);
+        let k11 = dot(&es, &bes) - m6;
+        // W = (B E) K^-1 = (B E) adj(K) / det: the adjugate products run beside the division.
+        let a0 = axpy(&bes, -k01, &scale(&bep, k11));
+        let a1 = axpy(&bep, -k01, &scale(&bes, k00));
+        let det = L::madd(k00, k11, -(k01 * k01));
+        // (An infinite det makes the accelerations non-finite, which the integrator reports.)
+        let bad = det.not_positive() & !bad_lanes;
+        if bad != 0 {
+            for (j, f) in failed.iter_mut().enumerate() {
+                if bad & (1 << j) != 0 {
+                    *f = Some(k + 1);
+                }
+            }
+            bad_lanes |= bad;
+            if bad_lanes == all {
+                break;
+            }
+        }
+        let inv = L::splat(1.0).div(det);
+        // Bias: y = K^-1 E^T (r/l^2 + (m/4) w - B w), r/l^2 + (m/4) w = `reduced` + b / l.
+        let bw = sym_mul(&bm, &w);
+        let v = axpy(&bias, inv_l, &sub3(&reduced, &bw));
+        let (r0, r1) = (dot_xz(&ep, &v), dot(&es, &v));
+        let y0 = L::madd(k11, r0, -(k01 * r1)) * inv;
+        let y1 = L::madd(k00, r1, -(k01 * r0)) * inv;
+        let t = axpy(&bep, y0, &axpy(&bes, y1, &bw));
+        bias = axpy(&t, -l, &add3(&force, &bias));
+        let upd = |a: L, b: L, c: L, d: L, base: L| L::madd(-L::madd(a, b, c * d), inv, base);
+        bm = [
+            upd(a0[0], bep[0], a1[0], bes[0], bm[0] + m),
+            upd(a0[1], bep[1], a1[1], bes[1], bm[1] + m),
+            upd(a0[2], bep[2], a1[2], bes[2], bm[2] + m),
+            upd(a0[0], bep[1], a1[0], bes[1], bm[3]),
+            upd(a0[0], bep[2], a1[0], bes[2], bm[4]),
+            upd(a0[1], bep[2], a1[1], bes[2], bm[5]),
+        ];
+        // l G = W^T.
+        let art = &mut work[k];
+        art.lg = [scale(&a0, inv), scale(&a1, inv)].map(|g| g.map(L::store));
+        art.y = [y0.store(), y1.store()];
+        watch.backward(k, &bm, &bias);
+    }
 
     // Root: s and segment 1's angles, against A_1 = B_1 - (m/2) 1 and b_1. With e, E_phi, E_psi
     // orthogonal (|E_phi| = cos psi), J_c^T J_c = diag(1, rho_c^2 cos^2 psi, rho_c^2) and
     // J_r^T J_r = diag(0, cos^2 psi, 1); the 3x3 system is solved by LDL^T.
-    let (force, extra) = (chain.force.get(0), chain.extra.get(0));
-    let half_m = 0.5 * m;
-    let a_mat = Sym3 {
-        xx: bm.xx - half_m,
-        yy: bm.yy - half_m,
-        zz: bm.zz - half_m,
-        ..bm
-    };
+    let half_m = L::gather(|j| 0.5 * c[j].m);
+    let a_mat: S3<L> = [
+        bm[0] - half_m,
+        bm[1] - half_m,
+        bm[2] - half_m,
+        bm[3],
+        bm[4],
+        bm[5],
+    ];
     let b_vec = bias;
-    let (e1, e_phi, e_psi) = (chain.e.get(0), chain.e_phi.get(0), chain.e_psi.get(0));
-    let w = chain.w.get(0);
-    let cos2 = chain.cos_psi[0] * chain.cos_psi[0];
-    let (rho_c, rho_t) = (s + 0.5 * l, s + l);
+    let (_, es1, w) = inputs.directions(0);
+    let (force, _, cos_psi0) = inputs.loads(0);
+    let [e1, ep1, e_dot, extra] = inputs.root();
+    let cos2 = cos_psi0 * cos_psi0;
+    let (s_v, sd_v) = (L::gather(|j| s[j]), L::gather(|j| sd[j]));
+    let (rho_c, rho_t) = (s_v + L::splat(0.5) * l, s_v + l);
     let (ae, aep, aes) = (
-        a_mat.mul::<M>(&e1),
-        a_mat.mul::<M>(&e_phi),
-        a_mat.mul::<M>(&e_psi),
+        sym_mul(&a_mat, &e1),
+        sym_mul(&a_mat, &ep1),
+        sym_mul(&a_mat, &es1),
     );
-    let own = m * rho_c * rho_c + c.rod_inertia;
+    let rod_inertia = L::gather(|j| c[j].rod_inertia);
+    let own = m * rho_c * rho_c + rod_inertia;
     let rho_t2 = rho_t * rho_t;
-    let m11_own = m + dot::<M>(&e1, &ae);
-    let m11 = m11_own + spring.added_mass;
-    let m12 = rho_t * dot::<M>(&e1, &aep);
-    let m13 = rho_t * dot::<M>(&e1, &aes);
-    let m22 = M::madd(own, cos2, rho_t2 * dot::<M>(&e_phi, &aep));
-    let m23 = rho_t2 * dot::<M>(&e_phi, &aes);
-    let m33 = M::madd(rho_t2, dot::<M>(&e_psi, &aes), own);
-    let drift = chain.e_dot.get(0) * (2.0 * sd);
-    let c0 = axpy::<M>(&w, rho_c, &drift);
-    let t0 = axpy::<M>(&w, rho_t, &drift);
-    let f1 = axpy::<M>(&c0, -m, &force);
-    let f2 = b_vec - a_mat.mul::<M>(&t0);
-    let moment = axpy::<M>(&f1, rho_c, &axpy::<M>(&f2, rho_t, &extra));
-    let r0 = dot::<M>(&e1, &(f1 + f2)) - M::madd(c.k, spring.s, c.c_s * spring.sd);
-    let (r1, r2) = (dot::<M>(&e_phi, &moment), dot::<M>(&e_psi, &moment));
+    let m11_own = m + dot(&e1, &ae);
+    let m11 = m11_own + L::gather(|j| springs[j].added_mass);
+    let m12 = rho_t * dot(&e1, &aep);
+    let m13 = rho_t * dot(&e1, &aes);
+    let m22 = L::madd(own, cos2, rho_t2 * dot(&ep1, &aep));
+    let m23 = rho_t2 * dot(&ep1, &aes);
+    let m33 = L::madd(rho_t2, dot(&es1, &aes), own);
+    let drift = scale(&e_dot, L::splat(2.0) * sd_v);
+    let c0 = axpy(&w, rho_c, &drift);
+    let t0 = axpy(&w, rho_t, &drift);
+    let f1 = axpy(&c0, -m, &force);
+    let f2 = sub3(&b_vec, &sym_mul(&a_mat, &t0));
+    let moment = axpy(&f1, rho_c, &axpy(&f2, rho_t, &extra));
+    let (k_v, c_s) = (L::gather(|j| c[j].k), L::gather(|j| c[j].c_s));
+    let (spring_s, spring_sd) = (L::gather(|j| springs[j].s), L::gather(|j| springs[j].sd));
+    let r0 = dot(&e1, &add3(&f1, &f2)) - L::madd(k_v, spring_s, c_s * spring_sd);
+    let (r1, r2) = (dot(&ep1, &moment), dot(&es1, &moment));
     let d1 = m11;
-    let (l21, l31) = (m12 / d1, m13 / d1);
-    let d2 = M::madd(-l21, m12, m22);
-    let l32 = M::madd(-l31, m12, m23) / d2;
-    let d3 = M::madd(-l32 * l32, d2, M::madd(-l31, m13, m33));
-    if !(d1 > 0.0 && d2 > 0.0 && d3 > 0.0) {
-        return Err(singular(time, 1));
-    }
-    let axial_mass = root_axial_mass(m11_own, m12, m13, m22, m23, m33);
-    let y2 = M::madd(-l21, r0, r1);
-    let y3 = M::madd(-l32, y2, M::madd(-l31, r0, r2));
-    let z2 = y3 / d3;
-    let z1 = M::madd(-l32, z2, y2 / d2);
-    let z0 = M::madd(-l31, z2, M::madd(-l21, z1, r0 / d1));
-    qdd[0] = z0;
-    qdd[1] = z1;
-    qdd[2] = z2;
-    let e1dd_ang = axpy::<M>(&e_phi, z1, &(e_psi * z2));
-    let mut acc = axpy::<M>(&e1dd_ang, rho_t, &axpy::<M>(&e1, z0, &t0));
-
-    let mut tensions = tensions;
-    if let Some(t) = tensions.as_deref_mut() {
-        let com = e1 * z0 + drift + (w + e1dd_ang) * rho_c;
-        let pull = force - com * m + b_vec - a_mat.mul::<M>(&acc);
-        t[0] = pull.dot(&e1);
-    }
-
-    // Forward sweep.
-    for k in 1..n {
-        let art = &work[k];
-        if let Some(t) = tensions.as_deref_mut() {
-            // P_k = b_k - A_k a_k with A_k = B_k - (m/2) 1.
-            let pull = art.bias - art.inertia.mul::<M>(&acc) + acc * (0.5 * m);
-            t[k] = pull.dot(&chain.e.get(k));
-        }
-        let [c0, c1] = art.lg.map(|r| V3::new(r[0], r[1], r[2]));
-        let [y0, y1] = art.y;
-        // u = y - G a with l G a = (c0 . a, c1 . a); then a_{k+1} = a_k + l (w_k + E_k u_k)
-        // = (a_k + phi_k) - E_k (l G a_k) with phi_k = l (w_k + E_k y_k) formed aside (a shorter
-        // chain of dependent operations from segment to segment).
-        let (d0, d1) = (dot::<M>(&c0, &acc), dot::<M>(&c1, &acc));
-        qdd[1 + 2 * k] = M::madd(-inv_l, d0, y0);
-        qdd[2 + 2 * k] = M::madd(-inv_l, d1, y1);
-        let (ep, es) = (V3::new(ep_k.x[k], 0.0, ep_k.z[k]), es_k.get(k));
-        let phi = axpy::<M>(&ep, y0, &axpy::<M>(&es, y1, &w_k.get(k)));
-        let shifted = axpy::<M>(&phi, l, &acc);
-        acc = axpy::<M>(&ep, -d0, &axpy::<M>(&es, -d1, &shifted));
-    }
-    if let Some(t) = tensions {
-        t[n] = (chain.tip_force - acc * c.tip_mass).dot(&chain.e.get(n - 1));
-    }
-    Ok(axial_mass)
-}
-
-/// The backward sweep (tip to segment 2) on `B = A + (m/2) 1`, writing `l G_k` and `y_k` (and,
-/// for the tensions, `B_k` and `b_k`) into `work`; returns `B_1` and `b_1` for the root. Four
-/// lanes wide where the processor has AVX2 and FMA (`recursive/avx2.rs`); the scalar loop
-/// below is its bitwise reference and the sweep of other processors.
-#[inline(always)]
-fn backward<M: Madd>(
-    time: f64,
-    c: &ChainConstants,
-    chain: &ChainState,
-    work: &mut [Articulated],
-    want_tensions: bool,
-) -> Result<(Sym3, V3)> {
-    #[cfg(target_arch = "x86_64")]
-    if M::VECTORIZED && crate::arith::has_avx2_fma() {
-        // SAFETY: the processor has AVX2 and FMA, checked just above.
-        return unsafe { avx2::backward(time, c, chain, work, want_tensions) };
-    }
-    let n = chain.segments();
-    let (l, m) = (c.l, c.m);
-    let inv_l = 1.0 / l;
-    let m6 = m / 6.0;
-    let mut bm = Sym3::diagonal(c.tip_mass + 0.5 * m);
-    let mut bias = chain.tip_force;
-    let (force_k, reduced_k, w_k) = (chain.force.view(n), chain.reduced.view(n), chain.w.view(n));
-    let (ep_k, es_k) = (chain.e_phi.view(n), chain.e_psi.view(n));
-    let cos_psi_k = &chain.cos_psi[..n];
-    let work = &mut work[..n];
-    for k in (1..n).rev() {
-        let (force, reduced, w) = (force_k.get(k), reduced_k.get(k), w_k.get(k));
-        let cos_psi = cos_psi_k[k];
-        let (ep, es) = (&V3::new(ep_k.x[k], 0.0, ep_k.z[k]), &es_k.get(k));
-        // Articulated inertia: depends on the geometry only.
-        let bep = bm.mul_xz::<M>(ep);
-        let bes = bm.mul::<M>(es);
-        let k00 = M::madd(-m6 * cos_psi, cos_psi, dot_xz::<M>(ep, &bep));
-        let k01 = dot_xz::<M>(ep, &bes);
-        let k11 = dot::<M>(es, &bes) - m6;
-        // W = (B E) K^-1 = (B E) adj(K) / det: the adjugate products run beside the division.
-        let a0 = axpy::<M>(&bes, -k01, &(bep * k11));
-        let a1 = axpy::<M>(&bep, -k01, &(bes * k00));
-        let det = M::madd(k00, k11, -(k01 * k01));
-        // (Not positive or NaN. An infinite det makes the accelerations non-finite, which the
-        // integrator reports.)
-        if det.is_nan() || det <= 0.0 {
-            return Err(singular(time, k + 1));
-        }
-        let inv = 1.0 / det;
-        // Bias: y = K^-1 E^T (r/l^2 + (m/4) w - B w), r/l^2 + (m/4) w = `reduced` + b / l.
-        let bw = bm.mul::<M>(&w);
-        let v = axpy::<M>(&bias, inv_l, &(reduced - bw));
-        let (r0, r1) = (dot_xz::<M>(ep, &v), dot::<M>(es, &v));
-        let y0 = M::madd(k11, r0, -(k01 * r1)) * inv;
-        let y1 = M::madd(k00, r1, -(k01 * r0)) * inv;
-        let t = axpy::<M>(&bep, y0, &axpy::<M>(&bes, y1, &bw));
-        bias = axpy::<M>(&t, -l, &(force + bias));
-        let upd =
-            |a: f64, b: f64, c: f64, d: f64, base: f64| M::madd(-M::madd(a, b, c * d), inv, base);
-        bm = Sym3 {
-            xx: upd(a0.x, bep.x, a1.x, bes.x, bm.xx + m),
-            yy: upd(a0.y, bep.y, a1.y, bes.y, bm.yy + m),
-            zz: upd(a0.z, bep.z, a1.z, bes.z, bm.zz + m),
-            xy: upd(a0.x, bep.y, a1.x, bes.y, bm.xy),
-            xz: upd(a0.x, bep.z, a1.x, bes.z, bm.xz),
-            yz: upd(a0.y, bep.z, a1.y, bes.z, bm.yz),
-        };
-        // l G = W^T.
-        let art = &mut work[k];
-        let (g0, g1) = (a0 * inv, a1 * inv);
-        art.lg = [[g0.x, g0.y, g0.z, 0.0], [g1.x, g1.y, g1.z, 0.0]];
-        art.y = [y0, y1];
-        if want_tensions {
-            art.inertia = bm;
-            art.bias = bias;
-        }
-    }
-    Ok((bm, bias))
-}
-
-/// The effective mass the axial element moves, `1 / (M^-1)_00`, kg, from the root's 3x3 system
-/// (rows `m11 .. m33` in the order s, phi_1, psi_1).
-///
-/// The backward sweep eliminates every outboard angle exactly, so the root matrix is the Schur
-/// complement of the outboard block of `M`, and by the block-inverse formula its inverse is the
-/// root block of `M^-1`: `(M^-1)_00 = (M_root^-1)_00`. Its reciprocal is in turn the Schur
-/// complement of segment 1's angle block in `M_root`:
-///
-/// ```text
-/// 1 / (M^-1)_00 = m11 - [m12 m13] [[m22 m23] [m23 m33]]^-1 [m12 m13]^T.
-/// ```
-///
-/// The axial damping `c_s` acts on s alone (a rank-one damping matrix `c_s e_0 e_0^T`), so
-/// `c_s (M^-1)_00` is exactly the rate of its damping mode. At least the segment mass (segment
-/// 1's centre moves at s' along e whatever the angle rates), which the caller's guard keeps.
-#[inline(always)]
-fn root_axial_mass(m11: f64, m12: f64, m13: f64, m22: f64, m23: f64, m33: f64) -> f64 {
+    let (l21, l31) = (m12.div(d1), m13.div(d1));
+    let d2 = L::madd(-l21, m12, m22);
+    let l32 = L::madd(-l31, m12, m23).div(d2);
+    let d3 = L::madd(-(l32 * l32), d2, L::madd(-l31, m13, m33));
+    let root_bad = d1.not_positive() | d2.not_positive() | d3.not_positive();
+    // The axial mass (see `Solved::result`).
     let det = m22 * m33 - m23 * m23;
-    let quad = m33 * m12 * m12 - 2.0 * m23 * m12 * m13 + m22 * m13 * m13;
-    m11 - quad / det
+    let quad = m33 * m12 * m12 - L::splat(2.0) * m23 * m12 * m13 + m22 * m13 * m13;
+    let mut axial_mass = [0.0; N];
+    (m11_own - quad.div(det)).write(&mut axial_mass);
+    let y2 = L::madd(-l21, r0, r1);
+    let y3 = L::madd(-l32, y2, L::madd(-l31, r0, r2));
+    let z2 = y3.div(d3);
+    let z1 = L::madd(-l32, z2, y2.div(d2));
+    let z0 = L::madd(-l31, z2, L::madd(-l21, z1, r0.div(d1)));
+    write_lanes(&mut qdd, 0, z0);
+    write_lanes(&mut qdd, 1, z1);
+    write_lanes(&mut qdd, 2, z2);
+    let e1dd_ang = axpy(&ep1, z1, &scale(&es1, z2));
+    let mut acc = axpy(&e1dd_ang, rho_t, &axpy(&e1, z0, &t0));
+    let root = Root {
+        e1,
+        z0,
+        drift,
+        w,
+        e1dd_ang,
+        rho_c,
+        force,
+        bias: b_vec,
+        a_mat,
+        acc1: acc,
+    };
+
+    // Forward sweep: u = y - G a with l G a = (c0 . a, c1 . a); then a_{k+1} = a_k + l (w_k +
+    // E_k u_k) = (a_k + phi_k) - E_k (l G a_k) with phi_k = l (w_k + E_k y_k) formed aside (a
+    // shorter chain of dependent operations from segment to segment).
+    let neg_inv_l = -inv_l;
+    for (k, art) in work.iter().enumerate().skip(1) {
+        watch.forward(k, &acc);
+        let [lg0, lg1] = art.lg.map(|row| row.map(|v| L::load(&v)));
+        let [y0, y1] = art.y.map(|v| L::load(&v));
+        let (d0, d1) = (dot(&lg0, &acc), dot(&lg1, &acc));
+        write_lanes(&mut qdd, 1 + 2 * k, L::madd(neg_inv_l, d0, y0));
+        write_lanes(&mut qdd, 2 + 2 * k, L::madd(neg_inv_l, d1, y1));
+        let ([ep_x, ep_z], es, w) = inputs.directions(k);
+        let ep = [ep_x, zero, ep_z];
+        let phi = axpy(&ep, y0, &axpy(&es, y1, &w));
+        let shifted = axpy(&phi, l, &acc);
+        acc = axpy(&ep, -d0, &axpy(&es, -d1, &shifted));
+    }
+    Solved {
+        failed,
+        root_bad,
+        axial_mass,
+        root,
+        acc,
+    }
+}
+
+/// Lane j of `v` into `out[j][i]`.
+#[inline(always)]
+fn write_lanes<const N: usize, L: Lane>(out: &mut [&mut [f64]; N], i: usize, v: L) {
+    let mut lanes = [0.0; N];
+    v.write(&mut lanes);
+    for (out, v) in out.iter_mut().zip(lanes) {
+        out[i] = v;
+    }
 }

@@ -3,7 +3,9 @@
 use nalgebra::Vector3;
 
 use crate::config::{StepLoad, TetherConfig};
-use crate::dynamics::{Energy, LockstepWork, TetherModel};
+#[cfg(feature = "lockstep")]
+use crate::dynamics::LockstepWork;
+use crate::dynamics::{Energy, TetherModel};
 use crate::error::{Result, TetherError};
 use crate::implicit::Rosenbrock;
 use crate::integrator::{InSurroundings, Rk4};
@@ -151,9 +153,10 @@ impl Tether {
 
     /// [`Tether::step`] of four tethers at once, each in its own surroundings: the right-hand
     /// sides of the four are evaluated together, their recursion four AVX2 lanes wide
-    /// ([`TetherModel::accelerations_four`], [`Rk4::advance_adaptive_four`]), at about 0.8 of
-    /// the cost of four single steps (BENCHMARKS.md). Every tether's result, error included, is
-    /// bit for bit that of its own `step`. `work` is the lanes' work space (one per thread).
+    /// ([`TetherModel::accelerations_four`], [`Rk4::advance_adaptive_four`]). Every tether's
+    /// result, error included, is bit for bit that of its own `step`. `work` is the lanes' work
+    /// space (one per thread).
+    #[cfg(feature = "lockstep")]
     pub fn step_four<S: Surroundings + ?Sized>(
         tethers: [&mut Tether; 4],
         surroundings: [&S; 4],

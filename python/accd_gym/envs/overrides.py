@@ -98,7 +98,7 @@ _SOFT_CAPTURE: dict[str, Any] = {"boom": {"capture_radius": 0.3, "max_closing_sp
 #: The precision scenario (design notes, item 14): the soft capture in severe ambient turbulence.
 _PRECISION: dict[str, Any] = merge({"turbulence": {"ambient": "severe"}}, _SOFT_CAPTURE)
 
-#: Randomized physics at the documented default ranges (crates/sim/src/randomization.rs), written
+#: Randomized physics at the documented default ranges (crates/sim/src/task/randomization.rs), written
 #: out so that a change of the code's defaults cannot change the tier.
 _RANDOMIZATION: dict[str, Any] = {
     "enabled": True,

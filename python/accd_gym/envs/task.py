@@ -1,6 +1,6 @@
 """The RL task's spaces, observation table, info fields and seeds, shared by every env class.
 
-The numbers come from the Rust core (``crates/sim/src/task.rs``), so they cannot drift apart.
+The numbers come from the Rust core (``crates/sim/src/task/``), so they cannot drift apart.
 """
 
 from __future__ import annotations

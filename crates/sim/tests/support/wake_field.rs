@@ -2,8 +2,8 @@
 //! wake and turbulence (the capture simulation builds its field from its own configuration with
 //! [`WakeField::from_parts`]; this is not production API).
 
-use accd_sim::turbulence::{Turbulence, TurbulenceConfig};
-use accd_sim::wake::{Wake, WakeConfig, WakeTables};
+use accd_sim::physics::turbulence::{Turbulence, TurbulenceConfig};
+use accd_sim::physics::wake::{Wake, WakeConfig, WakeTables};
 use accd_sim::{SimError, WakeField};
 use accd_tether::Atmosphere;
 

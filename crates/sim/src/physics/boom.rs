@@ -261,7 +261,7 @@ impl CaptureStatus {
     }
 }
 
-/// The RLV's boom ([`crate::boom::Boom`]), TA frame, SI.
+/// The RLV's boom ([`crate::physics::boom::Boom`]), TA frame, SI.
 ///
 /// Part of the state format: a change is a change of [`crate::state_format::FORMAT_VERSION`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -1,5 +1,5 @@
 //! [`WakeField`]: the air around the tether and the capturing device: free stream, the TA's mean
-//! wake ([`crate::wake`]) and turbulence ([`crate::turbulence`]), as an
+//! wake ([`crate::physics::wake`]) and turbulence ([`crate::physics::turbulence`]), as an
 //! [`accd_tether::Surroundings`], so that wake and turbulence act on every tether segment.
 //!
 //! `air_velocity(t, p) = (-U_inf, 0, 0) + wake(p).velocity + turbulence(p, wake(p).tke)`, in the
@@ -17,11 +17,11 @@
 use accd_tether::Surroundings;
 use nalgebra::Vector3;
 
-use crate::air::{AirDisturbance, AirState};
 use crate::error::Result;
+use crate::physics::air::{AirDisturbance, AirState};
+use crate::physics::turbulence::Turbulence;
+use crate::physics::wake::Wake;
 use crate::state_format::StateError;
-use crate::turbulence::Turbulence;
-use crate::wake::Wake;
 
 /// Free stream + mean wake + turbulence, as the tether's [`Surroundings`].
 #[derive(Debug, Clone)]
@@ -35,7 +35,7 @@ pub struct WakeField {
 
 impl WakeField {
     /// Assembles a field; the free stream is `(-wake.airspeed(), 0, 0)`, `density` in kg/m^3.
-    /// Every wake lane is generated (per-lane streams too, [`crate::turbulence::LaneStreams`]:
+    /// Every wake lane is generated (per-lane streams too, [`crate::physics::turbulence::LaneStreams`]:
     /// a standalone field cannot know where it will be sampled).
     pub fn from_parts(wake: Wake, mut turbulence: Turbulence, density: f64) -> WakeField {
         turbulence.activate_all();
@@ -175,8 +175,8 @@ impl AirDisturbance for WakeField {
     }
 
     /// Restarts the turbulence; with per-lane streams no lane is generated until
-    /// [`crate::air::AirDisturbance::prepare`] declares the points sampled (or
-    /// [`crate::air::AirDisturbance::prepare_all`]).
+    /// [`crate::physics::air::AirDisturbance::prepare`] declares the points sampled (or
+    /// [`crate::physics::air::AirDisturbance::prepare_all`]).
     fn reset(&mut self, wake_seed: u64) {
         self.turbulence.reset(wake_seed);
     }

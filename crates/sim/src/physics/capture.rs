@@ -10,32 +10,34 @@
 //! the tether as the tip force, and its moment drives Euler's equations. Once per step, before
 //! the RK4 stages: the flap actuators, the boom and the air disturbance advance, and the air
 //! density is taken from ISA at the aircraft's altitude (varying linearly with depth below it).
-//! The quaternion is renormalised after each step. [`CaptureSim::step_four`] steps four
-//! simulations with their tethers' recursions four AVX2 lanes wide, each bit for bit its own
-//! step.
+//! The quaternion is renormalised after each step. With the `lockstep` feature,
+//! `CaptureSim::step_four` steps four simulations with their tethers' recursions four AVX2 lanes
+//! wide, each bit for bit its own step.
 
 use std::sync::Arc;
 
 use accd_tether::{
-    Atmosphere, AxialStage, AxialSystem, Lockstep, LockstepWork, Rk4, Rosenbrock, Surroundings,
-    System, TetherModel, TetherState,
+    Atmosphere, AxialStage, AxialSystem, Rk4, Rosenbrock, Surroundings, System, TetherModel,
+    TetherState,
 };
+#[cfg(feature = "lockstep")]
+use accd_tether::{Lockstep, LockstepWork};
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::accd::{aero_loads, angular_acceleration, AccdState, Actuators, AeroLoads};
-use crate::aero::AeroModel;
-use crate::air::{AirDisturbance, AirState};
-use crate::aircraft::AircraftConfig;
-use crate::boom::{Boom, BoomState, CaptureStatus};
 use crate::config::CaptureConfig;
 use crate::error::{Result, SimError};
+use crate::physics::accd::{aero_loads, angular_acceleration, AccdState, Actuators, AeroLoads};
+use crate::physics::aero::AeroModel;
+use crate::physics::air::{AirDisturbance, AirState};
+use crate::physics::aircraft::AircraftConfig;
+use crate::physics::boom::{Boom, BoomState, CaptureStatus};
+use crate::physics::turbulence::Turbulence;
+use crate::physics::wake::{AirSampling, Wake};
+use crate::physics::wake_field::WakeField;
 use crate::rng::Seeds;
 use crate::state_format::check_len;
-use crate::turbulence::Turbulence;
 use crate::valid::Valid;
-use crate::wake::{AirSampling, Wake};
-use crate::wake_field::WakeField;
 
 type V3 = Vector3<f64>;
 
@@ -215,6 +217,7 @@ impl AxialSystem for Coupled<'_> {
     }
 }
 
+#[cfg(feature = "lockstep")]
 impl Lockstep for Coupled<'_> {
     fn derivatives_four(
         systems: &mut [&mut Self; 4],
@@ -712,6 +715,7 @@ impl CaptureSim {
     /// recursion four AVX2 lanes wide ([`accd_tether::Rk4::advance_adaptive_four`]); everything
     /// else runs per simulation. Every simulation's result, error included, is bit for bit that
     /// of its own `step`. `work` is the lanes' work space (one per thread).
+    #[cfg(feature = "lockstep")]
     pub fn step_four(
         sims: [&mut CaptureSim; 4],
         commands: [[f64; 4]; 4],

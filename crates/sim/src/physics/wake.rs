@@ -101,7 +101,7 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, SimError};
-use crate::interp::{Axis, Edge, Grid};
+use crate::physics::interp::{Axis, Edge, Grid};
 
 /// Length of the towing aircraft L, m (paper section 2.2).
 pub const TA_LENGTH_M: f64 = 70.0;
@@ -713,7 +713,7 @@ impl Wake {
     /// an attachment offset outside [-1000, 1000] m, `airspeed_mps` outside (0, 400].
     pub fn new(config: &WakeConfig, airspeed_mps: f64, tables: WakeTables) -> Result<Wake> {
         config.validate()?;
-        crate::aircraft::check_airspeed("airspeed_mps", airspeed_mps)?;
+        crate::physics::aircraft::check_airspeed("airspeed_mps", airspeed_mps)?;
         let (lo, hi) = (tables.low().alpha_deg(), tables.high().alpha_deg());
         if !(config.alpha_deg >= lo && config.alpha_deg <= hi) {
             return Err(SimError::invalid_config(

@@ -23,7 +23,7 @@
 //! (-z) and `bottom` (+z) vertical. A positive deflection of a horizontal flap moves its trailing
 //! edge up (force +z at the tail: nose-up pitching moment); of a vertical flap, its trailing edge to
 //! starboard (force -y at the tail: nose-right yawing moment). The paper's Fig. 5 mixing then reads
-//! (see [`crate::accd::mix`]): pitch (nose up) = right and left together; yaw (nose right) = top and
+//! (see [`crate::physics::accd::mix`]): pitch (nose up) = right and left together; yaw (nose right) = top and
 //! bottom together; roll (right side down) = right +, left -, top -, bottom +.
 //!
 //! # File format (JSON)
@@ -46,7 +46,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, SimError};
-use crate::interp::{check_axis, check_values, Axis};
+use crate::physics::interp::{check_axis, check_values, Axis};
 
 /// Names of the six coefficients, in storage order.
 pub const COEFFICIENTS: [&str; 6] = ["cx", "cy", "cz", "cl", "cm", "cn"];
@@ -303,7 +303,7 @@ impl AeroModel {
     /// The model with every force coefficient (base and flap increments of C_X, C_Y, C_Z) times
     /// `force` and every moment coefficient (C_l, C_m, C_n, their flap increments and the
     /// damping derivatives) times `moment`: loads scale by the same factors
-    /// (`tests` check it against [`crate::accd::aero_loads`]).
+    /// (`tests` check it against [`crate::physics::accd::aero_loads`]).
     pub fn scaled(mut self, force: f64, moment: f64) -> Self {
         for c in self.base.iter_mut().chain(self.flaps.iter_mut()) {
             for (i, v) in c.iter_mut().enumerate() {

@@ -276,7 +276,7 @@ impl TurbulenceConfig {
 }
 
 /// Position of a point on a 1D lane axis: the first lane, the fraction towards the second, and
-/// whether there is a second. Not [`crate::interp::Axis`]: the lanes are a computed uniform
+/// whether there is a second. Not [`crate::physics::interp::Axis`]: the lanes are a computed uniform
 /// grid (first lane and spacing, no stored points) that may have a single lane, and beyond the
 /// outer lanes a point takes the outer lane's gusts (a clamp, `Edge::Hold` in the table
 /// interpolator's terms); its values (the lane histories) live in the turbulence's ring buffer.
@@ -371,7 +371,7 @@ impl Turbulence {
     /// at time 0 with its history filled (stationary from the start).
     pub fn new(config: &TurbulenceConfig, airspeed_mps: f64, seed: u64) -> Result<Turbulence> {
         config.validate()?;
-        crate::aircraft::check_airspeed("airspeed_mps", airspeed_mps)?;
+        crate::physics::aircraft::check_airspeed("airspeed_mps", airspeed_mps)?;
         let dt = config.time_step_s;
         let spacing = config.wake_length_scale_m;
         let lanes_y = LaneAxis {

@@ -34,8 +34,8 @@ use accd_tether::{Material, TetherConfig};
 use serde::{Deserialize, Serialize};
 
 use crate::config::CaptureConfig;
+use crate::physics::turbulence::AmbientTurbulence;
 use crate::rng::Stream;
-use crate::turbulence::AmbientTurbulence;
 
 /// ChaCha stream label of the parameter draw ("PARAMS  " in ASCII), on the wake seed.
 pub const PARAMETERS_STREAM: u64 = u64::from_be_bytes(*b"PARAMS  ");
@@ -196,7 +196,7 @@ impl Parameters {
     /// diameter (mass, breaking tension, EA and EI from Table 2's rope model; segments, damping,
     /// drag and step as they were), the ACCD's mass and coefficient factors, the wake's angle and
     /// strength, the airspeed, and the ambient turbulence (none at 0 m/s). The episode's whole
-    /// configuration is [`crate::episode::drawn_config`].
+    /// configuration is [`crate::task::episode::drawn_config`].
     pub fn apply_to(&self, physics: &mut CaptureConfig) {
         let rope = Material::Uhmwpe;
         let d = self.tether_diameter;

@@ -1,4 +1,4 @@
-//! An opt-in sensor model for the observation (`sensors` in [`crate::task::EnvConfig`]; off by
+//! An opt-in sensor model for the observation (`sensors` in [`crate::task::config::EnvConfig`]; off by
 //! default, and then nothing here runs). It changes what the agent *sees*, never the physics:
 //! the reward and the episode end read the true state, and every random number comes from the
 //! sensor stream ([`crate::rng::SENSOR_STREAM`], keyed by the episode's initial-conditions seed),
@@ -175,7 +175,7 @@ accd_spec::config_struct! {
 impl Rules for GnssConfig {}
 
 accd_spec::config_struct! {
-    /// The sensor model of the observation (module docs of `accd_sim::sensors`). Off by
+    /// The sensor model of the observation (module docs of `accd_sim::task::sensors`). Off by
     /// default: the observation is then the true state. Only the observation is sensed; the
     /// reward and the episode end use the true state.
     #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

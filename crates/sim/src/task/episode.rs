@@ -5,23 +5,26 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
-use accd_tether::{LockstepWork, TetherState};
+#[cfg(feature = "lockstep")]
+use accd_tether::LockstepWork;
+use accd_tether::TetherState;
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::accd::AccdState;
-use crate::capture::{CaptureSim, CaptureState, Snapshot};
 use crate::error::{Result, SimError};
-use crate::randomization::Parameters;
+use crate::physics::accd::AccdState;
+use crate::physics::capture::{CaptureSim, CaptureState, Snapshot};
+use crate::physics::turbulence::AmbientTurbulence;
+use crate::physics::wake::AirSampling;
 use crate::rng::{Seeds, Stream};
-use crate::sensors::{SensorState, Sensors};
 use crate::state_format::{check_len, StateError};
-use crate::task::{
-    observe, observe_sensed, tilt, EnvConfig, ObservationInputs, ACT_DIM, OBS_DIM, SENSED_LAYOUT,
+use crate::task::config::EnvConfig;
+use crate::task::observation::{
+    observe, observe_sensed, tilt, ObservationInputs, ACT_DIM, OBS_DIM, SENSED_LAYOUT,
 };
-use crate::turbulence::AmbientTurbulence;
+use crate::task::randomization::Parameters;
+use crate::task::sensors::{SensorState, Sensors};
 use crate::valid::Valid;
-use crate::wake::AirSampling;
 
 type V3 = Vector3<f64>;
 
@@ -412,6 +415,7 @@ impl Episode {
     /// by one otherwise. Every episode's outcome, error included, is bit for bit that of its own
     /// `step_interruptible` (but for where a `stop` set meanwhile interrupts it). `work` is the
     /// lanes' work space (one per thread).
+    #[cfg(feature = "lockstep")]
     pub fn step_four(
         episodes: [&mut Episode; 4],
         actions: [&[f32]; 4],

@@ -9,15 +9,15 @@
 //! I w' = M_aero - w x (I w)        q' = q (0, w) / 2
 //! ```
 //!
-//! Four flaps (right, left, top, bottom; see [`crate::aero`] for their signs) follow their
+//! Four flaps (right, left, top, bottom; see [`crate::physics::aero`] for their signs) follow their
 //! commands through a first-order lag with a rate limit and hard stops at +-`flap_limit_deg`.
 
 use accd_spec::{join, out_of_range, Fields, OutOfRange, Rules};
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::aero::AeroModel;
 use crate::error::{Result, SimError};
+use crate::physics::aero::AeroModel;
 
 type V3 = Vector3<f64>;
 
@@ -46,7 +46,7 @@ accd_spec::config_struct! {
             "time constant of the flap actuators' first-order lag";
         pub actuator_rate_limit_deg_s: f64 = 300.0, "deg/s", "(0, 5000]",
             "rate limit of the flap actuators";
-        /// See [`crate::aero`] for the file format; an inline table (text starting with `{`) is a
+        /// See [`crate::physics::aero`] for the file format; an inline table (text starting with `{`) is a
         /// configuration that carries its table, for pickles and saved envs.
         pub aero_table: Option<String> = None, "", "",
             "aerodynamic table: a file path (a regular file of at most 64 MiB) or the table as JSON text (None: the default finned body)";

@@ -1,12 +1,12 @@
 //! The air around the tether and the ACCD, beyond the free stream: [`AirDisturbance`], what
-//! the capture simulation samples (the wake field of [`crate::wake_field`] is the one in use).
+//! the capture simulation samples (the wake field of [`crate::physics::wake_field`] is the one in use).
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use crate::error::Result;
+use crate::physics::turbulence::TurbulenceState;
 use crate::state_format::StateError;
-use crate::turbulence::TurbulenceState;
 
 type V3 = Vector3<f64>;
 

@@ -4,7 +4,7 @@
 //! # The model
 //! With `x` the plant state, `u` the four flap commands (the env's action: units of the flap
 //! limit `accd.flap_limit_deg`, held over the step), `w` a wind bias at the ACCD (m/s, lateral
-//! y and vertical z) and `y` the observation of [`crate::task::OBSERVATION`] (each quantity
+//! y and vertical z) and `y` the observation of [`crate::task::observation::OBSERVATION`] (each quantity
 //! times its scale, *before* clipping):
 //!
 //! ```text
@@ -28,7 +28,7 @@
 //!
 //! The quaternion's fourth, dependent coordinate is gone (the error is a 3-vector), and the flap
 //! commands are inputs, not states: the actuator's first-order lag starts every physics step
-//! from the deflection and the command ([`crate::accd::Actuators::advance`]). Nothing is
+//! from the deflection and the command ([`crate::physics::accd::Actuators::advance`]). Nothing is
 //! reduced: the model is exact to first order in the whole state; a design may reduce it.
 //!
 //! # The boom and the observation
@@ -62,19 +62,20 @@ use std::sync::Arc;
 use accd_tether::Atmosphere;
 use nalgebra::{DMatrix, UnitQuaternion, Vector3};
 
-use crate::aero::AeroModel;
-use crate::air::{AirDisturbance, AirState};
-use crate::capture::{CaptureSim, CaptureState};
 use crate::config::CaptureConfig;
-use crate::episode::Equilibrium;
 use crate::error::{Result, SimError};
+use crate::physics::aero::AeroModel;
+use crate::physics::air::{AirDisturbance, AirState};
+use crate::physics::capture::{CaptureSim, CaptureState};
+use crate::physics::turbulence::{AmbientTurbulence, Turbulence};
+use crate::physics::wake::Wake;
+use crate::physics::wake_field::WakeField;
 use crate::rng::Seeds;
 use crate::state_format::StateError;
-use crate::task::{EnvConfig, ObservationInputs, ACT_DIM, OBSERVATION, OBS_DIM};
-use crate::turbulence::{AmbientTurbulence, Turbulence};
+use crate::task::config::EnvConfig;
+use crate::task::episode::Equilibrium;
+use crate::task::observation::{ObservationInputs, ACT_DIM, OBSERVATION, OBS_DIM};
 use crate::valid::Valid;
-use crate::wake::Wake;
-use crate::wake_field::WakeField;
 
 type V3 = Vector3<f64>;
 
