@@ -11,13 +11,13 @@ source scripts/setup.sh
 echo "== cargo fmt --check"
 cargo fmt --all -- --check
 echo "== cargo clippy (warnings are errors)"
-cargo clippy --workspace --all-targets --release -q -- -D warnings
-echo "== cargo test"
+cargo clippy --workspace --all-targets --profile ci -q -- -D warnings
+echo "== cargo test (profile ci: release optimisation, no LTO)"
 # The bindings crate is a cdylib built and tested through Python below.
-cargo test --release --workspace --exclude accd-py
+cargo test --profile ci --workspace --exclude accd-py
 echo "== without the lockstep feature (envs stepped one at a time)"
-cargo clippy -p accd-tether -p accd-sim -p accd-batch --all-targets --release -q --no-default-features -- -D warnings
-cargo test --release -q -p accd-tether -p accd-batch --no-default-features
+cargo clippy -p accd-tether -p accd-sim -p accd-batch --all-targets --profile ci -q --no-default-features -- -D warnings
+cargo test --profile ci -q -p accd-tether -p accd-batch --no-default-features
 # The replay pages are tested in a real browser (tests/test_replay.py): Debian's chromium, installed
 # here under CI (about 30 s); locally those tests are skipped, saying so, when it is missing.
 if [ "${CI:-}" = "true" ] && ! command -v chromium >/dev/null && [ ! -x /usr/lib/chromium/chromium ]; then

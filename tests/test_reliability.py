@@ -128,7 +128,9 @@ def test_a_long_batch_step_raises_keyboard_interrupt_within_0_2_s_and_wants_a_re
             def step():
                 return env.step(np.zeros(4, np.float32))[0]
 
-    _assert_interrupted_within_0_2_s(step, delay=0.1)  # the step runs for 0.4 s or more
+    # The step runs for 0.6 s or more; the signal comes well inside it (a signal in the first
+    # moments can land in the Python before the native step on a loaded machine).
+    _assert_interrupted_within_0_2_s(step, delay=0.25)
     # the envs stopped part-way through the step: the env says so until it is reset
     with pytest.raises(StateError, match=r"interrupted.*reset\(\)"):
         step()
