@@ -37,7 +37,7 @@ EXACT='{"wake": {"sampling": "per_stage"}, "turbulence": {"normal_sampler": "box
   "$ACCD_PY" scripts/bench_training.py --json "$OUT/training_default.json"
   echo "== PPO training, exact scheme"
   "$ACCD_PY" scripts/bench_training.py --env "$EXACT" --json "$OUT/training_exact.json"
-  echo "== the performance targets (issue 12) from this run"
+  echo "== the performance targets from this run"
   "$ACCD_PY" scripts/bench_summary.py "$OUT" --json "$OUT/targets.json"
   echo "load at the end: $(cut -d' ' -f1-3 /proc/loadavg)"
 } 2>&1 | tee "$OUT/bench.txt"

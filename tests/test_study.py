@@ -1,4 +1,4 @@
-"""`accd-gym study`: the paper's section-4 design studies against design.md section 7.
+"""`accd-gym study`: the paper's section-4 design studies against the expected settling of the reference design.
 
 Every study here runs at full length (the whole command takes a few seconds), through the same
 functions the command uses; the JSON each writes is what the assertions read.
@@ -16,7 +16,7 @@ from accd_gym.cli import main
 # Longer than the suite's default time limit (pyproject.toml): the module fixtures run the design studies (timed with the first test that uses them).
 pytestmark = pytest.mark.timeout(1800)
 
-#: design.md section 7: "settles about 50 m below" / "about 70 m below", within 15 %.
+#: The expected settling: "settles about 50 m below" / "about 70 m below", within 15 %.
 DEPTH_TOLERANCE = 0.15
 
 

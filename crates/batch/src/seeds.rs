@@ -1,4 +1,4 @@
-//! Per-episode seeds (design.md §8): every episode of every env gets its own independent
+//! Per-episode seeds: every episode of every env gets its own independent
 //! streams, derived from a base seed, the env's index and the episode's index; wake seeds come
 //! from a training range, a fixed value or an explicit evaluation list.
 //!

@@ -1,4 +1,4 @@
-//! Regression tests of issue 13 for the batch: memory is budgeted before anything is allocated,
+//! Regression tests for the batch: memory is budgeted before anything is allocated,
 //! construction stops when its interruption check says so, and a read-back of errors names them.
 
 use accd_batch::memory::{budget_bytes, check_budget, MAX_BATCH_BYTES};
@@ -16,7 +16,7 @@ fn low_and_slow() -> EnvConfig {
 fn the_estimate_follows_the_gust_history() {
     let default = EnvConfig::default().bytes_per_env();
     assert!((1 << 10..16 << 20).contains(&default), "{default} bytes");
-    // issue 13: about 44 MiB per env at 10 m/s with a 5 km history
+    // About 44 MiB per env at 10 m/s with a 5 km history
     let slow = low_and_slow().bytes_per_env();
     assert!((30 << 20..60 << 20).contains(&slow), "{slow} bytes");
 }

@@ -170,7 +170,7 @@ fn torque_free_accd_conserves_rotational_energy_and_angular_momentum() {
 
 #[test]
 fn calibrated_depths_match_the_paper() {
-    // design.md section 7 within 15 %: 250 m UHMWPE about 50 m, steel more than 100 m,
+    // The expected settling within 15 %: 250 m UHMWPE about 50 m, steel more than 100 m,
     // 300 m UHMWPE about 70 m below the towing aircraft, open loop, no wake.
     let depth = |preset: &str| {
         let config = CaptureConfig {

@@ -1,4 +1,4 @@
-//! Regression tests of issue 13 for the capture simulation: configuration errors name the field,
+//! Regression tests for the capture simulation: configuration errors name the field,
 //! cross-field rules hold, the coupled step substeps fine tethers and never the default one, and
 //! an empty gust history is not filled grid time by grid time.
 
@@ -69,9 +69,9 @@ fn no_gust_channels_keep_no_history() {
 #[test]
 fn an_equilibrium_outside_the_episode_limits_is_reported_naming_the_limit() {
     use accd_sim::Equilibrium;
-    // issue 13: a tangential drag coefficient of 1 hung the ACCD about 62 m from a boom placed
+    // A tangential drag coefficient of 1 hung the ACCD about 62 m from a boom placed
     // at a fixed position (the default allows 60 m): every episode ended at its first step,
-    // silently. Placed relative to the equilibrium (the default since issue 16) the boom follows.
+    // silently. Placed relative to the equilibrium (the default) the boom follows.
     let mut c = EnvConfig::default();
     c.physics.tether.tangential_drag_coefficient = 1.0;
     let eq = Equilibrium::settle(&c.clone().validated().unwrap()).unwrap();

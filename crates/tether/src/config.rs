@@ -532,7 +532,7 @@ impl TetherConfig {
     /// 0.01 s is outside its stability region there, at n = 30 (about 45 rad/s) far inside.
     /// `M_a` is the exact `1 / (M^-1)_00` of the state ([`StepLoad::axial_mass`]): for a towed
     /// 10 or 50 kg/m tether it falls to a quarter of the straight chain's, and with it the
-    /// damping mode's rate climbs past what one step at 0.01 s can take (issue 13).
+    /// damping mode's rate climbs past what one step at 0.01 s can take.
     pub fn fastest_rate(&self, load: &StepLoad) -> f64 {
         let l = self.segment_length();
         let mu = self.mass_per_length;

@@ -1,5 +1,5 @@
 //! The effective axial mass `1 / (M^-1)_00` that the substep estimate reads
-//! ([`TetherModel::axial_mass`], issue 13): the recursion's root system and the dense solve's
+//! ([`TetherModel::axial_mass`]): the recursion's root system and the dense solve's
 //! Cholesky factor against the inverse of the dense mass matrix (`TetherModel::mass_matrix`), at
 //! random bent and folded states for n = 1 ... 50.
 

@@ -1,4 +1,4 @@
-//! Regression tests of issue 13 for the tether alone: every valid discretization steps stably
+//! Regression tests for the tether alone: every valid discretization steps stably
 //! (auto-substepping from the chain's fastest mode), an unstable one is refused with the largest
 //! stable step, Table 3's step stays a plain RK4 step, long loops stop when asked, and a
 //! divergence leaves the last bounded state.
@@ -41,7 +41,7 @@ fn three_hundred_segments_substep_and_stay_stable_at_the_default_step() {
 
 #[test]
 fn three_hundred_segments_diverge_without_substeps() {
-    // The bug of issue 13: plain RK4 at 0.01 s is outside its stability region at n = 300.
+    // The regression: plain RK4 at 0.01 s is outside its stability region at n = 300.
     let (t, flow) = towed(300);
     let mut model = TetherModel::new(t.config()).unwrap();
     let mut state = t.state().clone();
@@ -78,7 +78,7 @@ fn the_fastest_mode_estimate_matches_the_issue() {
     let rate = cfg.fastest_rate(&StepLoad::at_rest(&cfg, 3.4e3, 0.66, 185.0, 50.0));
     assert!(
         (420.0..560.0).contains(&rate),
-        "{rate} rad/s (issue: near 470)"
+        "{rate} rad/s (the regression: near 470)"
     );
     let table3 = TetherConfig::table3();
     let slow = table3.fastest_rate(&StepLoad::at_rest(&table3, 3.4e3, 0.66, 185.0, 50.0));

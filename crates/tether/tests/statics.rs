@@ -190,7 +190,7 @@ fn table3_tether_settles_behind_the_aircraft() {
     assert!(depth[depth.len() - 200..]
         .iter()
         .all(|z| (z - final_depth).abs() < 1e-3));
-    // design.md section 7: about 50 m below the aircraft (within 15 %), damped in about 40 s.
+    // The expected settling (docs/paper-reproduction.md): about 50 m below the aircraft (within 15 %), damped in about 40 s.
     assert!(
         (final_depth / 50.0 - 1.0).abs() < 0.15,
         "depth {final_depth}"
@@ -216,7 +216,7 @@ fn steel_settles_deeper_and_longer_tethers_deeper() {
         "settled depth: uhmwpe 250 m {uhmwpe:.1} m in {uhmwpe_settle:.1} s, steel {steel:.1} m in {steel_settle:.1} s, \
          uhmwpe 300 m {long:.1} m"
     );
-    // design.md section 7: steel more than 100 m below and oscillating longer; 300 m about 70 m.
+    // The expected settling: steel more than 100 m below and oscillating longer; 300 m about 70 m.
     assert!(steel > 100.0);
     assert!(steel_settle > uhmwpe_settle);
     assert!((long / 70.0 - 1.0).abs() < 0.15, "300 m tether at {long} m");

@@ -1,5 +1,5 @@
 //! The towing aircraft's (TA) wake: mean velocity perturbation and turbulent kinetic energy from
-//! look-up tables over position behind the TA (paper section 2.2, design.md section 5).
+//! look-up tables over position behind the TA (paper section 2.2).
 //!
 //! # Tables
 //!

@@ -1,4 +1,4 @@
-//! The reinforcement-learning task (design.md §6): its configuration ([`config`]), the
+//! The reinforcement-learning task: its configuration ([`config`]), the
 //! observation ([`observation`], optionally through the [`sensors`]), the reward and the
 //! episode-end conditions (computed in [`episode`], which steps one episode), the domain
 //! randomization ([`randomization`]) and the plant's linearization for controller design

@@ -30,7 +30,7 @@ pub fn episode_with_seeds(config: &EnvConfig, seeds: Seeds) -> Episode {
 }
 
 /// `config` made to diverge: RK4 at 0.1 s is far beyond the stability limit of the axial element
-/// (omega dt ~ 5); since issue 13 the tether substeps through that, so what diverges is the
+/// (omega dt ~ 5); the tether substeps through that, so what diverges is the
 /// ACCD's roll: a roll damping far beyond any body's makes its rate equation stiff at 0.1 s.
 pub fn stiff_roll(mut config: EnvConfig) -> EnvConfig {
     config.physics.tether.time_step = 0.1;
