@@ -264,22 +264,7 @@ impl Rosenbrock {
         qd: &[f64],
         x: &[f64],
     ) -> Result<()> {
-        let (dim, first) = (system.dofs(), system.first_order_states());
-        let sizes = [
-            ("q", q.len(), dim),
-            ("qd", qd.len(), dim),
-            ("x", x.len(), first),
-            ("integrator buffers", self.q.len(), dim),
-            ("integrator first-order buffers", self.x.len(), first),
-        ];
-        match sizes.iter().find(|(_, f, e)| f != e) {
-            Some(&(what, found, expected)) => Err(TetherError::WrongSize {
-                what,
-                expected,
-                found,
-            }),
-            None => Ok(()),
-        }
+        crate::integrator::check_state_sizes(system, q, qd, x, self.q.len(), self.x.len())
     }
 
     /// One ROS34PW2 step of length `h` from `(q, qd, x)` at `t`, written back into them (the

@@ -312,22 +312,7 @@ impl Rk4 {
         qd: &[f64],
         x: &[f64],
     ) -> Result<()> {
-        let (dim, first) = (system.dofs(), system.first_order_states());
-        let sizes = [
-            ("q", q.len(), dim),
-            ("qd", qd.len(), dim),
-            ("x", x.len(), first),
-            ("integrator buffers", self.q_stage.len(), dim),
-            ("integrator first-order buffers", self.x_stage.len(), first),
-        ];
-        match sizes.iter().find(|(_, f, e)| f != e) {
-            Some(&(what, found, expected)) => Err(TetherError::WrongSize {
-                what,
-                expected,
-                found,
-            }),
-            None => Ok(()),
-        }
+        check_state_sizes(system, q, qd, x, self.q_stage.len(), self.x_stage.len())
     }
 
     /// `substeps` RK4 steps of `dt / substeps` from `(q, qd, x)` at `time`, the result written
@@ -741,5 +726,33 @@ impl<'a> LaneRun<'a> {
         std::mem::swap(self.q, &mut slot.q);
         std::mem::swap(self.qd, &mut slot.qd);
         self.x.copy_from_slice(&slot.x);
+    }
+}
+
+/// The sizes an integrator checks before a step: the state's (`q`, `qd`, `x`) and its own
+/// buffers' (`buffer_dofs`, `buffer_first_order` entries) against the system's.
+pub(crate) fn check_state_sizes<Y: System + ?Sized>(
+    system: &Y,
+    q: &[f64],
+    qd: &[f64],
+    x: &[f64],
+    buffer_dofs: usize,
+    buffer_first_order: usize,
+) -> Result<()> {
+    let (dim, first) = (system.dofs(), system.first_order_states());
+    let sizes = [
+        ("q", q.len(), dim),
+        ("qd", qd.len(), dim),
+        ("x", x.len(), first),
+        ("integrator buffers", buffer_dofs, dim),
+        ("integrator first-order buffers", buffer_first_order, first),
+    ];
+    match sizes.iter().find(|(_, f, e)| f != e) {
+        Some(&(what, found, expected)) => Err(TetherError::WrongSize {
+            what,
+            expected,
+            found,
+        }),
+        None => Ok(()),
     }
 }
