@@ -6,6 +6,9 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 # The test extras plus Ray (tests/test_ray.py); ACCD_EXTRAS=test runs without Ray (those tests skip).
 export ACCD_EXTRAS="${ACCD_EXTRAS:-test,ray}"
+# One build for the extension and the Rust test suites: the `ci` profile (release optimisation
+# without LTO), which maturin takes here and cargo below; a user's install builds `release`.
+export MATURIN_PEP517_ARGS="--profile ci"
 source scripts/setup.sh
 
 echo "== cargo fmt --check"
