@@ -18,6 +18,6 @@ PIP=("$VENV/bin/python" -m pip --disable-pip-version-check -q)
 "${PIP[@]}" install --upgrade pip >/dev/null
 # The README's install command: the package in editable mode with its extras. pip builds the Rust
 # extension through maturin (release profile, pyproject.toml) and installs the dependencies.
-echo "setup: pip install -e \".[$EXTRAS]\" (builds the Rust extension, release)"
+echo "setup: pip install -e \".[$EXTRAS]\" (builds the Rust extension)"
 (cd "$ROOT" && "${PIP[@]}" install -e ".[$EXTRAS]")
 export ACCD_PY="$VENV/bin/python"
