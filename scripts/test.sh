@@ -11,14 +11,14 @@ export ACCD_EXTRAS="${ACCD_EXTRAS:-test,ray}"
 export MATURIN_PEP517_ARGS="--profile ci"
 source scripts/setup.sh
 
-echo "== cargo fmt --check"
+echo "== cargo fmt --check [$SECONDS s]"
 cargo fmt --all -- --check
-echo "== cargo clippy (warnings are errors)"
+echo "== cargo clippy (warnings are errors) [$SECONDS s]"
 cargo clippy --workspace --all-targets --profile ci -q -- -D warnings
-echo "== cargo test (profile ci: release optimisation, no LTO)"
+echo "== cargo test (profile ci: release optimisation, no LTO) [$SECONDS s]"
 # The bindings crate is a cdylib built and tested through Python below.
 cargo test --profile ci --workspace --exclude accd-py
-echo "== without the lockstep feature (envs stepped one at a time)"
+echo "== without the lockstep feature (envs stepped one at a time) [$SECONDS s]"
 cargo clippy -p accd-tether -p accd-sim -p accd-batch --all-targets --profile ci -q --no-default-features -- -D warnings
 cargo test --profile ci -q -p accd-tether -p accd-batch --no-default-features
 # The replay pages are tested in a real browser (tests/test_replay.py): Debian's chromium, installed
@@ -29,5 +29,6 @@ if [ "${CI:-}" = "true" ] && ! command -v chromium >/dev/null && [ ! -x /usr/lib
   $SUDO apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends chromium >/dev/null
 fi
-echo "== pytest (two workers; the slowest tests listed at the end)"
-"$ACCD_PY" -m pytest -q -n 2 --durations=15 tests
+echo "== pytest (two workers; the slowest tests listed at the end) [$SECONDS s]"
+"$ACCD_PY" -m pytest -q -n 2 --dist worksteal --durations=15 tests
+echo "== done [$SECONDS s]"
