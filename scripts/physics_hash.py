@@ -24,8 +24,8 @@ import numpy as np
 import accd_gym
 from accd_gym.control.baselines import GuidancePolicy
 
-# The exact air scheme, the default until the fast one became it (BENCHMARKS.md, "the fast air
-# scheme"): its hashes are the ones recorded at a3be75f for the default and precision configs.
+# The exact air scheme (docs/decisions.md, "The fast air scheme is the default; the exact scheme
+# stays"): its hashes are those of the default and precision configs under that scheme.
 EXACT = {"wake": {"sampling": "per_stage"}, "turbulence": {"normal_sampler": "box_muller", "lane_streams": "shared"}}
 PRECISION = {
     "turbulence": {"ambient": "severe"},

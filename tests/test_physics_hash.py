@@ -2,11 +2,10 @@
 
 ``scripts/physics_hash.py`` hashes 8 envs x 700 agent steps under the default and the precision
 configurations with the guidance controller and with seeded random flaps. The recorded hashes in
-``tests/data/physics_hashes.json`` were taken on main at a3be75f, before the capture-layer rebuild,
-for the exact air scheme (then the default; now ``exact/*`` and ``exact_precision/*``); the
-``default/*`` and ``precision/*`` hashes were recorded when the fast air scheme became the default
-(measured against the exact one in BENCHMARKS.md). A change of the numerical scheme must be
-measured, documented and recorded here on purpose.
+``tests/data/physics_hashes.json`` are those of the exact air scheme (``exact/*`` and
+``exact_precision/*``) and of the default fast scheme (``default/*`` and ``precision/*``; the two
+schemes compared in docs/decisions.md). A change of the numerical scheme must be measured,
+documented and recorded here on purpose.
 """
 
 import importlib.util

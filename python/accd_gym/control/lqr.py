@@ -37,7 +37,7 @@ Design (per configuration; ``T`` = ``agent_step``)
   ``(A - I) dx_ss + B u_ss + E w = 0`` that puts the capture point's y and z on the boom tip
   (``r_y, r_z``), the minimum-norm one (states in units of their steps, commands in flap-limit
   units: the roll angle is neutral, so there is a family). Along track (x) nothing is tracked:
-  the ACCD has almost no authority there (docs/design-notes.md item 13); the RLV closes it.
+  the ACCD has almost no authority there (docs/decisions.md, "The RLV approaches along track"); the RLV closes it.
 * **LQR** on ``dx - dx_ss``: ``u = u_ss - K (dx - dx_ss)``, clipped to [-1, 1], ``K`` from the
   DARE with ``Q = q_position P_yz^T P_yz + q_velocity V^T V + q_attitude (attitude error)
   + q_rate (body rates) + 1e-9 I`` (``P_yz``: the capture point's y, z per state; ``V``: its

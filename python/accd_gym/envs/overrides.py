@@ -15,7 +15,7 @@ from typing import Any, Mapping
 from accd_gym.errors import ConfigError
 
 
-#: The exact air scheme, the default before the fast one (BENCHMARKS.md, "the fast air scheme"):
+#: The exact air scheme, the default before the fast one (docs/decisions.md, "The fast air scheme is the default; the exact scheme stays"):
 #: the segments sample the wake and its turbulence at every RK4 stage, Box-Muller normals, one
 #: stream for every turbulence lane. Pass it to reproduce results of the first releases bit for
 #: bit, e.g. ``InAirCaptureEnv(**EXACT_AIR_SCHEME)`` (merge your own ``wake``/``turbulence``
@@ -95,7 +95,7 @@ _FORMATION: dict[str, Any] = {"boom": {"initial_spread": [2.0, 8.0, 8.0]}}
 
 #: The precision scenario's soft capture: a 0.3 m radius, at most 1 m/s closing speed.
 _SOFT_CAPTURE: dict[str, Any] = {"boom": {"capture_radius": 0.3, "max_closing_speed": 1.0}}
-#: The precision scenario (design notes, item 14): the soft capture in severe ambient turbulence.
+#: The precision scenario (docs/decisions.md, "The precision scenario is where policies separate"): the soft capture in severe ambient turbulence.
 _PRECISION: dict[str, Any] = merge({"turbulence": {"ambient": "severe"}}, _SOFT_CAPTURE)
 
 #: Randomized physics at the documented default ranges (crates/sim/src/task/randomization.rs), written

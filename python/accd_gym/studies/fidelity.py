@@ -159,7 +159,7 @@ def fig9_closed_forms() -> dict[str, float]:
     """What the vertical case must give, from Table 1 alone: the simplified model's static stretch
     ``M g / k`` and axial ring ``sqrt(k / M) / 2 pi`` (the element carries the whole chain; damped
     by ``zeta = c_s / 2 sqrt(k M)``), and the full model's (elements ``n k``) hanging stretch
-    ``(n + 1) / (2 n) M g / k`` (rods lumped: docs/design-notes.md)."""
+    ``(n + 1) / (2 n) M g / k`` (rods lumped: docs/decisions.md, "The distributed elasticity: an option, not the default")."""
     c = accd_gym.tether_config("table1")
     n, k, mass, g = c["segments"], c["axial_stiffness"], c["mass_per_length"] * c["length"], c["gravity"]
     zeta = c["axial_damping_per_mass"] * mass / (2.0 * math.sqrt(k * mass))
