@@ -146,6 +146,20 @@ struct Coupled<'a> {
     inertia: V3,
 }
 
+impl Coupled<'_> {
+    /// Sets the stage's ACCD state from the first-order states `x` (quaternion, body rates) and
+    /// returns them, for [`System::derivatives`] and [`AxialSystem::derivatives_axial`] alike.
+    #[inline(always)]
+    fn take_attitude(&mut self, x: &[f64]) -> (Quaternion<f64>, V3) {
+        let (quat, omega) = states_to_parts(x);
+        self.stage.accd = AccdState {
+            attitude: UnitQuaternion::new_normalize(quat),
+            omega,
+        };
+        (quat, omega)
+    }
+}
+
 impl System for Coupled<'_> {
     fn dofs(&self) -> usize {
         self.model.dofs()
@@ -164,11 +178,7 @@ impl System for Coupled<'_> {
         qdd: &mut [f64],
         xd: &mut [f64],
     ) -> accd_tether::Result<()> {
-        let (quat, omega) = states_to_parts(x);
-        self.stage.accd = AccdState {
-            attitude: UnitQuaternion::new_normalize(quat),
-            omega,
-        };
+        let (quat, omega) = self.take_attitude(x);
         let loads = self.model.accelerations(time, q, qd, &self.stage, qdd)?;
         accd_rates(&self.inertia, (quat, omega), &loads, xd);
         Ok(())
@@ -204,11 +214,7 @@ impl AxialSystem for Coupled<'_> {
         qdd: &mut [f64],
         xd: &mut [f64],
     ) -> accd_tether::Result<()> {
-        let (quat, omega) = states_to_parts(x);
-        self.stage.accd = AccdState {
-            attitude: UnitQuaternion::new_normalize(quat),
-            omega,
-        };
+        let (quat, omega) = self.take_attitude(x);
         let loads = self
             .model
             .accelerations_axial(time, q, qd, axial, &self.stage, qdd)?;
