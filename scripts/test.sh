@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Runs every test: formatting, the Rust test suites (release build: they integrate physics), and
-# the Python suite against a fresh release build of the extension. Does its own set-up.
+# Runs every test: formatting, clippy, the Rust test suites with and without the `lockstep`
+# feature, and the Python suite, all against one optimised build (the `ci` profile: release
+# optimisation without LTO; they integrate physics). Does its own set-up.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
