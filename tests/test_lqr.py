@@ -1,7 +1,7 @@
 """accd_gym.linearize and the LQR baseline (accd_gym.control.lqr).
 
 The linear model is checked against the nonlinear step it was taken from (errors shrink
-quadratically with the perturbation where the dynamics are smooth; crates/sim/tests/linearize.rs
+quadratically with the perturbation where the dynamics are smooth; crates/sim/tests/integration/linearize.rs
 has the finer checks), the design's closed loop and observer on the linear model itself, and the
 policy on a handful of training-seed episodes of the default task.
 """

@@ -8,7 +8,7 @@
 //! Frames and units as in `accd_tether`: SI, TA frame with x forward, y starboard, z down, origin
 //! at the tether attachment.
 //!
-//! # Modules, by concept (no import cycle: `tests/module_graph.rs`)
+//! # Modules, by concept (no import cycle: `tests/integration/module_graph.rs`)
 //! * [`physics`]: the world of one capture, nothing of the RL task. Tables: [`physics::interp`]
 //!   (grid look-ups), [`physics::aero`] (the ACCD's coefficient tables); the air: [`physics::air`]
 //!   (the [`AirDisturbance`] interface), [`physics::wake`] (mean wake: tables and the analytic

@@ -17,7 +17,7 @@
 //! sideways (e = +-y). Trailing, hanging, everything in between and lateral excursions up to
 //! several tens of degrees are far from it. The paper's own convention (Eq. 2) puts the singular
 //! axis along z, which its initial condition for a straight trailing tether (psi = pi/2) hits
-//! exactly; see `tests/singularity.rs` for the conditioning of ours.
+//! exactly; see `tests/integration/singularity.rs` for the conditioning of ours.
 
 use nalgebra::Vector3;
 

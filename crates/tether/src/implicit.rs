@@ -44,7 +44,7 @@
 //!   at each stage): a stiff element is damped by the L-stable stability function, its stretch
 //!   settling on the quasi-static `s = T / k` instead of ringing at a frequency the step cannot
 //!   resolve. A resolved axial mode keeps order 3 and loses energy at the rate of the stability
-//!   function's `|R(z)| < 1` (measured in `tests/implicit_axial.rs`).
+//!   function's `|R(z)| < 1` (measured in `tests/integration/implicit_axial.rs`).
 //! * Every other mode (swing, bending, zig-zag, aerodynamics, the capturing device's
 //!   attitude) sees `T = 0`: the method is then an explicit four-stage method of order 3,
 //!   stable to 1.50 on the imaginary axis and 1.99 on the negative real axis

@@ -7,7 +7,7 @@ Every policy here (and :class:`accd_gym.evals.evaluation.SB3Policy`) has the sam
 top, bottom); ``reset(mask)`` clears the internal state of the envs whose episode just ended
 (the guidance controller's integrators; the others ignore it).
 
-Signs, checked on the physics (``crates/sim/tests/behaviour.rs``, no wake, from the settled state)
+Signs, checked on the physics (``crates/sim/tests/integration/behaviour.rs``, no wake, from the settled state)
 and on the controller (``tests/test_training.py``): a positive pitch command (both horizontal
 flaps +) pitches the nose up and the ACCD *rises* (-z in the TA frame, about 9 m in 3 s at pitch 0.3); a positive yaw
 command (both vertical flaps +) turns the nose right and the ACCD moves to starboard (+y); a

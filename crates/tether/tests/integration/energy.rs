@@ -6,7 +6,7 @@
 //!   forces (damping, aerodynamics, tip force, apparent force), at random states: this checks every
 //!   term of the right-hand side against an independent expression.
 
-mod common;
+use crate::common;
 
 use accd_tether::direction::direction;
 use accd_tether::{

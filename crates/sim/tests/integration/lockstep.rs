@@ -8,7 +8,7 @@
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
-mod support;
+use crate::support;
 use support::{episode, seeds, stiff_roll};
 
 use accd_sim::{EnvConfig, Episode, Equilibrium};

@@ -3,7 +3,7 @@
 //! bit as surroundings whose field gives the same air at those centres, for the recursive
 //! solver (the hot path) and the dense one; held samples of the wrong length are an error.
 
-mod common;
+use crate::common;
 
 use accd_tether::{
     reference, Solver, Surroundings, TetherConfig, TetherError, TetherModel, TetherState,

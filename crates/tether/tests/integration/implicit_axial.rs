@@ -14,7 +14,7 @@
 //!   RK4 at small steps within stated tolerances;
 //! * configurations the explicit scheme refuses for their axial stiffness are accepted.
 
-mod common;
+use crate::common;
 
 use accd_tether::direction::direction;
 use accd_tether::{

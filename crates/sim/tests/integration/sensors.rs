@@ -3,7 +3,7 @@
 //! draws are deterministic per seed, the latency and the observation delay shift the true
 //! signal by exactly their steps, and a saved state continues bit for bit.
 
-mod support;
+use crate::support;
 use support::episode;
 
 use accd_sim::task::sensors::SensorsConfig;

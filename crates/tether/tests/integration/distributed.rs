@@ -11,7 +11,7 @@
 //! * energy is conserved without damping;
 //! * the distributed model tends to the attachment model as the stiffness grows.
 
-mod common;
+use crate::common;
 
 use accd_tether::direction::{angles, direction};
 use accd_tether::{

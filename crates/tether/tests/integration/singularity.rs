@@ -2,7 +2,7 @@
 //! matrix is equally well conditioned for a tether trailing straight back, hanging straight down,
 //! every in-plane angle between, and bent shapes with lateral excursions.
 
-mod common;
+use crate::common;
 
 use accd_tether::{direction, TetherConfig, TetherModel, TetherState};
 use common::eig_range;

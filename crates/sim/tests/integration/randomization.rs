@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-mod support;
+use crate::support;
 use support::{episode_with_seeds, seeds};
 
 use accd_sim::{EnvConfig, Episode, Equilibrium, Parameters};

@@ -4,7 +4,7 @@
 //! * A hanging chain's lowest frequency converges to Bernoulli's continuous result
 //!   (j01 / 2) sqrt(g / L) as n grows, j01 the first zero of the Bessel function J0.
 
-mod common;
+use crate::common;
 
 use accd_tether::{reference, Tether, TetherConfig, TetherModel, TetherState, Vacuum};
 use common::upward_crossings;

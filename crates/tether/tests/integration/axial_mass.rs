@@ -3,7 +3,7 @@
 //! Cholesky factor against the inverse of the dense mass matrix (`TetherModel::mass_matrix`), at
 //! random bent and folded states for n = 1 ... 50.
 
-mod common;
+use crate::common;
 
 use accd_tether::direction::{angles, direction};
 use accd_tether::{reference, Solver, TetherConfig, TetherModel};

@@ -7,7 +7,7 @@
 //! 2n + 1 generalized accelerations (and the same over the angle accelerations alone, so that a
 //! large elongation acceleration cannot hide errors in the angles).
 
-mod common;
+use crate::common;
 
 use accd_tether::direction::{angles, direction};
 use accd_tether::{reference, Solver, Tether, TetherConfig, TetherModel, UniformFlow};

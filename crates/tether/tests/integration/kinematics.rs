@@ -1,7 +1,7 @@
 //! The two walks along the chain agree: `centres_and_tip_batch` (the kinematics pass with
 //! vectorised sin/cos) against `centres_and_tip` (scalar, libm) at random states, n = 1 ... 300.
 
-mod common;
+use crate::common;
 
 use accd_tether::{TetherConfig, TetherModel};
 use common::{SplitMix, V3};

@@ -1,7 +1,7 @@
 //! The mass matrix is symmetric positive definite and equals the Hessian of the kinetic energy,
 //! which is computed here independently from finite differences of the positions (paper Eq. 3).
 
-mod common;
+use crate::common;
 
 use accd_tether::{TetherConfig, TetherModel};
 use common::{eig_range, kinetic_energy_fd};

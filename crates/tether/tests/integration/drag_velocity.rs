@@ -2,7 +2,7 @@
 //! air velocity alone): it parses, serializes only when chosen, leaves the default bit for bit,
 //! and makes the drag a function of the configuration only (not of the rates).
 
-mod common;
+use crate::common;
 
 use accd_tether::{reference, DragVelocity, TetherConfig, TetherModel, UniformFlow, Vacuum};
 use nalgebra::Vector3;

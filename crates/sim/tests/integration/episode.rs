@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-mod support;
+use crate::support;
 use support::{episode, seeds, stiff_roll};
 
 use accd_sim::{EnvConfig, Episode, Equilibrium, Outcome, OBS_BOUND};

@@ -6,7 +6,7 @@
 //! * Towed at 185 m/s, 6000 m with a stand-in capturing device, Table 3's tether settles to a
 //!   steady shape about 50 m below the aircraft (paper Fig. 19).
 
-mod common;
+use crate::common;
 
 use accd_tether::{reference, Tether, TetherConfig, TetherModel, TetherState, UniformFlow, Vacuum};
 use common::SplitMix;

@@ -1,8 +1,8 @@
 //! The wake field as the tether's surroundings: composition, and Table 3's tether flying in it.
 
+use crate::support;
 use accd_sim::physics::turbulence::{AmbientTurbulence, TurbulenceConfig};
 use accd_sim::physics::wake::WakeConfig;
-mod support;
 
 use accd_sim::SimError;
 use accd_tether::{reference, Surroundings, Tether};
