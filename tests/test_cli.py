@@ -36,3 +36,23 @@ def test_settling_time_definition():
     t = np.arange(10.0)
     z = np.array([0, 10, 20, 15, 11, 10.1, 10, 10, 10, 10.0])
     assert settle.settling_time(t, z, band=0.02) == 5.0
+
+
+def test_ctrl_c_after_the_command_finished_is_ignored_at_shutdown(tmp_path):
+    """A SIGINT that arrives while the interpreter shuts down (after the command returned) leaves
+    the exit code and prints no traceback: the executable ignores Ctrl+C once its work is done."""
+    script = (
+        "import atexit, os, signal, time\n"
+        "def late_interrupt():\n"
+        "    os.kill(os.getpid(), signal.SIGINT)\n"
+        "    time.sleep(0.2)  # Python code running after the signal: where a KeyboardInterrupt would land\n"
+        "atexit.register(late_interrupt)\n"
+        "import sys\n"
+        f"sys.argv = ['accd-gym', 'export-aero', '--out', {str(tmp_path / 'aero.json')!r}]\n"
+        "from accd_gym.cli import run\n"
+        "run()\n"
+    )
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert "Traceback" not in out.stderr and "KeyboardInterrupt" not in out.stderr, out.stderr
+    assert (tmp_path / "aero.json").stat().st_size > 0

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import NoReturn, Optional, Sequence
 from accd_gym import files as _files
 
 
@@ -412,10 +413,30 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 130
 
 
+def run() -> NoReturn:
+    """The ``accd-gym`` executable (and ``python -m accd_gym``): :func:`main` on the process
+    arguments, then exit with its code.
+
+    Once the command has returned, its files are written and its exit code is decided, so Ctrl+C
+    is ignored from then on: an interrupt arriving while the interpreter shuts down would otherwise
+    surface as a traceback from some library's exit handler (PyTorch registers several) and turn a
+    clean exit into a crash report. An interrupt between the command's end and this point exits
+    with 130, as one during the command does.
+    """
+    try:
+        code = main()
+    except KeyboardInterrupt:
+        print("accd-gym: interrupted", file=sys.stderr)
+        code = 130
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    sys.exit(code)
+
+
 def _one_line(error: Exception) -> str:
     """An exception's message on one line."""
     return " ".join(str(error).split())
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run()
