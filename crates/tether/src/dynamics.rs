@@ -264,6 +264,17 @@ impl TetherModel {
         self.distributed
     }
 
+    /// Whether coordinate `i` of q is an axial element's stretch (the attachment element's
+    /// `s`, or with the distributed elasticity every segment's): the coordinates whose
+    /// spring-dampers [`crate::Scheme::ImplicitAxial`] treats implicitly.
+    pub fn is_stretch_coordinate(&self, i: usize) -> bool {
+        if self.distributed {
+            i == 0 || (i > 2 * self.n && i < 3 * self.n)
+        } else {
+            i == 0
+        }
+    }
+
     /// Stretch of segment k's element and its rate, (m, m/s): segment 1's is the attachment
     /// element's `s`; the other segments have none unless the elasticity is distributed.
     #[inline(always)]

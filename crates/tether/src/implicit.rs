@@ -17,17 +17,22 @@
 //! the stage, `M_i = M(q_i)`:
 //!
 //! ```text
-//! T = [[0, I], [-M_i^-1 K, -M_i^-1 C]]   on (q, v);   zero on the first-order states x,
+//! T = [[0, P^T P], [-M_i^-1 K, -M_i^-1 C]]   on (q, v);   zero on the first-order states x,
 //! ```
 //!
 //! `K = k P^T P` and `C = c P^T P` with `P` picking the stretch coordinates and `(k, c)` one
-//! element's stiffness and damping. The element's force `-k s - c s'` acts on its own
+//! element's stiffness and damping. The kinematic coupling `q' = v` is in `T` for the
+//! stretches alone: with it on every coordinate, the swing and bending modes would see a
+//! nilpotent `T = [[0, I], [0, 0]]` instead of zero, and the method's stability region for
+//! them would no longer be the explicit one (an undamped zig-zag chain's energy then grows
+//! at the 0.01 s step; `tests/integration/implicit_axial.rs`). The element's force `-k s - c s'` acts on its own
 //! coordinate, so `K`, `C` are diagonal, and with `u = sum_{j<i} gamma_ij k_j` the stage
 //! reduces to one solve with the mass matrix augmented on the stretch diagonal:
 //!
 //! ```text
 //! (M_i + gamma h C + (gamma h)^2 K) k_v = h [Q(Y_i) - K (u_q + gamma h (v_i + u_v)) - C u_v]
-//! k_q = h (v_i + u_v) + gamma h k_v,        k_x = h x'(Y_i)
+//! k_q = h (v_i + u_v) + gamma h k_v  (stretches),   k_q = h v_i  (other coordinates),
+//! k_x = h x'(Y_i)
 //! ```
 //!
 //! i.e. the right-hand side of the stage with each element's spring evaluated at
@@ -143,6 +148,10 @@ fn stage_point<const I: usize>(
 /// A [`System`] whose second-order coordinates include axial spring-dampers the Rosenbrock
 /// step treats implicitly: it solves a stage with them ([`AxialStage`]).
 pub trait AxialSystem: System {
+    /// Whether second-order coordinate `i` is an axial element's stretch: the coordinates whose
+    /// kinematic coupling `q' = v` is in the Rosenbrock matrix with their spring-dampers.
+    fn is_axial(&self, i: usize) -> bool;
+
     /// The stage's derivatives at `(time, q, q', x)`: `(M + gamma_h C + gamma_h^2 K)^-1` of the
     /// generalized forces with the springs and dampers at `stage`'s arguments into `qdd`
     /// ([`TetherModel::accelerations_axial`]), and `x'` into `xd` as
@@ -161,6 +170,10 @@ pub trait AxialSystem: System {
 }
 
 impl<S: Surroundings + ?Sized> AxialSystem for InSurroundings<'_, S> {
+    fn is_axial(&self, i: usize) -> bool {
+        self.model.is_stretch_coordinate(i)
+    }
+
     fn derivatives_axial(
         &mut self,
         time: f64,
@@ -192,6 +205,9 @@ pub struct Rosenbrock {
     stretch_rate: Vec<f64>,
     /// `u_v = sum_{j<i} gamma_ij k_v,j`.
     uv: Vec<f64>,
+    /// Which coordinates are stretches ([`AxialSystem::is_axial`]), set by
+    /// [`Rosenbrock::advance`].
+    axial: Vec<bool>,
     /// The state at the start of [`Rosenbrock::advance`].
     start_q: Vec<f64>,
     start_qd: Vec<f64>,
@@ -213,6 +229,7 @@ impl Rosenbrock {
             stretch: z(),
             stretch_rate: z(),
             uv: z(),
+            axial: vec![false; dofs],
             start_q: z(),
             start_qd: z(),
             start_x: x(),
@@ -241,6 +258,9 @@ impl Rosenbrock {
         self.check_sizes(system, q, qd, x)?;
         let substeps = substeps.max(1);
         let h = dt / substeps as f64;
+        for (i, axial) in self.axial.iter_mut().enumerate() {
+            *axial = system.is_axial(i);
+        }
         // The start, restored if a substep fails.
         self.start_q.copy_from_slice(q);
         self.start_qd.copy_from_slice(qd);
@@ -333,7 +353,8 @@ impl Rosenbrock {
                 stretch_rate: &self.stretch_rate,
                 gamma_h: gh,
             };
-            // k_v = h (augmented solve), k_q = h (v_i + u_v) + gamma h k_v, k_x = h x'.
+            // k_v = h (augmented solve), k_x = h x'; k_q = h (v_i + u_v) + gamma h k_v at the
+            // stretches, h v_i elsewhere (T's q' = v block is on the stretches alone).
             system.derivatives_axial(
                 time,
                 &self.q,
@@ -344,10 +365,14 @@ impl Rosenbrock {
                 &mut self.kx[i],
             )?;
             let (kq, kv) = (&mut self.kq[i][..dim], &mut self.kv[i][..dim]);
-            let (uv, sqd) = (&self.uv[..dim], &self.qd[..dim]);
+            let (uv, sqd, axial) = (&self.uv[..dim], &self.qd[..dim], &self.axial[..dim]);
             for r in 0..dim {
                 kv[r] *= h;
-                kq[r] = h * (sqd[r] + uv[r]) + gh * kv[r];
+                kq[r] = if axial[r] {
+                    h * (sqd[r] + uv[r]) + gh * kv[r]
+                } else {
+                    h * sqd[r]
+                };
             }
             for v in self.kx[i].iter_mut() {
                 *v *= h;

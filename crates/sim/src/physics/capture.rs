@@ -204,6 +204,10 @@ impl System for Coupled<'_> {
 /// tether's with its axial spring-dampers implicit, the ACCD's rates explicit, as in
 /// [`System::derivatives`].
 impl AxialSystem for Coupled<'_> {
+    fn is_axial(&self, i: usize) -> bool {
+        self.model.is_stretch_coordinate(i)
+    }
+
     fn derivatives_axial(
         &mut self,
         time: f64,

@@ -610,8 +610,8 @@ fn fig9_cases_match_small_step_rk4() {
 
 /// The hanging chain's lowest mode (the bare 10 m chain of `oscillation.rs`, released in its
 /// first mode shape): period and tip track under the implicit scheme at 0.01 s, both
-/// elasticities, against RK4 at 1e-3 s: periods within 1e-5, tips within 1e-4 of the amplitude
-/// (measured: 2e-5).
+/// elasticities, against RK4 at 1e-3 s: periods within 1e-5, tips within 5e-4 of the amplitude
+/// (measured: 2e-4, the swing integrated by the explicit stages alone).
 #[test]
 fn hanging_mode_matches_rk4() {
     let bare = TetherConfig {
@@ -678,7 +678,7 @@ fn hanging_mode_matches_rk4() {
             cfg.elasticity.name()
         );
         assert!((got / want - 1.0).abs() < 1e-5, "{got} vs {want}");
-        assert!(err < 1e-4 * amplitude, "{err:e}");
+        assert!(err < 5e-4 * amplitude, "{err:e}");
     }
 }
 
@@ -786,4 +786,127 @@ fn implicit_steps_are_deterministic() {
         t.state().q.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
     };
     assert_eq!(go(), go());
+}
+
+/// Undamped chains bent into a zig-zag (their fastest bending mode), the attachment and the
+/// distributed elasticity, hanging at their static stretch, 20 s at 0.01 s: the implicit
+/// scheme's energy must not grow (the swing and bending modes see the explicit stages alone;
+/// a Rosenbrock matrix coupling `q' = v` on every coordinate makes them grow, its stability
+/// function exceeding 1 on the whole imaginary axis). Allowed: a gain of 1e-6 of the energy
+/// above the hanging rest state.
+#[test]
+fn undamped_zigzag_does_not_grow() {
+    let bare = implicit(TetherConfig {
+        joint_damping_per_mass: 0.0,
+        axial_damping_per_mass: 0.0,
+        normal_drag_coefficient: 0.0,
+        tangential_drag_coefficient: 0.0,
+        segments: 10,
+        ..TetherConfig::table1()
+    });
+    let n = bare.segments;
+    let dirs: Vec<_> = (0..n)
+        .map(|k| Vector3::new(if k % 2 == 0 { 0.01 } else { -0.01 }, 0.0, 1.0))
+        .collect();
+    let mut gains = Vec::new();
+    for cfg in [bare.clone(), distributed(bare.clone())] {
+        let hanging = hanging_stretches(&cfg);
+        let bent =
+            TetherState::from_directions(&dirs, &vec![Vector3::zeros(); n], 0.0, 0.0).unwrap();
+        let mut st = if cfg.is_distributed() {
+            bent.to_distributed().unwrap()
+        } else {
+            bent
+        };
+        for (j, &i) in stretch_indices(&cfg).iter().enumerate() {
+            st.q[i] = hanging[j];
+        }
+        let rest = {
+            let mut t = Tether::new(&cfg).unwrap();
+            t.set_state(straight(
+                &cfg,
+                Vector3::z(),
+                &hanging,
+                &vec![0.0; hanging.len()],
+            ))
+            .unwrap();
+            t.energy().total()
+        };
+        let mut t = Tether::new(&cfg).unwrap();
+        t.set_state(st).unwrap();
+        let e0 = t.energy().total();
+        let mut gained = f64::NEG_INFINITY;
+        for _ in 0..2000 {
+            t.step(&Vacuum).unwrap();
+            gained = gained.max(t.energy().total() - e0);
+        }
+        let lost = e0 - t.energy().total();
+        eprintln!(
+            "undamped zig-zag, {}: {:.2e} J above rest; over 20 s at 0.01 s the energy gained \
+             at most {:.2e} of it, lost {:.2e} at the end",
+            cfg.elasticity.name(),
+            e0 - rest,
+            gained / (e0 - rest),
+            lost / (e0 - rest)
+        );
+        gains.push(gained / (e0 - rest));
+    }
+    assert!(gains.iter().all(|&g| g < 1e-6), "{gains:?}");
+}
+
+/// Order of the implicit scheme on a smooth case (Table 1's damped chain swinging from pi/4,
+/// stretched 1 cm, 1 s): the tip's error against RK4 at 1e-5 s falls by 2^3 = 8 on halving the
+/// step, required within a factor 2^(3 +- 0.5) at 4, 2 and 1 ms (steps the swing's stability
+/// needs no substeps at), both elasticities.
+#[test]
+fn implicit_scheme_converges_at_third_order() {
+    let base = TetherConfig::table1();
+    let n = base.segments;
+    let d = direction(std::f64::consts::FRAC_PI_4, std::f64::consts::FRAC_PI_4);
+    let start =
+        TetherState::from_directions(&vec![d; n], &vec![Vector3::zeros(); n], 0.01, 0.0).unwrap();
+    for cfg in [base.clone(), distributed(base.clone())] {
+        let st = if cfg.is_distributed() {
+            straight_like(&cfg, &start)
+        } else {
+            start.clone()
+        };
+        let tip = |c: &TetherConfig| run(c, &st, 1.0).tip_state().0;
+        let want = tip(&TetherConfig {
+            time_step: 1e-5,
+            ..cfg.clone()
+        });
+        let errors: Vec<f64> = [0.004, 0.002, 0.001]
+            .iter()
+            .map(|&h| {
+                (tip(&implicit(TetherConfig {
+                    time_step: h,
+                    ..cfg.clone()
+                })) - want)
+                    .norm()
+            })
+            .collect();
+        let ratios: Vec<f64> = errors.windows(2).map(|e| e[0] / e[1]).collect();
+        eprintln!(
+            "order, {}: tip errors {errors:?} m at 4, 2, 1 ms; ratios {ratios:.2?}",
+            cfg.elasticity.name()
+        );
+        for r in ratios {
+            assert!(
+                (2f64.powf(2.5)..2f64.powf(3.5)).contains(&r),
+                "{errors:?} {r}"
+            );
+        }
+    }
+}
+
+/// `start` (attachment layout) in the distributed layout, its stretch spread evenly.
+fn straight_like(cfg: &TetherConfig, start: &TetherState) -> TetherState {
+    let n = cfg.segments;
+    let mut st = start.to_distributed().unwrap();
+    let per = start.q[0] / n as f64;
+    for &i in &stretch_indices(cfg) {
+        st.q[i] = per;
+    }
+    st
 }
