@@ -109,13 +109,29 @@ def test_quick_benchmark_runs_the_whole_pipeline(tmp_path, monkeypatch):
         raise AssertionError("a finished job was trained again")
 
     monkeypatch.setattr(training, "train", no_training)
-    again_doc = benchmark.run(cfg, out, progress=lambda _m: None)
+    said: list[str] = []
+    again_doc = benchmark.run(cfg, out, progress=said.append)
+    assert not any(m.startswith("baseline") for m in said)  # stored once in OUT/baselines, reused
     assert all(r["reused"] for r in again_doc["runs"])
     assert json.loads((out / "episodes.json").read_text())["runs"] == eps["runs"]
     assert "reused" in benchmark.report_markdown(again_doc)
+    # A stale evaluation (other episodes, other code: another key) is evaluated again, not retrained.
     job = benchmark.jobs(cfg)[0]
-    with pytest.raises(AssertionError, match="trained again"):
-        benchmark.run_job(job, str(out), cfg["episodes"] + 1, cfg["num_envs"])
+    fresh = benchmark.run_job(job, str(out), cfg["episodes"] + 1, cfg["num_envs"])
+    assert not fresh["reused"] and len(fresh["episodes"]["captured"]) == cfg["episodes"] + 1
+
+    # Filters: an unknown value is one error line naming it and the allowed ones (exit 2); a run of
+    # some jobs reports every finished one and lists the others as missing.
+    assert main(["benchmark", "--quick", "--out", str(out), "--seeds", "7", "--quiet"]) == 2
+    assert main(["benchmark", "--quick", "--out", str(out), "--algos", "dqn", "--quiet"]) == 2
+    import shutil
+
+    gone = benchmark.jobs(cfg)[-1]
+    shutil.rmtree(out / "runs" / gone.name)
+    part = benchmark.run(cfg, out, progress=lambda _m: None, chosen=benchmark.selection(cfg, seeds=[0], algos=["ppo"]))
+    assert [m["name"] for m in part["missing"]] == [gone.name]
+    assert len(part["runs"]) == len(benchmark.jobs(cfg)) - 1
+    assert "## Missing / unfinished runs" in benchmark.report_markdown(part) and gone.name in benchmark.report_markdown(part)
 
 
 def test_an_interrupted_job_continues_from_its_checkpoint(tmp_path, monkeypatch):
@@ -186,3 +202,28 @@ def test_a_job_with_a_cpu_budget_keeps_its_gradient_updates_within_it(tmp_path, 
         with pytest.raises(ConfigError, match="update_threads"):
             benchmark.run_job(dataclasses.replace(job, train_config=str(tmp_path / "bad.json")), str(tmp_path / "bad"),
                               cfg["episodes"], cfg["num_envs"], 1)
+
+
+def test_ctrl_c_stops_the_benchmark_and_reports_what_is_finished(tmp_path, monkeypatch):
+    # The trainer answers Ctrl+C by writing its checkpoint and returning "interrupted" (probed
+    # here): the benchmark stops there, writes its report from the finished runs (none) and lists
+    # every job as missing.
+    from accd_gym.learning import training
+
+    calls = []
+
+    def interrupted(cfg, run, **_k):
+        calls.append(run)
+        return {"status": "interrupted", "timesteps": 2048, "config": cfg}
+
+    monkeypatch.setattr(training, "train", interrupted)
+    raw = json.loads((ROOT / "training" / "benchmark.json").read_text())
+    raw.update(tiers=["nominal"], baselines=["zero"], episodes=4,
+               learners={"ppo": {"train_config": "training/ppo.json", "seeds": [0, 1], "timesteps": 4096}})
+    cfg = benchmark.validate_config(raw, root=ROOT)
+    doc = benchmark.run(cfg, tmp_path, progress=lambda _m: None)
+    assert len(calls) == 1 and "interrupted at 2048 steps" in doc["interrupted"]
+    assert [m["name"] for m in doc["missing"]] == ["nominal_ppo_seed0", "nominal_ppo_seed1"]
+    report = (tmp_path / "benchmark.md").read_text()
+    assert "## Missing / unfinished runs" in report and "| `nominal_ppo_seed1` | not started |" in report
+    assert "zero" in doc["tiers"]["nominal"]["policies"]

@@ -102,15 +102,37 @@ def _benchmark(args: argparse.Namespace) -> int:
     from accd_gym.evals import benchmark
 
     cfg = benchmark.load_config(args.config, quick=args.quick)
+    chosen = benchmark.selection(cfg, tiers=_names(args.tiers), algos=_names(args.algos), seeds=_seeds(args.seeds))
     docs = Path(args.docs) if args.docs else None
     command = ("accd-gym benchmark" + (f" --config {args.config}" if args.config != "training/benchmark.json" else "")
                + (" --quick" if args.quick else "") + (f" --ray {args.ray}" if args.ray else ""))
     progress = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True))
-    doc = benchmark.run(cfg, args.out, ray_address=args.ray, docs=docs, command=command, progress=progress)
+    doc = benchmark.run(cfg, args.out, ray_address=args.ray, docs=docs, command=command, progress=progress,
+                        chosen=chosen)
     print((Path(args.out) / "benchmark.md").read_text())
     print(f"wrote {Path(args.out) / 'benchmark.json'}, benchmark.md, performance_profile.png, episodes.json"
           + (f"; {docs / 'benchmark.md'}" if docs else "") + f" (wall time {doc['wall_time_s']:.0f} s)")
+    if doc.get("interrupted"):
+        print(f"accd-gym: benchmark interrupted ({doc['interrupted']}); the report covers the finished runs; "
+              f"run the same command again to resume", file=sys.stderr)
+        return 130
     return 0
+
+
+def _names(text: Optional[str]) -> Optional[list[str]]:
+    """A comma-separated option's values (None when not given)."""
+    return None if text is None else [v.strip() for v in text.split(",") if v.strip()]
+
+
+def _seeds(text: Optional[str]) -> Optional[list[int]]:
+    """--seeds as integers; a usage error naming a value that is not one."""
+    values = _names(text)
+    if values is None:
+        return None
+    for v in values:
+        if not v.lstrip("-").isdigit():
+            raise _usage(f"--seeds {v!r} is not an integer")
+    return [int(v) for v in values]
 
 
 def _sweep(args: argparse.Namespace) -> int:
@@ -368,6 +390,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--config", default="training/benchmark.json", help="benchmark config, JSON (default: training/benchmark.json)")
     p.add_argument("--out", default="runs/benchmark", help="output folder (default: runs/benchmark)")
     p.add_argument("--quick", action="store_true", help="the config's quick overrides: a few minutes, for CI")
+    p.add_argument("--tiers", metavar="A,B", help="run only these tiers' jobs (the report covers every finished run)")
+    p.add_argument("--algos", metavar="A,B", help="run only these algorithms' jobs")
+    p.add_argument("--seeds", metavar="0,1", help="run only these seeds' jobs")
     p.add_argument("--docs", metavar="FOLDER", help="also write FOLDER/benchmark.md and FOLDER/figures/benchmark_profile.png")
     p.add_argument("--ray", nargs="?", const="local", metavar="ADDRESS",
                    help="run the training jobs as Ray tasks: 'local' (default), 'auto' or HOST:PORT (needs the ray extra)")

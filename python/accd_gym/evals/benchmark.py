@@ -12,16 +12,23 @@ trained with several seeds, every baseline, the same held-out episodes, one repo
    CPUs each, placed wherever the cluster has room (the same machinery as ``evaluate --ray``),
    the longest first. Resumable: a finished job's result stays in ``OUT/runs/<job>/result.json``
    and a rerun into the same ``OUT`` reuses it while its key (:func:`job_key`: job, training
-   config, tier, build, evaluation) is unchanged; an interrupted training continues from its
-   checkpoint (:func:`run_job`).
+   config, tier, build, evaluation) is unchanged; a finished training whose evaluation is stale
+   is evaluated again without retraining; an interrupted training continues from its
+   checkpoint (:func:`run_job`). ``--tiers``, ``--algos``, ``--seeds`` (:func:`selection`) run
+   only some jobs; the report covers every finished job in ``OUT`` and lists the others under
+   "Missing / unfinished runs". Ctrl+C: the training under way writes its checkpoint, the report
+   is written from what is finished, exit code 130.
 2. **Baselines** (``zero``, ``random``, ``guidance``, ``lqr``) on the same episodes of every
-   tier; the LQR is designed for each tier's configuration.
+   tier; the LQR is designed for each tier's configuration. Each baseline's record is stored once
+   in ``OUT/baselines`` and reused by a rerun while its key is unchanged.
 3. **Report** (``OUT/benchmark.json``, ``OUT/benchmark.md``, ``OUT/performance_profile.png``):
    per tier and policy the capture rate (learned: the interquartile mean over seeds with a 95 %
    stratified bootstrap interval, and every seed's rate; baselines: the rate with its Wilson
    interval), the median miss distance and time to capture, and the paired exact McNemar test
    (:func:`accd_gym.evals.evaluation.mcnemar_exact`) of the best learned run against the best
-   classical baseline on the same episodes; a performance profile over every (tier, seed) run.
+   classical baseline on the same episodes; the learned methods normalized by the LQR (LQR = 1.0)
+   with rliable's probability of improvement over it (:func:`probability_of_improvement`); the
+   Target section (:func:`target`); a performance profile over every (tier, seed) run.
    ``--docs`` also writes the report to docs/benchmark.md and the plot to docs/figures/.
 
 **Statistics.** IQM: the mean of the middle half of the seeds' rates (rliable's IQM,
@@ -186,6 +193,24 @@ def jobs(cfg: dict[str, Any]) -> list[Job]:
     return out
 
 
+def selection(cfg: dict[str, Any], tiers: Optional[Sequence[str]] = None, algos: Optional[Sequence[str]] = None,
+              seeds: Optional[Sequence[int]] = None) -> Callable[[Job], bool]:
+    """Which jobs of a validated config to run (None: every value); ConfigError naming the option,
+    the value and the allowed ones for a tier, algorithm or seed the config does not have."""
+    allowed = {"--tiers": list(cfg["tiers"]), "--algos": list(cfg["learners"]),
+               "--seeds": sorted({s for spec in cfg["learners"].values() for s in spec["seeds"]})}
+    for option, values in (("--tiers", tiers), ("--algos", algos), ("--seeds", seeds)):
+        for v in values or []:
+            if v not in allowed[option]:
+                raise ConfigError(f"invalid config: {option} {v!r} is outside the allowed range {allowed[option]}")
+
+    def chosen(job: Job) -> bool:
+        return ((tiers is None or job.tier in tiers) and (algos is None or job.algo in algos)
+                and (seeds is None or job.seed in seeds))
+
+    return chosen
+
+
 def _episode_record(eps: Sequence[Any]) -> dict[str, Any]:
     """What the report needs of an evaluation: per episode, captured, miss distance, capture time."""
     return {
@@ -254,7 +279,8 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
     (also ``out/runs/<name>/result.json``).
 
     Resumable: a job whose run folder holds a result of the same :func:`job_key` is not run again
-    (``"reused": true``); a run interrupted while training (Ctrl+C, a killed process) continues
+    (``"reused": true``); a finished training of the same config whose stored evaluation has
+    another key (the code or the episodes changed) is evaluated again without retraining; a run interrupted while training (Ctrl+C, a killed process) continues
     from its latest checkpoint (:func:`accd_gym.learning.training.resume`) to the same total; anything
     else starts the run afresh."""
     from accd_gym.learning import training
@@ -278,11 +304,15 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
         raw["update_threads"] = num_threads
     cfg = training.validate_config(raw)
     t0 = time.perf_counter()
-    if _continues(run, cfg):
+    if _trained(run, cfg):  # its evaluation is missing or stale (other code or episodes): not retrained
+        meta = json.loads((run / "run.json").read_text())
+    elif _continues(run, cfg):
         meta = training.resume(run, progress=False)
     else:
         meta = training.train(cfg, run, progress=False)
     train_s = time.perf_counter() - t0
+    if meta["status"] == "interrupted":  # Ctrl+C: its checkpoint is written; a rerun resumes it
+        raise KeyboardInterrupt(f"{job.name}: training interrupted at {meta['timesteps']} steps")
     t1 = time.perf_counter()
     record = evaluate_policy(load_policy(str(run)), job.tier, episodes, num_envs, num_threads)
     result = {"job": job.__dict__, "name": job.name, "status": meta["status"], "timesteps": meta["timesteps"],
@@ -293,6 +323,16 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
 
         files.write_text(run / RESULT_FILE, json.dumps({"key": key, "result": result}))
     return result | {"reused": False}
+
+
+def _trained(run: Path, cfg: dict[str, Any]) -> bool:
+    """``run`` holds a finished training of the config ``cfg`` with its final model and statistics."""
+    try:
+        meta = json.loads((run / "run.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return (isinstance(meta, dict) and meta.get("status") == "done" and (run / "final_model.zip").is_file()
+            and (run / "vecnormalize.pkl").is_file() and meta.get("config") == json.loads(json.dumps(cfg)))
 
 
 def _continues(run: Path, cfg: dict[str, Any]) -> bool:
@@ -316,7 +356,10 @@ def _run_jobs(todo: list[Job], cfg: dict[str, Any], out: Path, ray_address: Opti
         results = []
         for i, job in enumerate(todo):
             progress(f"[{i + 1}/{len(todo)}] training {job.name} ({job.timesteps} steps)")
-            results.append(run_job(job, str(out), cfg["episodes"], cfg["num_envs"]))
+            try:
+                results.append(run_job(job, str(out), cfg["episodes"], cfg["num_envs"]))
+            except KeyboardInterrupt as e:
+                raise _Interrupted(results, str(e) or "SIGINT") from None
         return results
     from accd_gym.evals import distributed
 
@@ -335,6 +378,49 @@ def _run_jobs(todo: list[Job], cfg: dict[str, Any], out: Path, ray_address: Opti
         done[i] = ray.get(ready[0])
         progress(f"[{len(done)}/{len(todo)}] finished {todo[i].name}")
     return [done[i] for i in range(len(todo))]
+
+
+class _Interrupted(Exception):
+    """Ctrl+C during the jobs: the results of the jobs finished before it."""
+
+    def __init__(self, results: list[dict[str, Any]], why: str) -> None:
+        super().__init__(why)
+        self.results = results
+
+
+def _run_status(run: Path) -> str:
+    """A job that has no result: "not started", or its training's state from its run.json."""
+    try:
+        meta = json.loads((run / "run.json").read_text())
+    except (OSError, ValueError):
+        return "not started"
+    if not isinstance(meta, dict):
+        return "not started"
+    if meta.get("status") == "done":
+        return "trained; its evaluation is missing or stale (a rerun evaluates it)"
+    return f"{meta.get('status', 'unfinished')} at {meta.get('timesteps', 0):,} of {meta.get('total_timesteps', 0):,} steps"
+
+
+def _baseline_record(name: str, tier: str, config: dict[str, Any], out: Path,
+                     progress: Callable[[str], None]) -> dict[str, Any]:
+    """Baseline ``name``'s episode record on the tier, stored once in ``out/baselines`` and reused
+    while its key (baseline, tier configuration, code, episodes, batch) is unchanged."""
+    from accd_gym import files
+    from accd_gym.envs.tiers import tier as _tier
+
+    key = json.loads(json.dumps({"baseline": name, "tier_config": _tier(tier).config(), "build": build_digest(),
+                                 "episodes": config["episodes"], "num_envs": config["num_envs"]}))
+    path = out / "baselines" / f"{tier}_{name}.json"
+    try:
+        stored = json.loads(path.read_text())
+        if isinstance(stored, dict) and stored.get("key") == key:
+            return stored["record"]
+    except (OSError, ValueError):
+        pass
+    progress(f"baseline {name} on {tier}")
+    record = evaluate_policy(_baseline_policy(name, tier), tier, config["episodes"], config["num_envs"])
+    files.write_text(path, json.dumps({"key": key, "record": record}))
+    return record
 
 
 def _baseline_policy(name: str, tier: str) -> Any:
@@ -366,6 +452,61 @@ def stratified_bootstrap(captured: Sequence[Sequence[bool]], *, resamples: int =
     stats = resampled[:, k:rates.size - k].mean(axis=1)
     a = (1.0 - level) / 2.0
     return float(np.quantile(stats, a)), float(np.quantile(stats, 1.0 - a))
+
+
+def probability_of_improvement(x: Sequence[float], y: Sequence[float]) -> float:
+    """rliable's probability of improvement of X over Y on one task: P(X > Y) over every pair of
+    X's and Y's runs, a tie counting one half (the Mann-Whitney U statistic over ``len(x) * len(y)``)."""
+    a, b = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    if a.size == 0 or b.size == 0:
+        raise ValueError(f"probability_of_improvement: needs runs on both sides, got {a.size} and {b.size}")
+    gt = (a[:, None] > b[None, :]).sum()
+    eq = (a[:, None] == b[None, :]).sum()
+    return float((gt + 0.5 * eq) / (a.size * b.size))
+
+
+#: Issue criteria of the report's Target section: the largest seed spread of a learned method
+#: (rate points) and the significance level of the paired McNemar test.
+TARGET_MAX_SPREAD = 0.20
+TARGET_ALPHA = 0.05
+
+
+def target(tiers: dict[str, Any], episodes: dict[str, dict[str, Any]]) -> Optional[dict[str, Any]]:
+    """Whether a learned policy matches the LQR, per tier with an LQR and learned runs: the best
+    learned method (by IQM) at least the LQR (IQM >= LQR rate, its interval reaching it, the best
+    run not significantly worse by the paired exact McNemar), significantly better (best run,
+    p < :data:`TARGET_ALPHA`), and every learned method's seed spread at most
+    :data:`TARGET_MAX_SPREAD`; ``met``: every such tier at least the LQR, one significantly better,
+    no spread too large (None without such a tier). ``episodes``: per tier, ``{"lqr": captured,
+    run name: captured}``."""
+    from accd_gym.evals.evaluation import mcnemar_exact
+
+    out: dict[str, Any] = {}
+    for tier, t in tiers.items():
+        rows = t["policies"]
+        learned = {k: r for k, r in rows.items() if r["kind"] == "learned"}
+        if "lqr" not in rows or not learned:
+            continue
+        lqr_rate = rows["lqr"]["rate"]
+        best_algo = max(learned, key=lambda k: learned[k]["iqm"])
+        best = learned[best_algo]
+        runs = {k: v for k, v in episodes[tier].items() if k != "lqr"}
+        best_run = max(runs, key=lambda k: (float(np.mean(runs[k])), k))
+        a, b = np.asarray(runs[best_run], dtype=bool), np.asarray(episodes[tier]["lqr"], dtype=bool)
+        only_a, only_b = int(np.sum(a & ~b)), int(np.sum(~a & b))
+        p = mcnemar_exact(only_a, only_b)
+        spread = max(max(r["rates"]) - min(r["rates"]) for r in learned.values())
+        at_least = (best["iqm"] >= lqr_rate and best["ci95"][1] >= lqr_rate
+                    and not (only_b > only_a and p < TARGET_ALPHA))
+        out[tier] = {"method": best_algo, "iqm": best["iqm"], "ci95": best["ci95"], "lqr_rate": lqr_rate,
+                     "best_run": best_run, "only_learned": only_a, "only_lqr": only_b, "p_value": p,
+                     "at_least_lqr": bool(at_least), "significantly_better": bool(only_a > only_b and p < TARGET_ALPHA),
+                     "max_seed_spread": spread, "spread_ok": bool(spread <= TARGET_MAX_SPREAD)}
+    if not out:
+        return None
+    met = (all(v["at_least_lqr"] and v["spread_ok"] for v in out.values())
+           and any(v["significantly_better"] for v in out.values()))
+    return {"tiers": out, "met": bool(met)}
 
 
 def _medians(record: dict[str, Any]) -> tuple[float, Optional[float]]:
@@ -402,6 +543,13 @@ def summarize(cfg: dict[str, Any], results: list[dict[str, Any]], baselines: dic
             miss, ttc = _medians(rec)
             rows[name] = {"kind": "classical" if name in ("guidance", "lqr") else "trivial", "rate": k / n,
                           "ci95": list(wilson_interval(k, n)), "miss_median_m": miss, "capture_time_median_s": ttc}
+        if "lqr" in rows:  # the learned methods relative to the LQR (LQR = 1.0)
+            lqr_rate = rows["lqr"]["rate"]
+            for row in rows.values():
+                if row["kind"] == "learned":
+                    row["vs_lqr"] = None if lqr_rate == 0 else [row["iqm"] / lqr_rate, row["ci95"][0] / lqr_rate,
+                                                                row["ci95"][1] / lqr_rate]
+                    row["p_improvement_over_lqr"] = probability_of_improvement(row["rates"], [lqr_rate])
         comparison = None
         learned = [(float(np.mean(r["episodes"]["captured"])), r) for r in runs]
         classical = [(rows[b]["rate"], b) for b in ("guidance", "lqr") if b in rows]
@@ -469,6 +617,27 @@ def _reuse_note(doc: dict[str, Any]) -> str:
             f"and reused (their training and evaluation took {minutes:.1f} min then)")
 
 
+def _target_markdown(t: Optional[dict[str, Any]]) -> list[str]:
+    """The report's Target section from :func:`target`'s numbers (nothing without them)."""
+    if not t:
+        return []
+    lines = ["", "## Target", "",
+             "A learned policy captures at least as many held-out episodes as the LQR on every tier (IQM >= the "
+             "LQR's rate, its interval reaching it, the best run not significantly worse by the paired exact McNemar), "
+             f"significantly more on at least one (p < {TARGET_ALPHA}), and no learned method's seeds spread by more "
+             f"than {100 * TARGET_MAX_SPREAD:.0f} points.", "",
+             "| tier | best method (IQM) | LQR | best run: only learned / only LQR, p | at least the LQR | "
+             "significantly more | largest seed spread |", "|---|---|---|---|---|---|---|"]
+    yes = {True: "yes", False: "no"}
+    for tier, v in t["tiers"].items():
+        lines.append(f"| {tier} | {v['method'].upper()} {_pct(v['iqm'])} ({_pct(v['ci95'][0])} - {_pct(v['ci95'][1])}) "
+                     f"| {_pct(v['lqr_rate'])} | `{v['best_run']}`: {v['only_learned']} / {v['only_lqr']}, "
+                     f"p = {v['p_value']:.3g} | {yes[v['at_least_lqr']]} | {yes[v['significantly_better']]} "
+                     f"| {100 * v['max_seed_spread']:.1f} points ({yes[v['spread_ok']]}) |")
+    lines += ["", f"Target {'met' if t['met'] else 'not met'} on these runs."]
+    return lines
+
+
 def report_markdown(doc: dict[str, Any]) -> str:
     """The benchmark report (docs/benchmark.md)."""
     from accd_gym.envs.tiers import TIERS
@@ -504,22 +673,42 @@ def report_markdown(doc: dict[str, Any]) -> str:
                              f"| {seeds} | {row['miss_median_m']:.2f} | {ttc} |")
             else:
                 lines.append(f"| {name} | {_pct(row['rate'])} | {_pct(lo)} - {_pct(hi)} | - | {row['miss_median_m']:.2f} | {ttc} |")
+        rel = [(n, r) for n, r in t["policies"].items() if r.get("vs_lqr")]
+        if rel:
+            lines += ["", "Relative to the LQR (LQR = 1.0; IQM and interval divided by the LQR's rate) and rliable's "
+                      "probability of improvement P(seed's rate > LQR's, ties one half, averaged over the seeds):", "",
+                      "| policy | normalized IQM | 95 % interval | P(improvement over LQR) |", "|---|---|---|---|"]
+            lines += [f"| {n.upper()} | {r['vs_lqr'][0]:.3f} | {r['vs_lqr'][1]:.3f} - {r['vs_lqr'][2]:.3f} "
+                      f"| {r['p_improvement_over_lqr']:.2f} |" for n, r in rel]
         m = t["mcnemar"]
         if m:
             lines += ["", f"Best learned run `{m['learned']}` ({_pct(m['learned_rate'])}) vs best classical `{m['classical']}` "
                       f"({_pct(m['classical_rate'])}), paired on the same episodes: both {m['both']}, learned only "
                       f"{m['only_learned']}, classical only {m['only_classical']}, neither {m['neither']}; exact McNemar "
                       f"p = {m['p_value']:.3g} (both picked as the best on these episodes)."]
+    if doc.get("missing"):
+        lines += ["", "## Missing / unfinished runs", "",
+                  f"{len(doc['missing'])} of {len(doc['missing']) + len(doc['runs'])} training runs have no result "
+                  "in this report; `accd-gym benchmark` into the same folder runs or resumes them.", "",
+                  "| run | status |", "|---|---|"]
+        lines += [f"| `{m['name']}` | {m['status']} |" for m in doc["missing"]]
+    lines += _target_markdown(doc.get("target"))
     lines += ["", "## Performance profile", "", "![performance profile](figures/benchmark_profile.png)", "",
               "Fraction of each policy's runs (every tier; learned: every seed) whose capture rate is at least tau."]
     return "\n".join(lines) + "\n"
 
 
 def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] = None, docs: Optional[Path] = None,
-        command: str = "accd-gym benchmark", progress: Callable[[str], None] = print) -> dict[str, Any]:
+        command: str = "accd-gym benchmark", progress: Callable[[str], None] = print,
+        chosen: Optional[Callable[[Job], bool]] = None) -> dict[str, Any]:
     """Runs the benchmark of a validated config into ``out``; returns the report document
     (also ``out/benchmark.json``, ``out/benchmark.md``, ``out/performance_profile.png``; with
-    ``docs``, docs/benchmark.md and docs/figures/benchmark_profile.png there too)."""
+    ``docs``, docs/benchmark.md and docs/figures/benchmark_profile.png there too).
+
+    ``chosen`` (:func:`selection`): run only those jobs; the report covers every job of the
+    config finished in ``out`` (now or by an earlier invocation) and lists the others under
+    "Missing / unfinished runs". Ctrl+C while training: the run under way writes its checkpoint,
+    the report is written from what is finished and the document's ``interrupted`` says why."""
     import datetime
 
     from accd_gym import files
@@ -530,20 +719,36 @@ def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] =
         files.writable_folder(docs, "--docs")
         files.writable_folder(docs / "figures", "--docs")
     t0 = time.perf_counter()
-    todo = jobs(config)
-    results = _run_jobs(todo, config, out, ray_address, progress)
+    every = jobs(config)
+    todo = [j for j in every if chosen is None or chosen(j)]
+    interrupted = None
+    try:
+        ran = _run_jobs(todo, config, out, ray_address, progress)
+    except _Interrupted as e:
+        ran, interrupted = e.results, str(e)
+        progress(f"interrupted ({interrupted}); the report is written from the finished runs")
+    by_name = {r["name"]: r for r in ran if r.get("status") == "done"}
+    results, missing = [], []
+    for job in every:  # the report covers every finished run in OUT, chosen now or earlier
+        if job.name not in by_name:
+            stored = _stored_result(out / "runs" / job.name, job_key(job, config["episodes"], config["num_envs"]))
+            if stored is not None:
+                by_name[job.name] = stored["result"] | {"reused": True}
+        if job.name in by_name:
+            results.append(by_name[job.name])
+        else:
+            missing.append({"name": job.name, "status": _run_status(out / "runs" / job.name)})
     train_s = time.perf_counter() - t0
     t1 = time.perf_counter()
     baselines: dict[str, dict[str, Any]] = {}
     for tier in config["tiers"]:
         baselines[tier] = {}
         for name in config["baselines"]:
-            policy = _baseline_policy(name, tier)
-            progress(f"baseline {name} on {tier}")
-            baselines[tier][name] = evaluate_policy(policy, tier, config["episodes"], config["num_envs"])
+            baselines[tier][name] = _baseline_record(name, tier, config, out, progress)
     baseline_s = time.perf_counter() - t1
     taus = np.linspace(0.0, 1.0, 101)
     profile = performance_profile(results, baselines, taus)
+    summary = summarize(config, results, baselines)
     doc = {
         "command": command,
         "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
@@ -552,10 +757,16 @@ def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] =
         "wall_time_s": time.perf_counter() - t0,
         "train_wall_s": train_s,
         "baseline_wall_s": baseline_s,
-        "tiers": summarize(config, results, baselines),
+        "tiers": summary,
+        "target": target(summary, {
+            tier: {"lqr": baselines[tier]["lqr"]["captured"],
+                   **{r["name"]: r["episodes"]["captured"] for r in results if r["job"]["tier"] == tier}}
+            for tier in config["tiers"] if baselines.get(tier, {}).get("lqr") is not None}),
         "runs": [{k: v for k, v in r.items() if k != "episodes"} | {"capture_rate": float(np.mean(r["episodes"]["captured"]))}
                  for r in results],
         "profile": {"tau": taus.tolist(), **profile},
+        "missing": missing,
+        "interrupted": interrupted,
     }
     files.write_text(out / "benchmark.json", json.dumps(doc, indent=1))
     files.write_text(out / "episodes.json", json.dumps({"runs": {r["name"]: r["episodes"] for r in results},
@@ -575,4 +786,5 @@ def _cpus() -> int:
 
 
 __all__ = ["DEFAULTS", "RESULT_FILE", "Job", "build_digest", "job_key", "jobs", "load_config", "validate_config", "run", "run_job", "evaluate_policy",
-           "stratified_bootstrap", "summarize", "performance_profile", "report_markdown", "iqm"]
+           "stratified_bootstrap", "summarize", "performance_profile", "report_markdown", "iqm",
+           "probability_of_improvement", "target", "selection", "TARGET_MAX_SPREAD", "TARGET_ALPHA"]
