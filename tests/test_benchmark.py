@@ -227,3 +227,6 @@ def test_ctrl_c_stops_the_benchmark_and_reports_what_is_finished(tmp_path, monke
     report = (tmp_path / "benchmark.md").read_text()
     assert "## Missing / unfinished runs" in report and "| `nominal_ppo_seed1` | not started |" in report
     assert "zero" in doc["tiers"]["nominal"]["policies"]
+    # The folder belongs to its recipe: another config is refused with one line naming what differs.
+    with pytest.raises(ConfigError, match=r"another benchmark config \(differs in \['episodes'\]\)"):
+        benchmark.run({**cfg, "episodes": 5}, tmp_path, progress=lambda _m: None)

@@ -380,6 +380,30 @@ def _run_jobs(todo: list[Job], cfg: dict[str, Any], out: Path, ray_address: Opti
     return [done[i] for i in range(len(todo))]
 
 
+#: The config a benchmark folder was made with: a rerun into it must have the same.
+CONFIG_FILE = "benchmark_config.json"
+
+
+def _claim(out: Path, config: dict[str, Any]) -> None:
+    """Records ``config`` in ``out`` (first run) or refuses a folder made with another one:
+    ConfigError naming the folder and the keys that differ."""
+    from accd_gym import files
+
+    mine = json.loads(json.dumps(config))
+    path = out / CONFIG_FILE
+    try:
+        stored = json.loads(path.read_text())
+    except FileNotFoundError:
+        files.write_text(path, json.dumps(mine, indent=1))
+        return
+    except (OSError, ValueError) as e:
+        raise ConfigError(f"invalid config: --out {str(out)!r}: its {CONFIG_FILE} is unreadable ({e})") from None
+    if stored != mine:
+        keys = sorted(k for k in set(stored) | set(mine) if stored.get(k) != mine.get(k)) if isinstance(stored, dict) else ["*"]
+        raise ConfigError(f"invalid config: --out {str(out)!r} was made by another benchmark config (differs in {keys}); "
+                          "rerun with that config or choose another --out")
+
+
 class _Interrupted(Exception):
     """Ctrl+C during the jobs: the results of the jobs finished before it."""
 
@@ -718,6 +742,7 @@ def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] =
     if docs is not None:
         files.writable_folder(docs, "--docs")
         files.writable_folder(docs / "figures", "--docs")
+    _claim(out, config)
     t0 = time.perf_counter()
     every = jobs(config)
     todo = [j for j in every if chosen is None or chosen(j)]
@@ -787,4 +812,4 @@ def _cpus() -> int:
 
 __all__ = ["DEFAULTS", "RESULT_FILE", "Job", "build_digest", "job_key", "jobs", "load_config", "validate_config", "run", "run_job", "evaluate_policy",
            "stratified_bootstrap", "summarize", "performance_profile", "report_markdown", "iqm",
-           "probability_of_improvement", "target", "selection", "TARGET_MAX_SPREAD", "TARGET_ALPHA"]
+           "probability_of_improvement", "target", "selection", "CONFIG_FILE", "TARGET_MAX_SPREAD", "TARGET_ALPHA"]
