@@ -65,6 +65,13 @@ def test_jobs_follow_the_config():
     quick = benchmark.load_config(ROOT / "training" / "benchmark.json", quick=True)
     assert quick["episodes"] == 16 and quick["learners"]["ppo"]["timesteps"] == 4096
     assert quick["learners"]["sac"]["tiers"] == ["nominal"]
+    # residual learners: a recipe per tier (its env options kept), only in the full run
+    res = [j for j in jobs if j.algo.startswith("residual_")]
+    assert {(j.algo, j.tier) for j in res} == {(a, t) for a in ("residual_ppo", "residual_sac") for t in ("precision", "hard")}
+    assert len(res) == 20 and all(j.train_config.endswith(f"{j.algo}_{j.tier}.json") for j in res)
+    assert {j.timesteps for j in res if j.algo == "residual_ppo"} == {3_000_000}
+    assert {j.timesteps for j in res if j.algo == "residual_sac"} == {500_000}
+    assert set(quick["learners"]) == {"ppo", "sac"}
 
 
 @pytest.mark.timeout(1800)  # trains every tier with PPO and SAC
@@ -230,3 +237,21 @@ def test_ctrl_c_stops_the_benchmark_and_reports_what_is_finished(tmp_path, monke
     # The folder belongs to its recipe: another config is refused with one line naming what differs.
     with pytest.raises(ConfigError, match=r"another benchmark config \(differs in \['episodes'\]\)"):
         benchmark.run({**cfg, "episodes": 5}, tmp_path, progress=lambda _m: None)
+
+
+def test_a_residual_job_keeps_its_recipes_env_options(tmp_path, monkeypatch):
+    from accd_gym.learning import training
+
+    seen = []
+
+    def probe(cfg, *_a, **_k):
+        seen.append(cfg)
+        raise KeyError("probe")
+
+    monkeypatch.setattr(training, "train", probe)
+    cfg = benchmark.load_config(ROOT / "training" / "benchmark.json")
+    job = [j for j in benchmark.jobs(cfg) if j.algo == "residual_ppo" and j.tier == "hard"][0]
+    with pytest.raises(KeyError, match="probe"):
+        benchmark.run_job(job, str(tmp_path), 4, 4)
+    env = seen[0]["env"]
+    assert env["tier"] == "hard" and env["residual"]["base"] == "lqr" and env["history"] == 4

@@ -46,14 +46,16 @@ key              meaning
 ================ ===================================================================================
 tiers            tier names (default: all)
 learners         ``{"ppo": {"train_config", "seeds", "timesteps", "tiers"}, "sac": {...}}``;
-                 ``tiers`` limits an algorithm to some tiers (default: all)
+                 ``tiers`` limits an algorithm to some tiers (default: all); ``train_config`` a
+                 recipe, or ``{tier: recipe}`` (then its tiers by default); the recipe's env
+                 options (residual, history) are kept, its tier set to the job's
 baselines        baseline names (default ``["zero", "random", "guidance", "lqr"]``; unknown ones
                  are refused)
 episodes         held-out episodes per tier (default 500)
 num_envs         evaluation batch (default 16)
 cpus_per_job     CPUs a Ray job reserves, also the threads stepping its envs and at most those of
                  PyTorch in its gradient updates (default 1)
-quick            overrides for ``--quick``
+quick            overrides for ``--quick`` (its ``learners`` are the quick run's only ones)
 ================ ===================================================================================
 """
 
@@ -110,8 +112,9 @@ def validate_config(raw: Any, *, quick: bool = False, root: Optional[Path] = Non
     if quick:
         q = cfg.get("quick") or {}
         cfg = merge(cfg, q)
-        if "learners" in q:
-            cfg["learners"] = merge(raw.get("learners", DEFAULTS["learners"]), q["learners"])
+        if "learners" in q:  # the quick run trains only the learners its overrides name
+            full = raw.get("learners", DEFAULTS["learners"])
+            cfg["learners"] = {k: merge(full[k], v) if k in full else copy.deepcopy(v) for k, v in q["learners"].items()}
     tiers = cfg["tiers"] if cfg["tiers"] is not None else list(TIERS)
     bad = [t for t in tiers if t not in TIERS]
     if bad or not tiers:
@@ -120,11 +123,15 @@ def validate_config(raw: Any, *, quick: bool = False, root: Optional[Path] = Non
     if not isinstance(cfg["learners"], dict):
         raise ConfigError("invalid config: `learners` must be an object {algo: {train_config, seeds, timesteps, tiers}}")
     base = root or Path.cwd()
+    import re
+
     for algo, spec in cfg["learners"].items():
-        if algo not in ("ppo", "sac"):
-            raise ConfigError(f"invalid config: `learners.{algo}` is outside the allowed algorithms: ppo, sac")
+        if not re.fullmatch(r"[a-z][a-z0-9_]*", algo):
+            raise ConfigError(f"invalid config: `learners.{algo}` is outside the allowed names: [a-z][a-z0-9_]*")
         if not isinstance(spec, dict) or set(spec) - set(_LEARNER_KEYS):
             raise ConfigError(f"invalid config: `learners.{algo}` must be an object with keys {list(_LEARNER_KEYS)}")
+        if isinstance(spec.get("train_config"), dict):  # a recipe per tier: those tiers by default
+            spec.setdefault("tiers", list(spec["train_config"]))
         spec.setdefault("tiers", None)
         seeds = spec.get("seeds")
         if not isinstance(seeds, list) or not seeds or not all(isinstance(s, int) and s >= 0 for s in seeds):
@@ -134,14 +141,22 @@ def validate_config(raw: Any, *, quick: bool = False, root: Optional[Path] = Non
         steps = spec.get("timesteps")
         if not isinstance(steps, int) or steps < 1:
             raise ConfigError(f"invalid config: `learners.{algo}.timesteps` = {steps!r} is outside the allowed range >= 1")
-        path = Path(spec.get("train_config") or "")
-        path = path if path.is_absolute() else base / path
-        if not path.is_file():
-            raise ConfigError(f"invalid config: `learners.{algo}.train_config` = {spec.get('train_config')!r} is not a file")
-        spec["train_config"] = str(path)
         if spec["tiers"] is not None:
             if not isinstance(spec["tiers"], list) or [t for t in spec["tiers"] if t not in tiers]:
                 raise ConfigError(f"invalid config: `learners.{algo}.tiers` = {spec['tiers']!r} is outside the allowed values: a list of {tiers}")
+        recipes = spec.get("train_config")
+        named = recipes.items() if isinstance(recipes, dict) else [(None, recipes)]
+        if isinstance(recipes, dict) and [t for t in (spec["tiers"] or tiers) if t not in recipes]:
+            raise ConfigError(f"invalid config: `learners.{algo}.train_config` = {recipes!r} has no recipe for the tiers "
+                              f"{[t for t in (spec['tiers'] or tiers) if t not in recipes]}")
+        resolved = {}
+        for tier_name, recipe in named:
+            path = Path(recipe or "") if isinstance(recipe, str) else Path("")
+            path = path if path.is_absolute() else base / path
+            if not isinstance(recipe, str) or not path.is_file():
+                raise ConfigError(f"invalid config: `learners.{algo}.train_config` = {recipe!r} is not a file")
+            resolved[tier_name] = str(path)
+        spec["train_config"] = resolved if isinstance(recipes, dict) else resolved[None]
     if not isinstance(cfg["baselines"], list) or [b for b in cfg["baselines"] if b not in _BASELINES]:
         raise ConfigError(f"invalid config: `baselines` = {cfg['baselines']!r} is outside the allowed values: a list of {list(_BASELINES)}")
     for key, lo in (("episodes", 1), ("num_envs", 1), ("cpus_per_job", 1)):
@@ -189,7 +204,8 @@ def jobs(cfg: dict[str, Any]) -> list[Job]:
         for algo, spec in cfg["learners"].items():
             if spec["tiers"] is not None and tier not in spec["tiers"]:
                 continue
-            out += [Job(tier, algo, s, spec["train_config"], spec["timesteps"]) for s in spec["seeds"]]
+            recipe = spec["train_config"][tier] if isinstance(spec["train_config"], dict) else spec["train_config"]
+            out += [Job(tier, algo, s, recipe, spec["timesteps"]) for s in spec["seeds"]]
     return out
 
 
@@ -293,7 +309,7 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
     if stored is not None:
         return stored["result"] | {"reused": True}
     raw = read_json_object(job.train_config, "train_config (training config)")
-    raw["env"] = {"tier": job.tier}
+    raw["env"] = {**(raw.get("env") or {}), "tier": job.tier}  # the recipe's env options (residual, history) stay
     raw["seed"] = job.seed
     raw["total_timesteps"] = job.timesteps
     raw["num_threads"] = num_threads
@@ -368,7 +384,7 @@ def _run_jobs(todo: list[Job], cfg: dict[str, Any], out: Path, ray_address: Opti
     # Longest first, so that the long jobs do not start last: an off-policy learner's job (SAC:
     # measured at 330 steps/s with one thread, a gradient step every 4 env steps) costs several
     # times a PPO job of more steps (3,800 steps/s).
-    order = sorted(range(len(todo)), key=lambda i: (todo[i].algo == "ppo", -todo[i].timesteps, i))
+    order = sorted(range(len(todo)), key=lambda i: ("sac" not in todo[i].algo, -todo[i].timesteps, i))
     refs = [task.remote(todo[i], str(out), cfg["episodes"], cfg["num_envs"], cfg["cpus_per_job"]) for i in order]
     done: dict[int, dict[str, Any]] = {}
     pending = dict(zip(refs, order))
