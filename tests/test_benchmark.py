@@ -92,6 +92,7 @@ def test_quick_benchmark_runs_the_whole_pipeline(tmp_path, monkeypatch):
         lo, hi = rows["ppo"]["ci95"]
         assert 0.0 <= lo <= hi <= 1.0
         assert f"## {tier} " in report
+        assert rows["ppo"]["failures"]["episodes"] == 2 * cfg["episodes"]
         m = doc["tiers"][tier]["mcnemar"]
         assert m["both"] + m["only_learned"] + m["only_classical"] + m["neither"] == cfg["episodes"]
     assert "sac" in doc["tiers"]["nominal"]["policies"]
@@ -106,6 +107,7 @@ def test_quick_benchmark_runs_the_whole_pipeline(tmp_path, monkeypatch):
     again = benchmark.evaluate_policy(ZeroPolicy(), "nominal", cfg["episodes"], cfg["num_envs"])
     assert again["captured"] == zero
     assert "wall time" in report and doc["wall_time_s"] > 0
+    assert "closing speed at capture" in report and "Relative to the LQR" in report
     assert not any(r["reused"] for r in doc["runs"])
 
     # Resumable: a rerun into the same folder reuses every finished job (training is not called)

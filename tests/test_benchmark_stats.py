@@ -52,3 +52,33 @@ def test_report_has_a_target_section_only_with_its_numbers():
     doc["target"] = target({"hard": _tiers([1.0], 0.5, [1.0, 1.0])}, {"hard": {"lqr": lqr, "hard_ppo_seed0": [True, True]}})
     md = report_markdown(doc)
     assert "## Target" in md and "Target not met on these runs." in md and "| hard | PPO 100.0 %" in md
+
+
+def test_failure_table_numbers_by_hand():
+    from accd_gym.evals.benchmark import failures
+
+    rec = {"captured": [True, False, False, True], "outcome": ["captured", "truncated", "crashed", "captured"],
+           "min_distance": [0.1, 0.8, 0.4, 0.2], "closest_speed": [1.0, 3.0, 5.0, 2.0],
+           "final_speed": [1.5, 0.5, 0.7, 2.5], "capture_time": [10.0, None, None, 20.0]}
+    f = failures([rec, {k: v[:1] for k, v in rec.items()}])
+    assert f["episodes"] == 5 and f["missed"] == 2 and f["outcomes"] == {"truncated": 1, "crashed": 1}
+    assert f["missed_miss_median_m"] == pytest.approx(0.6) and f["missed_closest_speed_median_mps"] == 4.0
+    assert f["capture_speed_median_mps"] == 1.5 and f["capture_time_median_s"] == 10.0
+    # records written before the speeds were recorded give None, not an error
+    old = {k: v for k, v in rec.items() if "speed" not in k}
+    assert failures([old])["capture_speed_median_mps"] is None
+
+
+def test_episodes_record_the_closing_speeds_from_their_trajectory():
+    import numpy as np
+
+    from accd_gym.control.baselines import make_baseline
+    from accd_gym.evals.episodes import run_episodes
+
+    for e in run_episodes(make_baseline("lqr", 0, None), 2, num_envs=2):
+        p = e.trajectory.astype(np.float64)
+        dt = e.time / e.steps
+        assert e.final_speed == pytest.approx(np.linalg.norm(p[-1] - p[-2]) / dt)
+        k = int(np.argmin(np.linalg.norm(p, axis=1)))
+        assert e.closest_speed == pytest.approx(np.linalg.norm(p[k] - p[k - 1]) / dt)
+        assert 0 < e.closest_speed < 50

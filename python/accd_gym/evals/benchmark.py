@@ -234,7 +234,34 @@ def _episode_record(eps: Sequence[Any]) -> dict[str, Any]:
         "min_distance": [float(e.min_distance) for e in eps],
         "capture_time": [None if e.capture_time is None else float(e.capture_time) for e in eps],
         "outcome": [e.outcome for e in eps],
+        "closest_speed": [e.closest_speed for e in eps],
+        "final_speed": [e.final_speed for e in eps],
     }
+
+
+def _median(values: Sequence[Optional[float]]) -> Optional[float]:
+    """The median of the values that are not None (None without any)."""
+    v = [x for x in values if x is not None]
+    return float(np.median(v)) if v else None
+
+
+def failures(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """Where a method's episodes (pooled over its seeds' records) fail and how it captures: the
+    missed episodes' count, outcomes, median miss distance and closing speed at the closest
+    approach; the captured episodes' median closing speed at capture and time to capture."""
+    rows = [{k: rec[k][i] if k in rec else None for k in ("captured", "outcome", "min_distance", "closest_speed",
+                                                          "final_speed", "capture_time")}
+            for rec in records for i in range(len(rec["captured"]))]
+    missed = [r for r in rows if not r["captured"]]
+    caught = [r for r in rows if r["captured"]]
+    outcomes: dict[str, int] = {}
+    for r in missed:
+        outcomes[r["outcome"]] = outcomes.get(r["outcome"], 0) + 1
+    return {"episodes": len(rows), "missed": len(missed), "outcomes": outcomes,
+            "missed_miss_median_m": _median([r["min_distance"] for r in missed]),
+            "missed_closest_speed_median_mps": _median([r["closest_speed"] for r in missed]),
+            "capture_speed_median_mps": _median([r["final_speed"] for r in caught]),
+            "capture_time_median_s": _median([r["capture_time"] for r in caught])}
 
 
 def evaluate_policy(policy: Any, tier: str, episodes: int, num_envs: int, num_threads: int = 0) -> dict[str, Any]:
@@ -573,7 +600,8 @@ def summarize(cfg: dict[str, Any], results: list[dict[str, Any]], baselines: dic
             lo, hi = stratified_bootstrap(caps)
             pooled = {k: sum((r["episodes"][k] for r in mine), []) for k in ("min_distance", "capture_time")}
             miss, ttc = _medians(pooled)
-            rows[algo] = {"kind": "learned", "seeds": [r["job"]["seed"] for r in mine], "rates": rates,
+            rows[algo] = {"kind": "learned", "failures": failures([r["episodes"] for r in mine]),
+                          "seeds": [r["job"]["seed"] for r in mine], "rates": rates,
                           "iqm": iqm(rates), "ci95": [lo, hi], "miss_median_m": miss, "capture_time_median_s": ttc,
                           "train_wall_s": [r["train_wall_s"] for r in mine], "steps_per_s": [r["steps_per_s"] for r in mine]}
         for name, rec in baselines.get(tier, {}).items():
@@ -582,6 +610,7 @@ def summarize(cfg: dict[str, Any], results: list[dict[str, Any]], baselines: dic
             k, n = int(sum(rec["captured"])), len(rec["captured"])
             miss, ttc = _medians(rec)
             rows[name] = {"kind": "classical" if name in ("guidance", "lqr") else "trivial", "rate": k / n,
+                          "failures": failures([rec]),
                           "ci95": list(wilson_interval(k, n)), "miss_median_m": miss, "capture_time_median_s": ttc}
         if "lqr" in rows:  # the learned methods relative to the LQR (LQR = 1.0)
             lqr_rate = rows["lqr"]["rate"]
@@ -713,6 +742,18 @@ def report_markdown(doc: dict[str, Any]) -> str:
                              f"| {seeds} | {row['miss_median_m']:.2f} | {ttc} |")
             else:
                 lines.append(f"| {name} | {_pct(row['rate'])} | {_pct(lo)} - {_pct(hi)} | - | {row['miss_median_m']:.2f} | {ttc} |")
+        fails = [(n, r["failures"]) for n, r in t["policies"].items() if r.get("failures")]
+        if fails:
+            f2 = lambda x: "-" if x is None else f"{x:.2f}"  # noqa: E731
+            lines += ["", "Failures (learned: pooled over the seeds): the missed episodes, their outcomes, median miss "
+                      "distance and closing speed at the closest approach; the captured episodes' median closing speed "
+                      "at capture and time to capture.", "",
+                      "| policy | missed | outcomes of the missed | miss median (m) | closing speed at closest approach "
+                      "(m/s) | closing speed at capture (m/s) | time to capture (s) |", "|---|---|---|---|---|---|---|"]
+            lines += [f"| {n.upper() if t['policies'][n]['kind'] == 'learned' else n} | {f['missed']}/{f['episodes']} "
+                      f"| {', '.join(f'{k} {v}' for k, v in sorted(f['outcomes'].items())) or '-'} "
+                      f"| {f2(f['missed_miss_median_m'])} | {f2(f['missed_closest_speed_median_mps'])} "
+                      f"| {f2(f['capture_speed_median_mps'])} | {f2(f['capture_time_median_s'])} |" for n, f in fails]
         rel = [(n, r) for n, r in t["policies"].items() if r.get("vs_lqr")]
         if rel:
             lines += ["", "Relative to the LQR (LQR = 1.0; IQM and interval divided by the LQR's rate) and rliable's "
@@ -828,4 +869,4 @@ def _cpus() -> int:
 
 __all__ = ["DEFAULTS", "RESULT_FILE", "Job", "build_digest", "job_key", "jobs", "load_config", "validate_config", "run", "run_job", "evaluate_policy",
            "stratified_bootstrap", "summarize", "performance_profile", "report_markdown", "iqm",
-           "probability_of_improvement", "target", "selection", "CONFIG_FILE", "TARGET_MAX_SPREAD", "TARGET_ALPHA"]
+           "probability_of_improvement", "target", "selection", "CONFIG_FILE", "failures", "TARGET_MAX_SPREAD", "TARGET_ALPHA"]
