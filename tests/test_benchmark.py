@@ -65,6 +65,13 @@ def test_jobs_follow_the_config():
     quick = benchmark.load_config(ROOT / "training" / "benchmark.json", quick=True)
     assert quick["episodes"] == 16 and quick["learners"]["ppo"]["timesteps"] == 4096
     assert quick["learners"]["sac"]["tiers"] == ["nominal"]
+    # residual learners: a recipe per tier (its env options kept), only in the full run
+    res = [j for j in jobs if j.algo.startswith("residual_")]
+    assert {(j.algo, j.tier) for j in res} == {(a, t) for a in ("residual_ppo", "residual_sac") for t in ("precision", "hard")}
+    assert len(res) == 20 and all(j.train_config.endswith(f"{j.algo}_{j.tier}.json") for j in res)
+    assert {j.timesteps for j in res if j.algo == "residual_ppo"} == {3_000_000}
+    assert {j.timesteps for j in res if j.algo == "residual_sac"} == {500_000}
+    assert set(quick["learners"]) == {"ppo", "sac"}
 
 
 @pytest.mark.timeout(1800)  # trains every tier with PPO and SAC
@@ -85,6 +92,7 @@ def test_quick_benchmark_runs_the_whole_pipeline(tmp_path, monkeypatch):
         lo, hi = rows["ppo"]["ci95"]
         assert 0.0 <= lo <= hi <= 1.0
         assert f"## {tier} " in report
+        assert rows["ppo"]["failures"]["episodes"] == 2 * cfg["episodes"]
         m = doc["tiers"][tier]["mcnemar"]
         assert m["both"] + m["only_learned"] + m["only_classical"] + m["neither"] == cfg["episodes"]
     assert "sac" in doc["tiers"]["nominal"]["policies"]
@@ -99,6 +107,7 @@ def test_quick_benchmark_runs_the_whole_pipeline(tmp_path, monkeypatch):
     again = benchmark.evaluate_policy(ZeroPolicy(), "nominal", cfg["episodes"], cfg["num_envs"])
     assert again["captured"] == zero
     assert "wall time" in report and doc["wall_time_s"] > 0
+    assert "closing speed at capture" in report and "Relative to the LQR" in report
     assert not any(r["reused"] for r in doc["runs"])
 
     # Resumable: a rerun into the same folder reuses every finished job (training is not called)
@@ -109,13 +118,29 @@ def test_quick_benchmark_runs_the_whole_pipeline(tmp_path, monkeypatch):
         raise AssertionError("a finished job was trained again")
 
     monkeypatch.setattr(training, "train", no_training)
-    again_doc = benchmark.run(cfg, out, progress=lambda _m: None)
+    said: list[str] = []
+    again_doc = benchmark.run(cfg, out, progress=said.append)
+    assert not any(m.startswith("baseline") for m in said)  # stored once in OUT/baselines, reused
     assert all(r["reused"] for r in again_doc["runs"])
     assert json.loads((out / "episodes.json").read_text())["runs"] == eps["runs"]
     assert "reused" in benchmark.report_markdown(again_doc)
+    # A stale evaluation (other episodes, other code: another key) is evaluated again, not retrained.
     job = benchmark.jobs(cfg)[0]
-    with pytest.raises(AssertionError, match="trained again"):
-        benchmark.run_job(job, str(out), cfg["episodes"] + 1, cfg["num_envs"])
+    fresh = benchmark.run_job(job, str(out), cfg["episodes"] + 1, cfg["num_envs"])
+    assert not fresh["reused"] and len(fresh["episodes"]["captured"]) == cfg["episodes"] + 1
+
+    # Filters: an unknown value is one error line naming it and the allowed ones (exit 2); a run of
+    # some jobs reports every finished one and lists the others as missing.
+    assert main(["benchmark", "--quick", "--out", str(out), "--seeds", "7", "--quiet"]) == 2
+    assert main(["benchmark", "--quick", "--out", str(out), "--algos", "dqn", "--quiet"]) == 2
+    import shutil
+
+    gone = benchmark.jobs(cfg)[-1]
+    shutil.rmtree(out / "runs" / gone.name)
+    part = benchmark.run(cfg, out, progress=lambda _m: None, chosen=benchmark.selection(cfg, seeds=[0], algos=["ppo"]))
+    assert [m["name"] for m in part["missing"]] == [gone.name]
+    assert len(part["runs"]) == len(benchmark.jobs(cfg)) - 1
+    assert "## Missing / unfinished runs" in benchmark.report_markdown(part) and gone.name in benchmark.report_markdown(part)
 
 
 def test_an_interrupted_job_continues_from_its_checkpoint(tmp_path, monkeypatch):
@@ -186,3 +211,49 @@ def test_a_job_with_a_cpu_budget_keeps_its_gradient_updates_within_it(tmp_path, 
         with pytest.raises(ConfigError, match="update_threads"):
             benchmark.run_job(dataclasses.replace(job, train_config=str(tmp_path / "bad.json")), str(tmp_path / "bad"),
                               cfg["episodes"], cfg["num_envs"], 1)
+
+
+def test_ctrl_c_stops_the_benchmark_and_reports_what_is_finished(tmp_path, monkeypatch):
+    # The trainer answers Ctrl+C by writing its checkpoint and returning "interrupted" (probed
+    # here): the benchmark stops there, writes its report from the finished runs (none) and lists
+    # every job as missing.
+    from accd_gym.learning import training
+
+    calls = []
+
+    def interrupted(cfg, run, **_k):
+        calls.append(run)
+        return {"status": "interrupted", "timesteps": 2048, "config": cfg}
+
+    monkeypatch.setattr(training, "train", interrupted)
+    raw = json.loads((ROOT / "training" / "benchmark.json").read_text())
+    raw.update(tiers=["nominal"], baselines=["zero"], episodes=4,
+               learners={"ppo": {"train_config": "training/ppo.json", "seeds": [0, 1], "timesteps": 4096}})
+    cfg = benchmark.validate_config(raw, root=ROOT)
+    doc = benchmark.run(cfg, tmp_path, progress=lambda _m: None)
+    assert len(calls) == 1 and "interrupted at 2048 steps" in doc["interrupted"]
+    assert [m["name"] for m in doc["missing"]] == ["nominal_ppo_seed0", "nominal_ppo_seed1"]
+    report = (tmp_path / "benchmark.md").read_text()
+    assert "## Missing / unfinished runs" in report and "| `nominal_ppo_seed1` | not started |" in report
+    assert "zero" in doc["tiers"]["nominal"]["policies"]
+    # The folder belongs to its recipe: another config is refused with one line naming what differs.
+    with pytest.raises(ConfigError, match=r"another benchmark config \(differs in \['episodes'\]\)"):
+        benchmark.run({**cfg, "episodes": 5}, tmp_path, progress=lambda _m: None)
+
+
+def test_a_residual_job_keeps_its_recipes_env_options(tmp_path, monkeypatch):
+    from accd_gym.learning import training
+
+    seen = []
+
+    def probe(cfg, *_a, **_k):
+        seen.append(cfg)
+        raise KeyError("probe")
+
+    monkeypatch.setattr(training, "train", probe)
+    cfg = benchmark.load_config(ROOT / "training" / "benchmark.json")
+    job = [j for j in benchmark.jobs(cfg) if j.algo == "residual_ppo" and j.tier == "hard"][0]
+    with pytest.raises(KeyError, match="probe"):
+        benchmark.run_job(job, str(tmp_path), 4, 4)
+    env = seen[0]["env"]
+    assert env["tier"] == "hard" and env["residual"]["base"] == "lqr" and env["history"] == 4

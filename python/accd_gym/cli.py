@@ -103,15 +103,37 @@ def _benchmark(args: argparse.Namespace) -> int:
     from accd_gym.evals import benchmark
 
     cfg = benchmark.load_config(args.config, quick=args.quick)
+    chosen = benchmark.selection(cfg, tiers=_names(args.tiers), algos=_names(args.algos), seeds=_seeds(args.seeds))
     docs = Path(args.docs) if args.docs else None
     command = ("accd-gym benchmark" + (f" --config {args.config}" if args.config != "training/benchmark.json" else "")
                + (" --quick" if args.quick else "") + (f" --ray {args.ray}" if args.ray else ""))
     progress = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True))
-    doc = benchmark.run(cfg, args.out, ray_address=args.ray, docs=docs, command=command, progress=progress)
+    doc = benchmark.run(cfg, args.out, ray_address=args.ray, docs=docs, command=command, progress=progress,
+                        chosen=chosen)
     print((Path(args.out) / "benchmark.md").read_text())
     print(f"wrote {Path(args.out) / 'benchmark.json'}, benchmark.md, performance_profile.png, episodes.json"
           + (f"; {docs / 'benchmark.md'}" if docs else "") + f" (wall time {doc['wall_time_s']:.0f} s)")
+    if doc.get("interrupted"):
+        print(f"accd-gym: benchmark interrupted ({doc['interrupted']}); the report covers the finished runs; "
+              f"run the same command again to resume", file=sys.stderr)
+        return 130
     return 0
+
+
+def _names(text: Optional[str]) -> Optional[list[str]]:
+    """A comma-separated option's values (None when not given)."""
+    return None if text is None else [v.strip() for v in text.split(",") if v.strip()]
+
+
+def _seeds(text: Optional[str]) -> Optional[list[int]]:
+    """--seeds as integers; a usage error naming a value that is not one."""
+    values = _names(text)
+    if values is None:
+        return None
+    for v in values:
+        if not v.lstrip("-").isdigit():
+            raise _usage(f"--seeds {v!r} is not an integer")
+    return [int(v) for v in values]
 
 
 def _sweep(args: argparse.Namespace) -> int:
@@ -197,10 +219,19 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _env_of(args: argparse.Namespace) -> dict:
-    """The environment config overrides of --env, over the tier of --tier (if given)."""
+    """The environment config overrides of --env, over the tier of --tier (if given; else, for
+    shipped trained policies of one tier, theirs, with a note)."""
     env = _env_overrides(args.env)
     if getattr(args, "tier", None):
         env = {"tier": args.tier, **env}
+    elif "tier" not in env:
+        from accd_gym.trained.catalog import info, is_trained
+
+        specs = args.policy if isinstance(getattr(args, "policy", None), list) else [getattr(args, "policy", "")]
+        tiers = sorted({info(s)["tier"] for s in specs if isinstance(s, str) and is_trained(s) and not Path(s).exists()})
+        if len(tiers) == 1:
+            print(f"note: the trained policies' tier {tiers[0]!r} (--tier sets another)", file=sys.stderr)
+            env = {"tier": tiers[0], **env}
     return env
 
 
@@ -309,7 +340,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_train)
     p = sub.add_parser("evaluate", help="evaluate policies on held-out wake seeds: JSON, plots, markdown")
     p.add_argument("--policy", action="append", required=True,
-                   help="a baseline (zero, random, guidance, lqr) or a trained model (run folder or .zip); repeatable")
+                   help="a baseline (zero, random, guidance, lqr), a shipped trained policy (accd_gym.trained) or a trained model "
+                        "(run folder or .zip); repeatable")
     p.add_argument("--episodes", type=_positive("--episodes"), default=100, help="episodes per policy (default 100)")
     p.add_argument("--out", default="runs/eval", help="output folder (default: runs/eval)")
     p.add_argument("--num-envs", type=_positive("--num-envs"), default=16, help="parallel episodes (default 16)")
@@ -328,7 +360,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_evaluate)
     p = sub.add_parser("replay", help="record episodes of a policy: .npz, a self-contained 3D replay page each, MP4")
-    p.add_argument("--policy", required=True, help="a baseline (zero, random, guidance, lqr) or a trained model")
+    p.add_argument("--policy", required=True, help="a baseline (zero, random, guidance, lqr), a shipped trained policy (accd_gym.trained) or a trained model")
     p.add_argument("--episodes", type=_positive("--episodes"), default=1, help="episodes (default 1)")
     p.add_argument("--out", default="runs/replay", help="output folder (default: runs/replay)")
     p.add_argument("--seed", type=_seed, default=None,
@@ -359,13 +391,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--config", default="training/benchmark.json", help="benchmark config, JSON (default: training/benchmark.json)")
     p.add_argument("--out", default="runs/benchmark", help="output folder (default: runs/benchmark)")
     p.add_argument("--quick", action="store_true", help="the config's quick overrides: a few minutes, for CI")
+    p.add_argument("--tiers", metavar="A,B", help="run only these tiers' jobs (the report covers every finished run)")
+    p.add_argument("--algos", metavar="A,B", help="run only these algorithms' jobs")
+    p.add_argument("--seeds", metavar="0,1", help="run only these seeds' jobs")
     p.add_argument("--docs", metavar="FOLDER", help="also write FOLDER/benchmark.md and FOLDER/figures/benchmark_profile.png")
     p.add_argument("--ray", nargs="?", const="local", metavar="ADDRESS",
                    help="run the training jobs as Ray tasks: 'local' (default), 'auto' or HOST:PORT (needs the ray extra)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=_benchmark)
     p = sub.add_parser("rollout", help="run a policy for a few episodes headless and print a summary")
-    p.add_argument("--policy", required=True, help="a baseline (zero, random, guidance, lqr) or a trained model")
+    p.add_argument("--policy", required=True, help="a baseline (zero, random, guidance, lqr), a shipped trained policy (accd_gym.trained) or a trained model")
     p.add_argument("--episodes", type=_positive("--episodes"), default=8, help="episodes (default 8)")
     p.add_argument("--seed", type=_seed, default=0, help="base seed (training wake seeds are drawn from it)")
     p.add_argument("--num-envs", type=_positive("--num-envs"), default=8, help="parallel episodes (default 8)")

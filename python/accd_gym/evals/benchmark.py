@@ -12,16 +12,23 @@ trained with several seeds, every baseline, the same held-out episodes, one repo
    CPUs each, placed wherever the cluster has room (the same machinery as ``evaluate --ray``),
    the longest first. Resumable: a finished job's result stays in ``OUT/runs/<job>/result.json``
    and a rerun into the same ``OUT`` reuses it while its key (:func:`job_key`: job, training
-   config, tier, build, evaluation) is unchanged; an interrupted training continues from its
-   checkpoint (:func:`run_job`).
+   config, tier, build, evaluation) is unchanged; a finished training whose evaluation is stale
+   is evaluated again without retraining; an interrupted training continues from its
+   checkpoint (:func:`run_job`). ``--tiers``, ``--algos``, ``--seeds`` (:func:`selection`) run
+   only some jobs; the report covers every finished job in ``OUT`` and lists the others under
+   "Missing / unfinished runs". Ctrl+C: the training under way writes its checkpoint, the report
+   is written from what is finished, exit code 130.
 2. **Baselines** (``zero``, ``random``, ``guidance``, ``lqr``) on the same episodes of every
-   tier; the LQR is designed for each tier's configuration.
+   tier; the LQR is designed for each tier's configuration. Each baseline's record is stored once
+   in ``OUT/baselines`` and reused by a rerun while its key is unchanged.
 3. **Report** (``OUT/benchmark.json``, ``OUT/benchmark.md``, ``OUT/performance_profile.png``):
    per tier and policy the capture rate (learned: the interquartile mean over seeds with a 95 %
    stratified bootstrap interval, and every seed's rate; baselines: the rate with its Wilson
    interval), the median miss distance and time to capture, and the paired exact McNemar test
    (:func:`accd_gym.evals.evaluation.mcnemar_exact`) of the best learned run against the best
-   classical baseline on the same episodes; a performance profile over every (tier, seed) run.
+   classical baseline on the same episodes; the learned methods normalized by the LQR (LQR = 1.0)
+   with rliable's probability of improvement over it (:func:`probability_of_improvement`); the
+   Target section (:func:`target`); a performance profile over every (tier, seed) run.
    ``--docs`` also writes the report to docs/benchmark.md and the plot to docs/figures/.
 
 **Statistics.** IQM: the mean of the middle half of the seeds' rates (rliable's IQM,
@@ -39,14 +46,16 @@ key              meaning
 ================ ===================================================================================
 tiers            tier names (default: all)
 learners         ``{"ppo": {"train_config", "seeds", "timesteps", "tiers"}, "sac": {...}}``;
-                 ``tiers`` limits an algorithm to some tiers (default: all)
+                 ``tiers`` limits an algorithm to some tiers (default: all); ``train_config`` a
+                 recipe, or ``{tier: recipe}`` (then its tiers by default); the recipe's env
+                 options (residual, history) are kept, its tier set to the job's
 baselines        baseline names (default ``["zero", "random", "guidance", "lqr"]``; unknown ones
                  are refused)
 episodes         held-out episodes per tier (default 500)
 num_envs         evaluation batch (default 16)
 cpus_per_job     CPUs a Ray job reserves, also the threads stepping its envs and at most those of
                  PyTorch in its gradient updates (default 1)
-quick            overrides for ``--quick``
+quick            overrides for ``--quick`` (its ``learners`` are the quick run's only ones)
 ================ ===================================================================================
 """
 
@@ -103,8 +112,9 @@ def validate_config(raw: Any, *, quick: bool = False, root: Optional[Path] = Non
     if quick:
         q = cfg.get("quick") or {}
         cfg = merge(cfg, q)
-        if "learners" in q:
-            cfg["learners"] = merge(raw.get("learners", DEFAULTS["learners"]), q["learners"])
+        if "learners" in q:  # the quick run trains only the learners its overrides name
+            full = raw.get("learners", DEFAULTS["learners"])
+            cfg["learners"] = {k: merge(full[k], v) if k in full else copy.deepcopy(v) for k, v in q["learners"].items()}
     tiers = cfg["tiers"] if cfg["tiers"] is not None else list(TIERS)
     bad = [t for t in tiers if t not in TIERS]
     if bad or not tiers:
@@ -113,11 +123,15 @@ def validate_config(raw: Any, *, quick: bool = False, root: Optional[Path] = Non
     if not isinstance(cfg["learners"], dict):
         raise ConfigError("invalid config: `learners` must be an object {algo: {train_config, seeds, timesteps, tiers}}")
     base = root or Path.cwd()
+    import re
+
     for algo, spec in cfg["learners"].items():
-        if algo not in ("ppo", "sac"):
-            raise ConfigError(f"invalid config: `learners.{algo}` is outside the allowed algorithms: ppo, sac")
+        if not re.fullmatch(r"[a-z][a-z0-9_]*", algo):
+            raise ConfigError(f"invalid config: `learners.{algo}` is outside the allowed names: [a-z][a-z0-9_]*")
         if not isinstance(spec, dict) or set(spec) - set(_LEARNER_KEYS):
             raise ConfigError(f"invalid config: `learners.{algo}` must be an object with keys {list(_LEARNER_KEYS)}")
+        if isinstance(spec.get("train_config"), dict):  # a recipe per tier: those tiers by default
+            spec.setdefault("tiers", list(spec["train_config"]))
         spec.setdefault("tiers", None)
         seeds = spec.get("seeds")
         if not isinstance(seeds, list) or not seeds or not all(isinstance(s, int) and s >= 0 for s in seeds):
@@ -127,14 +141,22 @@ def validate_config(raw: Any, *, quick: bool = False, root: Optional[Path] = Non
         steps = spec.get("timesteps")
         if not isinstance(steps, int) or steps < 1:
             raise ConfigError(f"invalid config: `learners.{algo}.timesteps` = {steps!r} is outside the allowed range >= 1")
-        path = Path(spec.get("train_config") or "")
-        path = path if path.is_absolute() else base / path
-        if not path.is_file():
-            raise ConfigError(f"invalid config: `learners.{algo}.train_config` = {spec.get('train_config')!r} is not a file")
-        spec["train_config"] = str(path)
         if spec["tiers"] is not None:
             if not isinstance(spec["tiers"], list) or [t for t in spec["tiers"] if t not in tiers]:
                 raise ConfigError(f"invalid config: `learners.{algo}.tiers` = {spec['tiers']!r} is outside the allowed values: a list of {tiers}")
+        recipes = spec.get("train_config")
+        named = recipes.items() if isinstance(recipes, dict) else [(None, recipes)]
+        if isinstance(recipes, dict) and [t for t in (spec["tiers"] or tiers) if t not in recipes]:
+            raise ConfigError(f"invalid config: `learners.{algo}.train_config` = {recipes!r} has no recipe for the tiers "
+                              f"{[t for t in (spec['tiers'] or tiers) if t not in recipes]}")
+        resolved = {}
+        for tier_name, recipe in named:
+            path = Path(recipe or "") if isinstance(recipe, str) else Path("")
+            path = path if path.is_absolute() else base / path
+            if not isinstance(recipe, str) or not path.is_file():
+                raise ConfigError(f"invalid config: `learners.{algo}.train_config` = {recipe!r} is not a file")
+            resolved[tier_name] = str(path)
+        spec["train_config"] = resolved if isinstance(recipes, dict) else resolved[None]
     if not isinstance(cfg["baselines"], list) or [b for b in cfg["baselines"] if b not in _BASELINES]:
         raise ConfigError(f"invalid config: `baselines` = {cfg['baselines']!r} is outside the allowed values: a list of {list(_BASELINES)}")
     for key, lo in (("episodes", 1), ("num_envs", 1), ("cpus_per_job", 1)):
@@ -182,8 +204,27 @@ def jobs(cfg: dict[str, Any]) -> list[Job]:
         for algo, spec in cfg["learners"].items():
             if spec["tiers"] is not None and tier not in spec["tiers"]:
                 continue
-            out += [Job(tier, algo, s, spec["train_config"], spec["timesteps"]) for s in spec["seeds"]]
+            recipe = spec["train_config"][tier] if isinstance(spec["train_config"], dict) else spec["train_config"]
+            out += [Job(tier, algo, s, recipe, spec["timesteps"]) for s in spec["seeds"]]
     return out
+
+
+def selection(cfg: dict[str, Any], tiers: Optional[Sequence[str]] = None, algos: Optional[Sequence[str]] = None,
+              seeds: Optional[Sequence[int]] = None) -> Callable[[Job], bool]:
+    """Which jobs of a validated config to run (None: every value); ConfigError naming the option,
+    the value and the allowed ones for a tier, algorithm or seed the config does not have."""
+    allowed = {"--tiers": list(cfg["tiers"]), "--algos": list(cfg["learners"]),
+               "--seeds": sorted({s for spec in cfg["learners"].values() for s in spec["seeds"]})}
+    for option, values in (("--tiers", tiers), ("--algos", algos), ("--seeds", seeds)):
+        for v in values or []:
+            if v not in allowed[option]:
+                raise ConfigError(f"invalid config: {option} {v!r} is outside the allowed range {allowed[option]}")
+
+    def chosen(job: Job) -> bool:
+        return ((tiers is None or job.tier in tiers) and (algos is None or job.algo in algos)
+                and (seeds is None or job.seed in seeds))
+
+    return chosen
 
 
 def _episode_record(eps: Sequence[Any]) -> dict[str, Any]:
@@ -193,7 +234,34 @@ def _episode_record(eps: Sequence[Any]) -> dict[str, Any]:
         "min_distance": [float(e.min_distance) for e in eps],
         "capture_time": [None if e.capture_time is None else float(e.capture_time) for e in eps],
         "outcome": [e.outcome for e in eps],
+        "closest_speed": [e.closest_speed for e in eps],
+        "final_speed": [e.final_speed for e in eps],
     }
+
+
+def _median(values: Sequence[Optional[float]]) -> Optional[float]:
+    """The median of the values that are not None (None without any)."""
+    v = [x for x in values if x is not None]
+    return float(np.median(v)) if v else None
+
+
+def failures(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """Where a method's episodes (pooled over its seeds' records) fail and how it captures: the
+    missed episodes' count, outcomes, median miss distance and closing speed at the closest
+    approach; the captured episodes' median closing speed at capture and time to capture."""
+    rows = [{k: rec[k][i] if k in rec else None for k in ("captured", "outcome", "min_distance", "closest_speed",
+                                                          "final_speed", "capture_time")}
+            for rec in records for i in range(len(rec["captured"]))]
+    missed = [r for r in rows if not r["captured"]]
+    caught = [r for r in rows if r["captured"]]
+    outcomes: dict[str, int] = {}
+    for r in missed:
+        outcomes[r["outcome"]] = outcomes.get(r["outcome"], 0) + 1
+    return {"episodes": len(rows), "missed": len(missed), "outcomes": outcomes,
+            "missed_miss_median_m": _median([r["min_distance"] for r in missed]),
+            "missed_closest_speed_median_mps": _median([r["closest_speed"] for r in missed]),
+            "capture_speed_median_mps": _median([r["final_speed"] for r in caught]),
+            "capture_time_median_s": _median([r["capture_time"] for r in caught])}
 
 
 def evaluate_policy(policy: Any, tier: str, episodes: int, num_envs: int, num_threads: int = 0) -> dict[str, Any]:
@@ -254,7 +322,8 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
     (also ``out/runs/<name>/result.json``).
 
     Resumable: a job whose run folder holds a result of the same :func:`job_key` is not run again
-    (``"reused": true``); a run interrupted while training (Ctrl+C, a killed process) continues
+    (``"reused": true``); a finished training of the same config whose stored evaluation has
+    another key (the code or the episodes changed) is evaluated again without retraining; a run interrupted while training (Ctrl+C, a killed process) continues
     from its latest checkpoint (:func:`accd_gym.learning.training.resume`) to the same total; anything
     else starts the run afresh."""
     from accd_gym.learning import training
@@ -267,7 +336,7 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
     if stored is not None:
         return stored["result"] | {"reused": True}
     raw = read_json_object(job.train_config, "train_config (training config)")
-    raw["env"] = {"tier": job.tier}
+    raw["env"] = {**(raw.get("env") or {}), "tier": job.tier}  # the recipe's env options (residual, history) stay
     raw["seed"] = job.seed
     raw["total_timesteps"] = job.timesteps
     raw["num_threads"] = num_threads
@@ -278,11 +347,15 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
         raw["update_threads"] = num_threads
     cfg = training.validate_config(raw)
     t0 = time.perf_counter()
-    if _continues(run, cfg):
+    if _trained(run, cfg):  # its evaluation is missing or stale (other code or episodes): not retrained
+        meta = json.loads((run / "run.json").read_text())
+    elif _continues(run, cfg):
         meta = training.resume(run, progress=False)
     else:
         meta = training.train(cfg, run, progress=False)
     train_s = time.perf_counter() - t0
+    if meta["status"] == "interrupted":  # Ctrl+C: its checkpoint is written; a rerun resumes it
+        raise KeyboardInterrupt(f"{job.name}: training interrupted at {meta['timesteps']} steps")
     t1 = time.perf_counter()
     record = evaluate_policy(load_policy(str(run)), job.tier, episodes, num_envs, num_threads)
     result = {"job": job.__dict__, "name": job.name, "status": meta["status"], "timesteps": meta["timesteps"],
@@ -293,6 +366,16 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
 
         files.write_text(run / RESULT_FILE, json.dumps({"key": key, "result": result}))
     return result | {"reused": False}
+
+
+def _trained(run: Path, cfg: dict[str, Any]) -> bool:
+    """``run`` holds a finished training of the config ``cfg`` with its final model and statistics."""
+    try:
+        meta = json.loads((run / "run.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return (isinstance(meta, dict) and meta.get("status") == "done" and (run / "final_model.zip").is_file()
+            and (run / "vecnormalize.pkl").is_file() and meta.get("config") == json.loads(json.dumps(cfg)))
 
 
 def _continues(run: Path, cfg: dict[str, Any]) -> bool:
@@ -316,7 +399,10 @@ def _run_jobs(todo: list[Job], cfg: dict[str, Any], out: Path, ray_address: Opti
         results = []
         for i, job in enumerate(todo):
             progress(f"[{i + 1}/{len(todo)}] training {job.name} ({job.timesteps} steps)")
-            results.append(run_job(job, str(out), cfg["episodes"], cfg["num_envs"]))
+            try:
+                results.append(run_job(job, str(out), cfg["episodes"], cfg["num_envs"]))
+            except KeyboardInterrupt as e:
+                raise _Interrupted(results, str(e) or "SIGINT") from None
         return results
     from accd_gym.evals import distributed
 
@@ -325,7 +411,7 @@ def _run_jobs(todo: list[Job], cfg: dict[str, Any], out: Path, ray_address: Opti
     # Longest first, so that the long jobs do not start last: an off-policy learner's job (SAC:
     # measured at 330 steps/s with one thread, a gradient step every 4 env steps) costs several
     # times a PPO job of more steps (3,800 steps/s).
-    order = sorted(range(len(todo)), key=lambda i: (todo[i].algo == "ppo", -todo[i].timesteps, i))
+    order = sorted(range(len(todo)), key=lambda i: ("sac" not in todo[i].algo, -todo[i].timesteps, i))
     refs = [task.remote(todo[i], str(out), cfg["episodes"], cfg["num_envs"], cfg["cpus_per_job"]) for i in order]
     done: dict[int, dict[str, Any]] = {}
     pending = dict(zip(refs, order))
@@ -335,6 +421,73 @@ def _run_jobs(todo: list[Job], cfg: dict[str, Any], out: Path, ray_address: Opti
         done[i] = ray.get(ready[0])
         progress(f"[{len(done)}/{len(todo)}] finished {todo[i].name}")
     return [done[i] for i in range(len(todo))]
+
+
+#: The config a benchmark folder was made with: a rerun into it must have the same.
+CONFIG_FILE = "benchmark_config.json"
+
+
+def _claim(out: Path, config: dict[str, Any]) -> None:
+    """Records ``config`` in ``out`` (first run) or refuses a folder made with another one:
+    ConfigError naming the folder and the keys that differ."""
+    from accd_gym import files
+
+    mine = json.loads(json.dumps(config))
+    path = out / CONFIG_FILE
+    try:
+        stored = json.loads(path.read_text())
+    except FileNotFoundError:
+        files.write_text(path, json.dumps(mine, indent=1))
+        return
+    except (OSError, ValueError) as e:
+        raise ConfigError(f"invalid config: --out {str(out)!r}: its {CONFIG_FILE} is unreadable ({e})") from None
+    if stored != mine:
+        keys = sorted(k for k in set(stored) | set(mine) if stored.get(k) != mine.get(k)) if isinstance(stored, dict) else ["*"]
+        raise ConfigError(f"invalid config: --out {str(out)!r} was made by another benchmark config (differs in {keys}); "
+                          "rerun with that config or choose another --out")
+
+
+class _Interrupted(Exception):
+    """Ctrl+C during the jobs: the results of the jobs finished before it."""
+
+    def __init__(self, results: list[dict[str, Any]], why: str) -> None:
+        super().__init__(why)
+        self.results = results
+
+
+def _run_status(run: Path) -> str:
+    """A job that has no result: "not started", or its training's state from its run.json."""
+    try:
+        meta = json.loads((run / "run.json").read_text())
+    except (OSError, ValueError):
+        return "not started"
+    if not isinstance(meta, dict):
+        return "not started"
+    if meta.get("status") == "done":
+        return "trained; its evaluation is missing or stale (a rerun evaluates it)"
+    return f"{meta.get('status', 'unfinished')} at {meta.get('timesteps', 0):,} of {meta.get('total_timesteps', 0):,} steps"
+
+
+def _baseline_record(name: str, tier: str, config: dict[str, Any], out: Path,
+                     progress: Callable[[str], None]) -> dict[str, Any]:
+    """Baseline ``name``'s episode record on the tier, stored once in ``out/baselines`` and reused
+    while its key (baseline, tier configuration, code, episodes, batch) is unchanged."""
+    from accd_gym import files
+    from accd_gym.envs.tiers import tier as _tier
+
+    key = json.loads(json.dumps({"baseline": name, "tier_config": _tier(tier).config(), "build": build_digest(),
+                                 "episodes": config["episodes"], "num_envs": config["num_envs"]}))
+    path = out / "baselines" / f"{tier}_{name}.json"
+    try:
+        stored = json.loads(path.read_text())
+        if isinstance(stored, dict) and stored.get("key") == key:
+            return stored["record"]
+    except (OSError, ValueError):
+        pass
+    progress(f"baseline {name} on {tier}")
+    record = evaluate_policy(_baseline_policy(name, tier), tier, config["episodes"], config["num_envs"])
+    files.write_text(path, json.dumps({"key": key, "record": record}))
+    return record
 
 
 def _baseline_policy(name: str, tier: str) -> Any:
@@ -368,6 +521,61 @@ def stratified_bootstrap(captured: Sequence[Sequence[bool]], *, resamples: int =
     return float(np.quantile(stats, a)), float(np.quantile(stats, 1.0 - a))
 
 
+def probability_of_improvement(x: Sequence[float], y: Sequence[float]) -> float:
+    """rliable's probability of improvement of X over Y on one task: P(X > Y) over every pair of
+    X's and Y's runs, a tie counting one half (the Mann-Whitney U statistic over ``len(x) * len(y)``)."""
+    a, b = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    if a.size == 0 or b.size == 0:
+        raise ValueError(f"probability_of_improvement: needs runs on both sides, got {a.size} and {b.size}")
+    gt = (a[:, None] > b[None, :]).sum()
+    eq = (a[:, None] == b[None, :]).sum()
+    return float((gt + 0.5 * eq) / (a.size * b.size))
+
+
+#: Issue criteria of the report's Target section: the largest seed spread of a learned method
+#: (rate points) and the significance level of the paired McNemar test.
+TARGET_MAX_SPREAD = 0.20
+TARGET_ALPHA = 0.05
+
+
+def target(tiers: dict[str, Any], episodes: dict[str, dict[str, Any]]) -> Optional[dict[str, Any]]:
+    """Whether a learned policy matches the LQR, per tier with an LQR and learned runs: the best
+    learned method (by IQM) at least the LQR (IQM >= LQR rate, its interval reaching it, the best
+    run not significantly worse by the paired exact McNemar), significantly better (best run,
+    p < :data:`TARGET_ALPHA`), and every learned method's seed spread at most
+    :data:`TARGET_MAX_SPREAD`; ``met``: every such tier at least the LQR, one significantly better,
+    no spread too large (None without such a tier). ``episodes``: per tier, ``{"lqr": captured,
+    run name: captured}``."""
+    from accd_gym.evals.evaluation import mcnemar_exact
+
+    out: dict[str, Any] = {}
+    for tier, t in tiers.items():
+        rows = t["policies"]
+        learned = {k: r for k, r in rows.items() if r["kind"] == "learned"}
+        if "lqr" not in rows or not learned:
+            continue
+        lqr_rate = rows["lqr"]["rate"]
+        best_algo = max(learned, key=lambda k: learned[k]["iqm"])
+        best = learned[best_algo]
+        runs = {k: v for k, v in episodes[tier].items() if k != "lqr"}
+        best_run = max(runs, key=lambda k: (float(np.mean(runs[k])), k))
+        a, b = np.asarray(runs[best_run], dtype=bool), np.asarray(episodes[tier]["lqr"], dtype=bool)
+        only_a, only_b = int(np.sum(a & ~b)), int(np.sum(~a & b))
+        p = mcnemar_exact(only_a, only_b)
+        spread = max(max(r["rates"]) - min(r["rates"]) for r in learned.values())
+        at_least = (best["iqm"] >= lqr_rate and best["ci95"][1] >= lqr_rate
+                    and not (only_b > only_a and p < TARGET_ALPHA))
+        out[tier] = {"method": best_algo, "iqm": best["iqm"], "ci95": best["ci95"], "lqr_rate": lqr_rate,
+                     "best_run": best_run, "only_learned": only_a, "only_lqr": only_b, "p_value": p,
+                     "at_least_lqr": bool(at_least), "significantly_better": bool(only_a > only_b and p < TARGET_ALPHA),
+                     "max_seed_spread": spread, "spread_ok": bool(spread <= TARGET_MAX_SPREAD)}
+    if not out:
+        return None
+    met = (all(v["at_least_lqr"] and v["spread_ok"] for v in out.values())
+           and any(v["significantly_better"] for v in out.values()))
+    return {"tiers": out, "met": bool(met)}
+
+
 def _medians(record: dict[str, Any]) -> tuple[float, Optional[float]]:
     miss = float(np.median(record["min_distance"]))
     times = [t for t in record["capture_time"] if t is not None]
@@ -392,7 +600,8 @@ def summarize(cfg: dict[str, Any], results: list[dict[str, Any]], baselines: dic
             lo, hi = stratified_bootstrap(caps)
             pooled = {k: sum((r["episodes"][k] for r in mine), []) for k in ("min_distance", "capture_time")}
             miss, ttc = _medians(pooled)
-            rows[algo] = {"kind": "learned", "seeds": [r["job"]["seed"] for r in mine], "rates": rates,
+            rows[algo] = {"kind": "learned", "failures": failures([r["episodes"] for r in mine]),
+                          "seeds": [r["job"]["seed"] for r in mine], "rates": rates,
                           "iqm": iqm(rates), "ci95": [lo, hi], "miss_median_m": miss, "capture_time_median_s": ttc,
                           "train_wall_s": [r["train_wall_s"] for r in mine], "steps_per_s": [r["steps_per_s"] for r in mine]}
         for name, rec in baselines.get(tier, {}).items():
@@ -401,7 +610,15 @@ def summarize(cfg: dict[str, Any], results: list[dict[str, Any]], baselines: dic
             k, n = int(sum(rec["captured"])), len(rec["captured"])
             miss, ttc = _medians(rec)
             rows[name] = {"kind": "classical" if name in ("guidance", "lqr") else "trivial", "rate": k / n,
+                          "failures": failures([rec]),
                           "ci95": list(wilson_interval(k, n)), "miss_median_m": miss, "capture_time_median_s": ttc}
+        if "lqr" in rows:  # the learned methods relative to the LQR (LQR = 1.0)
+            lqr_rate = rows["lqr"]["rate"]
+            for row in rows.values():
+                if row["kind"] == "learned":
+                    row["vs_lqr"] = None if lqr_rate == 0 else [row["iqm"] / lqr_rate, row["ci95"][0] / lqr_rate,
+                                                                row["ci95"][1] / lqr_rate]
+                    row["p_improvement_over_lqr"] = probability_of_improvement(row["rates"], [lqr_rate])
         comparison = None
         learned = [(float(np.mean(r["episodes"]["captured"])), r) for r in runs]
         classical = [(rows[b]["rate"], b) for b in ("guidance", "lqr") if b in rows]
@@ -469,6 +686,27 @@ def _reuse_note(doc: dict[str, Any]) -> str:
             f"and reused (their training and evaluation took {minutes:.1f} min then)")
 
 
+def _target_markdown(t: Optional[dict[str, Any]]) -> list[str]:
+    """The report's Target section from :func:`target`'s numbers (nothing without them)."""
+    if not t:
+        return []
+    lines = ["", "## Target", "",
+             "A learned policy captures at least as many held-out episodes as the LQR on every tier (IQM >= the "
+             "LQR's rate, its interval reaching it, the best run not significantly worse by the paired exact McNemar), "
+             f"significantly more on at least one (p < {TARGET_ALPHA}), and no learned method's seeds spread by more "
+             f"than {100 * TARGET_MAX_SPREAD:.0f} points.", "",
+             "| tier | best method (IQM) | LQR | best run: only learned / only LQR, p | at least the LQR | "
+             "significantly more | largest seed spread |", "|---|---|---|---|---|---|---|"]
+    yes = {True: "yes", False: "no"}
+    for tier, v in t["tiers"].items():
+        lines.append(f"| {tier} | {v['method'].upper()} {_pct(v['iqm'])} ({_pct(v['ci95'][0])} - {_pct(v['ci95'][1])}) "
+                     f"| {_pct(v['lqr_rate'])} | `{v['best_run']}`: {v['only_learned']} / {v['only_lqr']}, "
+                     f"p = {v['p_value']:.3g} | {yes[v['at_least_lqr']]} | {yes[v['significantly_better']]} "
+                     f"| {100 * v['max_seed_spread']:.1f} points ({yes[v['spread_ok']]}) |")
+    lines += ["", f"Target {'met' if t['met'] else 'not met'} on these runs."]
+    return lines
+
+
 def report_markdown(doc: dict[str, Any]) -> str:
     """The benchmark report (docs/benchmark.md)."""
     from accd_gym.envs.tiers import TIERS
@@ -504,22 +742,54 @@ def report_markdown(doc: dict[str, Any]) -> str:
                              f"| {seeds} | {row['miss_median_m']:.2f} | {ttc} |")
             else:
                 lines.append(f"| {name} | {_pct(row['rate'])} | {_pct(lo)} - {_pct(hi)} | - | {row['miss_median_m']:.2f} | {ttc} |")
+        fails = [(n, r["failures"]) for n, r in t["policies"].items() if r.get("failures")]
+        if fails:
+            f2 = lambda x: "-" if x is None else f"{x:.2f}"  # noqa: E731
+            lines += ["", "Failures (learned: pooled over the seeds): the missed episodes, their outcomes, median miss "
+                      "distance and closing speed at the closest approach; the captured episodes' median closing speed "
+                      "at capture and time to capture.", "",
+                      "| policy | missed | outcomes of the missed | miss median (m) | closing speed at closest approach "
+                      "(m/s) | closing speed at capture (m/s) | time to capture (s) |", "|---|---|---|---|---|---|---|"]
+            lines += [f"| {n.upper() if t['policies'][n]['kind'] == 'learned' else n} | {f['missed']}/{f['episodes']} "
+                      f"| {', '.join(f'{k} {v}' for k, v in sorted(f['outcomes'].items())) or '-'} "
+                      f"| {f2(f['missed_miss_median_m'])} | {f2(f['missed_closest_speed_median_mps'])} "
+                      f"| {f2(f['capture_speed_median_mps'])} | {f2(f['capture_time_median_s'])} |" for n, f in fails]
+        rel = [(n, r) for n, r in t["policies"].items() if r.get("vs_lqr")]
+        if rel:
+            lines += ["", "Relative to the LQR (LQR = 1.0; IQM and interval divided by the LQR's rate) and rliable's "
+                      "probability of improvement P(seed's rate > LQR's, ties one half, averaged over the seeds):", "",
+                      "| policy | normalized IQM | 95 % interval | P(improvement over LQR) |", "|---|---|---|---|"]
+            lines += [f"| {n.upper()} | {r['vs_lqr'][0]:.3f} | {r['vs_lqr'][1]:.3f} - {r['vs_lqr'][2]:.3f} "
+                      f"| {r['p_improvement_over_lqr']:.2f} |" for n, r in rel]
         m = t["mcnemar"]
         if m:
             lines += ["", f"Best learned run `{m['learned']}` ({_pct(m['learned_rate'])}) vs best classical `{m['classical']}` "
                       f"({_pct(m['classical_rate'])}), paired on the same episodes: both {m['both']}, learned only "
                       f"{m['only_learned']}, classical only {m['only_classical']}, neither {m['neither']}; exact McNemar "
                       f"p = {m['p_value']:.3g} (both picked as the best on these episodes)."]
+    if doc.get("missing"):
+        lines += ["", "## Missing / unfinished runs", "",
+                  f"{len(doc['missing'])} of {len(doc['missing']) + len(doc['runs'])} training runs have no result "
+                  "in this report; `accd-gym benchmark` into the same folder runs or resumes them.", "",
+                  "| run | status |", "|---|---|"]
+        lines += [f"| `{m['name']}` | {m['status']} |" for m in doc["missing"]]
+    lines += _target_markdown(doc.get("target"))
     lines += ["", "## Performance profile", "", "![performance profile](figures/benchmark_profile.png)", "",
               "Fraction of each policy's runs (every tier; learned: every seed) whose capture rate is at least tau."]
     return "\n".join(lines) + "\n"
 
 
 def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] = None, docs: Optional[Path] = None,
-        command: str = "accd-gym benchmark", progress: Callable[[str], None] = print) -> dict[str, Any]:
+        command: str = "accd-gym benchmark", progress: Callable[[str], None] = print,
+        chosen: Optional[Callable[[Job], bool]] = None) -> dict[str, Any]:
     """Runs the benchmark of a validated config into ``out``; returns the report document
     (also ``out/benchmark.json``, ``out/benchmark.md``, ``out/performance_profile.png``; with
-    ``docs``, docs/benchmark.md and docs/figures/benchmark_profile.png there too)."""
+    ``docs``, docs/benchmark.md and docs/figures/benchmark_profile.png there too).
+
+    ``chosen`` (:func:`selection`): run only those jobs; the report covers every job of the
+    config finished in ``out`` (now or by an earlier invocation) and lists the others under
+    "Missing / unfinished runs". Ctrl+C while training: the run under way writes its checkpoint,
+    the report is written from what is finished and the document's ``interrupted`` says why."""
     import datetime
 
     from accd_gym import files
@@ -529,21 +799,38 @@ def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] =
     if docs is not None:
         files.writable_folder(docs, "--docs")
         files.writable_folder(docs / "figures", "--docs")
+    _claim(out, config)
     t0 = time.perf_counter()
-    todo = jobs(config)
-    results = _run_jobs(todo, config, out, ray_address, progress)
+    every = jobs(config)
+    todo = [j for j in every if chosen is None or chosen(j)]
+    interrupted = None
+    try:
+        ran = _run_jobs(todo, config, out, ray_address, progress)
+    except _Interrupted as e:
+        ran, interrupted = e.results, str(e)
+        progress(f"interrupted ({interrupted}); the report is written from the finished runs")
+    by_name = {r["name"]: r for r in ran if r.get("status") == "done"}
+    results, missing = [], []
+    for job in every:  # the report covers every finished run in OUT, chosen now or earlier
+        if job.name not in by_name:
+            stored = _stored_result(out / "runs" / job.name, job_key(job, config["episodes"], config["num_envs"]))
+            if stored is not None:
+                by_name[job.name] = stored["result"] | {"reused": True}
+        if job.name in by_name:
+            results.append(by_name[job.name])
+        else:
+            missing.append({"name": job.name, "status": _run_status(out / "runs" / job.name)})
     train_s = time.perf_counter() - t0
     t1 = time.perf_counter()
     baselines: dict[str, dict[str, Any]] = {}
     for tier in config["tiers"]:
         baselines[tier] = {}
         for name in config["baselines"]:
-            policy = _baseline_policy(name, tier)
-            progress(f"baseline {name} on {tier}")
-            baselines[tier][name] = evaluate_policy(policy, tier, config["episodes"], config["num_envs"])
+            baselines[tier][name] = _baseline_record(name, tier, config, out, progress)
     baseline_s = time.perf_counter() - t1
     taus = np.linspace(0.0, 1.0, 101)
     profile = performance_profile(results, baselines, taus)
+    summary = summarize(config, results, baselines)
     doc = {
         "command": command,
         "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
@@ -552,10 +839,16 @@ def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] =
         "wall_time_s": time.perf_counter() - t0,
         "train_wall_s": train_s,
         "baseline_wall_s": baseline_s,
-        "tiers": summarize(config, results, baselines),
+        "tiers": summary,
+        "target": target(summary, {
+            tier: {"lqr": baselines[tier]["lqr"]["captured"],
+                   **{r["name"]: r["episodes"]["captured"] for r in results if r["job"]["tier"] == tier}}
+            for tier in config["tiers"] if baselines.get(tier, {}).get("lqr") is not None}),
         "runs": [{k: v for k, v in r.items() if k != "episodes"} | {"capture_rate": float(np.mean(r["episodes"]["captured"]))}
                  for r in results],
         "profile": {"tau": taus.tolist(), **profile},
+        "missing": missing,
+        "interrupted": interrupted,
     }
     files.write_text(out / "benchmark.json", json.dumps(doc, indent=1))
     files.write_text(out / "episodes.json", json.dumps({"runs": {r["name"]: r["episodes"] for r in results},
@@ -575,4 +868,5 @@ def _cpus() -> int:
 
 
 __all__ = ["DEFAULTS", "RESULT_FILE", "Job", "build_digest", "job_key", "jobs", "load_config", "validate_config", "run", "run_job", "evaluate_policy",
-           "stratified_bootstrap", "summarize", "performance_profile", "report_markdown", "iqm"]
+           "stratified_bootstrap", "summarize", "performance_profile", "report_markdown", "iqm",
+           "probability_of_improvement", "target", "selection", "CONFIG_FILE", "failures", "TARGET_MAX_SPREAD", "TARGET_ALPHA"]

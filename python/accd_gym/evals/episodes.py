@@ -42,6 +42,10 @@ class Episode:
     trajectory: np.ndarray
     #: The episode's drawn physical parameters under randomized physics (None otherwise).
     parameters: Optional[dict[str, float]] = None
+    #: Closing speed (m/s, of the capture point relative to the boom, from the trajectory) at the
+    #: closest approach and at the episode's end (at capture for a captured episode).
+    closest_speed: Optional[float] = None
+    final_speed: Optional[float] = None
 
     def metrics(self) -> dict[str, Any]:
         """The episode's numbers as plain JSON values (no trajectory)."""
@@ -178,6 +182,7 @@ def run_episode_range(
                     episode_return=float(ret[i]),
                     trajectory=np.asarray(traj[i], dtype=np.float32),
                     parameters=params_of[i],
+                    **_speeds(traj[i], float(info["time"]), int(info["episode_steps"])),
                 )
                 if bar is not None:
                     bar.update(1)
@@ -203,6 +208,17 @@ def run_episode_range(
             bar.close()
         env.close()
     return [done_eps[k] for k in range(start, stop)]
+
+
+def _speeds(traj: list[np.ndarray], time: float, steps: int) -> dict[str, Optional[float]]:
+    """Relative speed (m/s) at the trajectory's closest point to the boom and at its end, by
+    finite differences of the per-step positions (``time / steps`` apart)."""
+    p = np.asarray(traj, dtype=np.float64)
+    if len(p) < 2 or steps < 1 or time <= 0:
+        return {"closest_speed": None, "final_speed": None}
+    v = np.linalg.norm(np.diff(p, axis=0), axis=1) / (time / steps)
+    k = int(np.argmin(np.linalg.norm(p, axis=1)))
+    return {"closest_speed": float(v[max(k - 1, 0)]), "final_speed": float(v[-1])}
 
 
 def start_policy_episodes(policy: Any, rows: np.ndarray, ep_of: np.ndarray, last: np.ndarray) -> None:

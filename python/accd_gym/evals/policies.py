@@ -212,15 +212,19 @@ def _agent_options_of(model_path: Path) -> Any:
 def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False, config: Optional[Any] = None) -> Any:
     """A policy from a baseline name (``zero``, ``random``, ``guidance``, ``lqr``), a tuning file
     (``training/guidance_tuning*.json``: the guidance controller with its winning gains;
-    ``training/lqr_tuning.json``: the LQR with its winning tuning) or a model path (see
+    ``training/lqr_tuning.json``: the LQR with its winning tuning), a shipped trained policy's name
+    (:mod:`accd_gym.trained`) or a model path (see
     :class:`SB3Policy` for ``allow_unnormalized``; an RLlib run or checkpoint folder gives an
     :class:`accd_gym.learning.rllib.RLlibPolicy`). ``config``: the env configuration (overrides) the
     policy will run on; the LQR is designed for it."""
     from accd_gym.control.baselines import BASELINES, guidance_from_tuning, make_baseline
 
     from accd_gym.envs.agent_io import physics_config
+    from accd_gym.trained.catalog import is_trained, policy_dir
 
     config = physics_config(config)
+    if is_trained(spec) and not Path(spec).exists():  # a path of that name in the working folder wins
+        return SB3Policy(policy_dir(spec), config=config)
     if spec in BASELINES:
         return make_baseline(spec, seed, config)
     if spec.endswith(".json") and Path(spec).is_file():

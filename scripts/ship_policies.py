@@ -1,0 +1,130 @@
+"""Copies a training run's checkpoint into the package as a shipped trained policy
+(python/accd_gym/trained/NAME/, see docs/trained-policies.md): the model without its optimizer
+state (the weights are unchanged; the file is about a third of the checkpoint's size), the
+VecNormalize statistics, the run's run.json (env options: residual control, history) and
+policy.json with its metadata (tier, algorithm, seed, steps, source run) and the recorded held-out
+result (per-episode capture outcomes from a results JSON such as docs/results/residual_ppo_device.json).
+
+    python scripts/ship_policies.py --name residual_ppo_precision \\
+        --run training/runs/residual_ppo/precision_s2 \\
+        --results docs/results/residual_ppo_device.json --key residual_ppo_s2 [--check 8]
+
+``--check K`` runs the shipped policy on its first K held-out episodes and stores each one's
+outcome, steps and miss distance in policy.json (tests/test_trained_policies.py compares them)
+and checks the outcomes against the recorded ones. Every file is written atomically; an
+existing policy of that name is replaced only with ``--replace``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import sys
+from pathlib import Path
+
+from accd_gym.errors import ConfigError
+from accd_gym.files import read_user_json, write_bytes, write_text
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def stripped_model(zip_bytes: bytes, algo: str) -> bytes:
+    """The saved model ``zip_bytes`` with a fresh optimizer (no Adam moments): same weights, a
+    smaller file; evaluating it is unchanged."""
+    from stable_baselines3 import PPO, SAC
+
+    model = {"ppo": PPO, "sac": SAC}[algo].load(io.BytesIO(zip_bytes), device="cpu")
+    policy = model.policy
+    lr = model.lr_schedule(1.0)
+    if algo == "ppo":
+        policy.optimizer = policy.optimizer_class(policy.parameters(), lr=lr, **policy.optimizer_kwargs)
+    else:
+        for part in (policy.actor, policy.critic):
+            part.optimizer = policy.optimizer_class(part.parameters(), lr=lr, **policy.optimizer_kwargs)
+    buf = io.BytesIO()
+    model.save(buf)
+    return buf.getvalue()
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Ships one run's newest checkpoint (or final model) under ``--name``; 0 on success."""
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--name", required=True, help="the shipped policy's name (a folder name)")
+    ap.add_argument("--run", required=True, help="the training run folder (run.json, checkpoints/)")
+    ap.add_argument("--results", required=True, help="results JSON with {tier: {key: {captured: '0101..'}}}")
+    ap.add_argument("--key", required=True, help="the run's entry in --results (e.g. residual_ppo_s2)")
+    ap.add_argument("--check", type=int, default=8, help="held-out episodes to run and store (default 8)")
+    ap.add_argument("--replace", action="store_true", help="replace a shipped policy of that name")
+    args = ap.parse_args(argv)
+
+    from accd_gym.learning.training import latest_checkpoint
+    from accd_gym.trained.catalog import TRAINED_DIR
+
+    if not args.name.replace("_", "").isalnum():
+        raise ConfigError(f"invalid config: --name {args.name!r} is outside the allowed range [A-Za-z0-9_]+")
+    run = Path(args.run)
+    meta = read_user_json(run / "run.json", "run summary")
+    tier = meta["config"]["env"].get("tier")
+    if (run / "final_model.zip").is_file():
+        model_path, stats_path, steps = run / "final_model.zip", run / "vecnormalize.pkl", meta.get("timesteps")
+    else:
+        ckpt = latest_checkpoint(run)
+        if ckpt is None:
+            raise ConfigError(f"invalid config: --run {str(run)!r} has no final model and no checkpoint")
+        model_path, stats_path, steps = ckpt["model"], ckpt["vecnormalize"], ckpt["steps"]
+    results = read_user_json(args.results, "results")
+    if tier not in results or args.key not in results[tier]:
+        raise ConfigError(f"invalid config: --key {args.key!r} is not in {args.results!r}[{tier!r}] "
+                          f"(allowed: {sorted(k for k, v in results.get(tier, {}).items() if isinstance(v, dict))})")
+    captured = results[tier][args.key]["captured"]
+    lqr = results[tier].get("lqr", {}).get("captured")
+    out = TRAINED_DIR / args.name
+    if out.exists() and not args.replace:
+        raise ConfigError(f"invalid config: --name {args.name!r}: {str(out)!r} exists (pass --replace)")
+    doc = {
+        "name": args.name,
+        "tier": tier,
+        "algo": meta["algo"],
+        "seed": meta["config"].get("seed"),
+        "steps": int(steps),
+        "total_timesteps": meta.get("total_timesteps"),
+        "source_run": str(run.resolve().relative_to(ROOT)) if run.resolve().is_relative_to(ROOT) else str(run),
+        "source_checkpoint": model_path.name,
+        "env": meta["config"]["env"],
+        "held_out": {
+            "results": args.results,
+            "key": args.key,
+            "episodes": len(captured),
+            "base_seed": results.get(tier, {}).get("base_seed"),
+            "captures": captured.count("1"),
+            "captured": captured,
+            "lqr_captures": lqr.count("1") if lqr else None,
+            "evaluation": f"accd-gym evaluate --policy {args.name} --policy lqr --tier {tier} --episodes "
+                          f"{len(captured)} --num-envs 50",
+        },
+    }
+    write_bytes(out / "final_model.zip", stripped_model(model_path.read_bytes(), meta["algo"]))
+    write_bytes(out / "vecnormalize.pkl", stats_path.read_bytes())
+    write_bytes(out / "run.json", (run / "run.json").read_bytes())
+    import json
+
+    write_text(out / "policy.json", json.dumps(doc, indent=1) + "\n")
+    if args.check > 0:
+        from accd_gym import trained
+
+        eps = trained.held_out_episodes(args.name, args.check)
+        doc["check_episodes"] = [{"index": e.index, "outcome": e.outcome, "steps": e.steps,
+                                  "min_distance": round(float(e.min_distance), 6)} for e in eps]
+        got = "".join("1" if e.outcome == "captured" else "0" for e in eps)
+        if got != captured[: args.check]:
+            print(f"warning: {args.name}: first {args.check} held-out outcomes {got} differ from the recorded "
+                  f"{captured[: args.check]}", file=sys.stderr)
+        write_text(out / "policy.json", json.dumps(doc, indent=1) + "\n")
+    size = sum(f.stat().st_size for f in out.iterdir())
+    print(f"shipped {args.name}: {tier}, {meta['algo']} seed {doc['seed']}, {doc['steps']} steps, "
+          f"recorded {doc['held_out']['captures']}/{len(captured)}; {size} bytes in {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,84 @@
+"""The benchmark report's statistics on hand-computed cases: rliable's probability of
+improvement (ties one half) and the Target section's verdict from the numbers."""
+
+from __future__ import annotations
+
+import pytest
+
+from accd_gym.evals.benchmark import probability_of_improvement, report_markdown, target
+
+
+def test_probability_of_improvement_counts_ties_as_one_half():
+    # pairs (x, y): 0.9 beats 0.8 and 0.85; 0.8 ties 0.8 (1/2) and loses to 0.85; 0.7 loses both
+    # -> (2 + 0.5 + 0 + 0) / 6
+    assert probability_of_improvement([0.9, 0.8, 0.7], [0.8, 0.85]) == pytest.approx(2.5 / 6)
+    assert probability_of_improvement([0.93, 0.92, 0.92], [0.92]) == pytest.approx((1 + 0.5 + 0.5) / 3)
+    assert probability_of_improvement([0.5], [0.5]) == 0.5
+    with pytest.raises(ValueError, match="runs on both sides"):
+        probability_of_improvement([], [0.5])
+
+
+def _tiers(rates, lqr_rate, ci):
+    return {"policies": {"ppo": {"kind": "learned", "rates": rates, "iqm": sum(rates) / len(rates), "ci95": ci},
+                         "lqr": {"kind": "classical", "rate": lqr_rate}}}
+
+
+def test_target_is_read_from_the_numbers():
+    lqr = [True] * 90 + [False] * 10
+    better = [True] * 98 + [False] * 2          # 8 gained, 0 lost: p = 2 * 0.5**8 < 0.05
+    same = list(lqr)
+    tiers = {"precision": _tiers([0.98, 0.97], 0.90, [0.96, 0.99]), "hard": _tiers([0.90, 0.90], 0.90, [0.88, 0.92])}
+    eps = {"precision": {"lqr": lqr, "precision_ppo_seed0": better, "precision_ppo_seed1": same},
+           "hard": {"lqr": lqr, "hard_ppo_seed0": same, "hard_ppo_seed1": same}}
+    t = target(tiers, eps)
+    assert t["tiers"]["precision"]["significantly_better"] and t["tiers"]["precision"]["best_run"] == "precision_ppo_seed0"
+    assert t["tiers"]["precision"]["p_value"] == pytest.approx(2 * 0.5 ** 8)
+    assert t["tiers"]["hard"]["at_least_lqr"] and not t["tiers"]["hard"]["significantly_better"]
+    assert t["met"]
+    # a learned method whose seeds spread by more than 20 points fails the target
+    tiers["hard"] = _tiers([0.95, 0.70], 0.90, [0.70, 0.95])
+    t = target(tiers, eps)
+    assert not t["tiers"]["hard"]["spread_ok"] and not t["met"]
+    # below the LQR with an interval that does not reach it fails too
+    tiers["hard"] = _tiers([0.80, 0.80], 0.90, [0.76, 0.84])
+    assert not target(tiers, eps)["tiers"]["hard"]["at_least_lqr"]
+
+
+def test_report_has_a_target_section_only_with_its_numbers():
+    doc = {"config": {"learners": {}, "episodes": 1, "source": "x"}, "command": "c", "date": "d", "machine": "m",
+           "wall_time_s": 60, "train_wall_s": 0, "baseline_wall_s": 60, "tiers": {}, "runs": []}
+    assert "## Target" not in report_markdown(doc)
+    lqr = [True, False]
+    doc["target"] = target({"hard": _tiers([1.0], 0.5, [1.0, 1.0])}, {"hard": {"lqr": lqr, "hard_ppo_seed0": [True, True]}})
+    md = report_markdown(doc)
+    assert "## Target" in md and "Target not met on these runs." in md and "| hard | PPO 100.0 %" in md
+
+
+def test_failure_table_numbers_by_hand():
+    from accd_gym.evals.benchmark import failures
+
+    rec = {"captured": [True, False, False, True], "outcome": ["captured", "truncated", "crashed", "captured"],
+           "min_distance": [0.1, 0.8, 0.4, 0.2], "closest_speed": [1.0, 3.0, 5.0, 2.0],
+           "final_speed": [1.5, 0.5, 0.7, 2.5], "capture_time": [10.0, None, None, 20.0]}
+    f = failures([rec, {k: v[:1] for k, v in rec.items()}])
+    assert f["episodes"] == 5 and f["missed"] == 2 and f["outcomes"] == {"truncated": 1, "crashed": 1}
+    assert f["missed_miss_median_m"] == pytest.approx(0.6) and f["missed_closest_speed_median_mps"] == 4.0
+    assert f["capture_speed_median_mps"] == 1.5 and f["capture_time_median_s"] == 10.0
+    # records written before the speeds were recorded give None, not an error
+    old = {k: v for k, v in rec.items() if "speed" not in k}
+    assert failures([old])["capture_speed_median_mps"] is None
+
+
+def test_episodes_record_the_closing_speeds_from_their_trajectory():
+    import numpy as np
+
+    from accd_gym.control.baselines import make_baseline
+    from accd_gym.evals.episodes import run_episodes
+
+    for e in run_episodes(make_baseline("lqr", 0, None), 2, num_envs=2):
+        p = e.trajectory.astype(np.float64)
+        dt = e.time / e.steps
+        assert e.final_speed == pytest.approx(np.linalg.norm(p[-1] - p[-2]) / dt)
+        k = int(np.argmin(np.linalg.norm(p, axis=1)))
+        assert e.closest_speed == pytest.approx(np.linalg.norm(p[k] - p[k - 1]) / dt)
+        assert 0 < e.closest_speed < 50

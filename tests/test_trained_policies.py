@@ -1,0 +1,68 @@
+"""The trained policies shipped with the package (accd_gym.trained): each loads by name, runs its
+first held-out episodes as stored when it was shipped (outcome, steps, miss distance), its
+recorded held-out row is consistent, its files are small and in the wheel's package folder, and
+the command line evaluates it by name on its tier."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from accd_gym import ConfigError, trained
+from accd_gym.evals.policies import load_policy
+
+SHIPPED = ["residual_ppo_hard", "residual_ppo_precision"]
+
+
+def test_catalog_lists_the_shipped_policies_and_their_metadata():
+    assert trained.available() == SHIPPED
+    for name in SHIPPED:
+        doc = trained.info(name)
+        assert doc["name"] == name and doc["tier"] in name and doc["algo"] == "ppo"
+        held = doc["held_out"]
+        assert held["episodes"] == len(held["captured"]) == 500
+        assert held["captures"] == held["captured"].count("1")
+        assert held["captures"] >= held["lqr_captures"]  # recorded: at least the LQR's count
+        folder = trained.policy_dir(name)
+        sizes = {f.name: f.stat().st_size for f in folder.iterdir()}
+        assert set(sizes) == {"final_model.zip", "vecnormalize.pkl", "run.json", "policy.json"}
+        assert sum(sizes.values()) < 600_000, sizes
+
+
+def test_unknown_name_is_one_error_naming_the_value_and_the_shipped_names():
+    with pytest.raises(ConfigError, match=r"'nope'.*allowed range.*residual_ppo_hard"):
+        trained.info("nope")
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_shipped_policy_reproduces_its_stored_held_out_episodes(name):
+    pytest.importorskip("stable_baselines3")
+    doc = trained.info(name)
+    stored = doc["check_episodes"]
+    episodes = trained.held_out_episodes(name, len(stored))
+    assert [e.index for e in episodes] == [s["index"] for s in stored]
+    assert [e.outcome for e in episodes] == [s["outcome"] for s in stored]
+    assert [e.steps for e in episodes] == [s["steps"] for s in stored]
+    np.testing.assert_allclose([e.min_distance for e in episodes], [s["min_distance"] for s in stored], atol=1e-3)
+    recorded = doc["held_out"]["captured"][: len(stored)]
+    assert "".join("1" if e.captured else "0" for e in episodes) == recorded
+
+
+def test_load_policy_resolves_a_shipped_name():
+    pytest.importorskip("stable_baselines3")
+    policy = load_policy("residual_ppo_hard", config={"tier": "hard"})
+    assert policy.agent_options.enabled and policy.algo == "ppo"
+
+
+def test_rollout_runs_a_shipped_policy_by_name_on_its_tier():
+    pytest.importorskip("stable_baselines3")
+    r = subprocess.run([sys.executable, "-m", "accd_gym", "rollout", "--policy", "residual_ppo_precision",
+                        "--episodes", "2", "--quiet", "--json"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "tier 'precision'" in r.stderr
+    doc = json.loads(r.stdout[r.stdout.index("\n{") + 1:])
+    assert doc["summary"]["episodes"] == 2
