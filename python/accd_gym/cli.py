@@ -228,7 +228,7 @@ def _env_of(args: argparse.Namespace) -> dict:
         from accd_gym.trained.catalog import info, is_trained
 
         specs = args.policy if isinstance(getattr(args, "policy", None), list) else [getattr(args, "policy", "")]
-        tiers = sorted({info(s)["tier"] for s in specs if isinstance(s, str) and is_trained(s) and not Path(s).exists()})
+        tiers = sorted({info(s)["tier"] for s in specs if isinstance(s, str) and is_trained(s)})
         if len(tiers) == 1:
             print(f"note: the trained policies' tier {tiers[0]!r} (--tier sets another)", file=sys.stderr)
             env = {"tier": tiers[0], **env}

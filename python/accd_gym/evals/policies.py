@@ -223,7 +223,7 @@ def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False, c
     from accd_gym.trained.catalog import is_trained, policy_dir
 
     config = physics_config(config)
-    if is_trained(spec) and not Path(spec).exists():  # a path of that name in the working folder wins
+    if is_trained(spec):
         return SB3Policy(policy_dir(spec), config=config)
     if spec in BASELINES:
         return make_baseline(spec, seed, config)

@@ -42,5 +42,6 @@ def info(name: str) -> dict[str, Any]:
 
 
 def is_trained(spec: str) -> bool:
-    """Whether ``spec`` names a shipped policy (not a path)."""
-    return "/" not in spec and "\\" not in spec and spec in available()
+    """Whether ``spec`` names a shipped policy: one of :func:`available`, not a path, and no file or
+    folder of that name in the working folder (a path the user has wins over a shipped name)."""
+    return "/" not in spec and "\\" not in spec and spec in available() and not Path(spec).exists()
