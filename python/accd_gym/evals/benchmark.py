@@ -577,9 +577,7 @@ def target(tiers: dict[str, Any], episodes: dict[str, dict[str, Any]]) -> Option
 
 
 def _medians(record: dict[str, Any]) -> tuple[float, Optional[float]]:
-    miss = float(np.median(record["min_distance"]))
-    times = [t for t in record["capture_time"] if t is not None]
-    return miss, (float(np.median(times)) if times else None)
+    return float(np.median(record["min_distance"])), _median(record["capture_time"])
 
 
 def summarize(cfg: dict[str, Any], results: list[dict[str, Any]], baselines: dict[str, dict[str, Any]]) -> dict[str, Any]:
