@@ -169,7 +169,11 @@ def test_an_interrupted_job_continues_from_its_checkpoint(tmp_path, monkeypatch)
     (run / "checkpoints").mkdir(parents=True)
     (run / "checkpoints" / "model_2048_steps.zip").write_bytes(b"")
     for status, config, expected in (("interrupted", seen[0], "resume"), ("training", seen[0], "resume"),
-                                     ("done", seen[0], "train"), ("interrupted", {**seen[0], "seed": 99}, "train")):
+                                     ("done", seen[0], "train"), ("interrupted", {**seen[0], "seed": 99}, "train"),
+                                     # begun with another env thread count (a Ray task): continued
+                                     ("interrupted", {**seen[0], "num_threads": 7}, "resume"),
+                                     ("interrupted", {**seen[0], "checkpoint_every": 12345}, "resume"),
+                                     ("interrupted", {**seen[0], "torch_threads": 3}, "train")):
         (run / "run.json").write_text(json.dumps({"status": status, "config": config}))
         with pytest.raises(Chosen, match=expected):
             benchmark.run_job(job, str(tmp_path), cfg["episodes"], cfg["num_envs"])

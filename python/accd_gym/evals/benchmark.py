@@ -375,7 +375,7 @@ def _trained(run: Path, cfg: dict[str, Any]) -> bool:
     except (OSError, ValueError):
         return False
     return (isinstance(meta, dict) and meta.get("status") == "done" and (run / "final_model.zip").is_file()
-            and (run / "vecnormalize.pkl").is_file() and meta.get("config") == json.loads(json.dumps(cfg)))
+            and (run / "vecnormalize.pkl").is_file() and _same_recipe(meta.get("config"), cfg))
 
 
 def _continues(run: Path, cfg: dict[str, Any]) -> bool:
@@ -389,7 +389,20 @@ def _continues(run: Path, cfg: dict[str, Any]) -> bool:
     except (OSError, ValueError):
         return False
     return (isinstance(meta, dict) and meta.get("status") != "done" and training.latest_checkpoint(run) is not None
-            and meta.get("config") == json.loads(json.dumps(cfg)))
+            and _same_recipe(meta.get("config"), cfg))
+
+
+def _same_recipe(stored: Any, cfg: dict[str, Any]) -> bool:
+    """``stored`` (a run.json's config) trains what ``cfg`` trains: equal but for the two fields
+    that change no result: ``num_threads``, the env-stepping thread count (the batch is bitwise
+    identical for any thread count), and ``checkpoint_every``, how often the run is saved. A run
+    begun as a Ray task (one thread per job) thus continues or is reused locally (one thread per
+    core), and the other way round."""
+    if not isinstance(stored, dict):
+        return False
+    ignore = {"num_threads", "checkpoint_every"}
+    fresh = json.loads(json.dumps(cfg))
+    return {k: v for k, v in stored.items() if k not in ignore} == {k: v for k, v in fresh.items() if k not in ignore}
 
 
 def _run_jobs(todo: list[Job], cfg: dict[str, Any], out: Path, ray_address: Optional[str],
