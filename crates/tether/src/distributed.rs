@@ -54,7 +54,9 @@
 //! right-hand side: then `A_k` has no inertia along `e`, the element being massless, and
 //! `sigma - eps^2 / delta = m I / (m rho_c^2 + I)` is the rod's `m / 4` at its end.) `X` is
 //! inverted by its cofactors; a 3x3 symmetric product each way between the frames is all the
-//! sweep's matrix algebra.
+//! sweep's matrix algebra. `E_phi` has no y component, so neither has the frame's second axis,
+//! and its products skip it; the sweep is inlined into the solver's build with fused
+//! multiply-adds ([`crate::arith`]).
 //!
 //! **Dense, O(n^3)** ([`crate::Solver::Dense`], the oracle): the mass matrix from the same
 //! Jacobians, block `(k, k) = m J_c^T J_c + M_k J_t^T J_t + I J_r^T J_r` and block
@@ -65,12 +67,19 @@
 
 use nalgebra::{Matrix3, Vector3};
 
+use crate::arith::{axpy, dot, Madd};
 use crate::chain::ChainState;
 use crate::dynamics::AxialSolve;
 use crate::error::{Result, TetherError};
 
 type V3 = Vector3<f64>;
 type M3 = Matrix3<f64>;
+
+/// `a . b` for an `a` whose y component is zero (the frame's second axis `e_phi / cos psi`).
+#[inline(always)]
+fn dot_xz<M: Madd>(a: &V3, b: &V3) -> f64 {
+    M::madd(a.x, b.x, a.z * b.z)
+}
 
 /// Index in q of segment k's stretch s_k (n segments).
 #[inline(always)]
@@ -127,45 +136,56 @@ impl Sym {
     }
 
     #[inline(always)]
-    fn mul(&self, v: &V3) -> V3 {
+    fn mul<M: Madd>(&self, v: &V3) -> V3 {
         V3::new(
-            self.xx * v.x + self.xy * v.y + self.xz * v.z,
-            self.xy * v.x + self.yy * v.y + self.yz * v.z,
-            self.xz * v.x + self.yz * v.y + self.zz * v.z,
+            M::madd(self.xx, v.x, M::madd(self.xy, v.y, self.xz * v.z)),
+            M::madd(self.xy, v.x, M::madd(self.yy, v.y, self.yz * v.z)),
+            M::madd(self.xz, v.x, M::madd(self.yz, v.y, self.zz * v.z)),
+        )
+    }
+
+    /// [`Sym::mul`] of a vector whose y component is zero.
+    #[inline(always)]
+    fn mul_xz<M: Madd>(&self, v: &V3) -> V3 {
+        V3::new(
+            M::madd(self.xx, v.x, self.xz * v.z),
+            M::madd(self.xy, v.x, self.yz * v.z),
+            M::madd(self.xz, v.x, self.zz * v.z),
         )
     }
 
     /// The inverse of a positive definite matrix by its cofactors, or `None` where a leading
     /// minor is not positive (or NaN).
     #[inline(always)]
-    fn inverse_spd(&self) -> Option<Sym> {
-        let c_xx = self.yy * self.zz - self.yz * self.yz;
-        let c_xy = self.xz * self.yz - self.xy * self.zz;
-        let c_xz = self.xy * self.yz - self.xz * self.yy;
-        let minor2 = self.xx * self.yy - self.xy * self.xy;
-        let det = self.xx * c_xx + self.xy * c_xy + self.xz * c_xz;
+    fn inverse_spd<M: Madd>(&self) -> Option<Sym> {
+        let c_xx = M::madd(self.yy, self.zz, -(self.yz * self.yz));
+        let c_xy = M::madd(self.xz, self.yz, -(self.xy * self.zz));
+        let c_xz = M::madd(self.xy, self.yz, -(self.xz * self.yy));
+        let minor2 = M::madd(self.xx, self.yy, -(self.xy * self.xy));
+        let det = M::madd(self.xx, c_xx, M::madd(self.xy, c_xy, self.xz * c_xz));
         if !(self.xx > 0.0 && minor2 > 0.0 && det > 0.0) {
             return None;
         }
         let inv = 1.0 / det;
         Some(Sym {
             xx: c_xx * inv,
-            yy: (self.xx * self.zz - self.xz * self.xz) * inv,
+            yy: M::madd(self.xx, self.zz, -(self.xz * self.xz)) * inv,
             zz: minor2 * inv,
             xy: c_xy * inv,
             xz: c_xz * inv,
-            yz: (self.xy * self.xz - self.xx * self.yz) * inv,
+            yz: M::madd(self.xy, self.xz, -(self.xx * self.yz)) * inv,
         })
     }
 
     /// `U S U^T` for the orthonormal frame `U = [u0, u1, u2]` (columns).
     #[inline(always)]
-    fn in_frame(&self, u0: &V3, u1: &V3, u2: &V3) -> Sym {
+    fn in_frame<M: Madd>(&self, u0: &V3, u1: &V3, u2: &V3) -> Sym {
         // Columns of S U^T's transpose: r_i = sum_j S_ij u_j, then U S U^T = sum_i u_i r_i^T.
-        let r0 = u0 * self.xx + u1 * self.xy + u2 * self.xz;
-        let r1 = u0 * self.xy + u1 * self.yy + u2 * self.yz;
-        let r2 = u0 * self.xz + u1 * self.yz + u2 * self.zz;
-        let entry = |a: usize, b: usize| u0[a] * r0[b] + u1[a] * r1[b] + u2[a] * r2[b];
+        let r0 = axpy::<M>(u0, self.xx, &axpy::<M>(u1, self.xy, &(u2 * self.xz)));
+        let r1 = axpy::<M>(u0, self.xy, &axpy::<M>(u1, self.yy, &(u2 * self.yz)));
+        let r2 = axpy::<M>(u0, self.xz, &axpy::<M>(u1, self.yz, &(u2 * self.zz)));
+        let entry =
+            |a: usize, b: usize| M::madd(u0[a], r0[b], M::madd(u1[a], r1[b], u2[a] * r2[b]));
         Sym {
             xx: entry(0, 0),
             yy: entry(1, 1),
@@ -192,6 +212,8 @@ pub(crate) struct Articulated {
     t0: V3,
     /// `1 / rho_t`.
     inv_rho_t: f64,
+    /// `1 / cos psi`.
+    inv_cos: f64,
     /// `A_k` and `b_k` of the segment's joint (kept only when tensions are asked for).
     a: Sym,
     b: V3,
@@ -238,9 +260,11 @@ fn singular(time: f64, segment: usize) -> TetherError {
 /// The O(n) recursion (module documentation): q'' into `qdd`, the tensions (n + 1 values) into
 /// `tensions` if given. With `axial` (a stage of a linearly implicit step,
 /// [`crate::dynamics::AxialStage`]) every element's force is evaluated at the stage's arguments
-/// and its stretch entry of `H` gains the added mass.
+/// and its stretch entry of `H` gains the added mass. Inlined into its caller, which compiles it
+/// with fused multiply-adds where the processor has them ([`crate::arith`]).
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn solve(
+#[inline(always)]
+pub(crate) fn solve<M: Madd>(
     time: f64,
     c: &Constants,
     chain: &ChainState,
@@ -255,66 +279,89 @@ pub(crate) fn solve(
     let (l, m) = (c.l, c.m);
     let want_tensions = tensions.is_some();
     let added = axial.as_ref().map_or(0.0, |a| a.added_mass);
+    // The element's force's arguments: the state's stretches, or the stage's.
+    let (spring_s, spring_sd) = match &axial {
+        None => (q, qd),
+        Some(ax) => (ax.stretch, ax.stretch_rate),
+    };
+    let stretches = Stretches::new(n, q, qd, spring_s, spring_sd);
+    let (e, e_phi, e_psi) = (chain.e.view(n), chain.e_phi.view(n), chain.e_psi.view(n));
+    let (e_dot, w, force, extra) = (
+        chain.e_dot.view(n),
+        chain.w.view(n),
+        chain.force.view(n),
+        chain.extra.view(n),
+    );
+    let cos_psi = &chain.cos_psi[..n];
+    let work = &mut work[..n];
     let mut a = Sym::diagonal(c.tip_mass);
     let mut b = chain.tip_force;
-    let work = &mut work[..n];
     for k in (0..n).rev() {
-        let i = stretch_index(n, k);
-        let (s, sd) = (q[i], qd[i]);
-        let spring = match &axial {
-            None => c.k * s + c.c * sd,
-            Some(ax) => c.k * ax.stretch[i] + c.c * ax.stretch_rate[i],
-        };
-        let cos_psi = chain.cos_psi[k];
-        let (u0, u1, u2) = (
-            chain.e.get(k),
-            chain.e_phi.get(k) / cos_psi,
-            chain.e_psi.get(k),
-        );
+        let (s, sd, spring_s, spring_sd) = stretches.get(k);
+        let spring = M::madd(c.k, spring_s, c.c * spring_sd);
+        // The segment's frame U = [e, e_phi / cos psi, e_psi]; e_phi has no y component.
+        let inv_cos = 1.0 / cos_psi[k];
+        let u0 = e.get(k);
+        let u1 = V3::new(e_phi.x[k] * inv_cos, 0.0, e_phi.z[k] * inv_cos);
+        let u2 = e_psi.get(k);
         let (rho_c, rho_t) = (s + 0.5 * l, s + l);
         let inv_rho_t = 1.0 / rho_t;
-        let drift = chain.e_dot.get(k) * (2.0 * sd);
-        let w = chain.w.get(k);
-        let c0 = drift + w * rho_c;
-        let t0 = drift + w * rho_t;
+        let drift = e_dot.get(k) * (2.0 * sd);
+        let wk = w.get(k);
+        let c0 = axpy::<M>(&wk, rho_c, &drift);
+        let t0 = axpy::<M>(&wk, rho_t, &drift);
         // A in the segment's frame.
-        let (a0, a1, a2) = (a.mul(&u0), a.mul(&u1), a.mul(&u2));
-        let delta = (m * rho_c * rho_c + c.rod_inertia) * inv_rho_t * inv_rho_t;
+        let (a0, a1, a2) = (a.mul::<M>(&u0), a.mul_xz::<M>(&u1), a.mul::<M>(&u2));
+        let delta = M::madd(m * rho_c, rho_c, c.rod_inertia) * inv_rho_t * inv_rho_t;
         let gp = m * rho_c * inv_rho_t;
         let x = Sym {
-            xx: u0.dot(&a0) + m + added,
-            yy: u1.dot(&a1) + delta,
-            zz: u2.dot(&a2) + delta,
-            xy: u0.dot(&a1),
-            xz: u0.dot(&a2),
-            yz: u1.dot(&a2),
+            xx: dot::<M>(&u0, &a0) + (m + added),
+            yy: dot_xz::<M>(&u1, &a1) + delta,
+            zz: dot::<M>(&u2, &a2) + delta,
+            xy: dot::<M>(&u0, &a1),
+            xz: dot::<M>(&u0, &a2),
+            yz: dot_xz::<M>(&u1, &a2),
         };
-        let x_inv = x.inverse_spd().ok_or_else(|| singular(time, k + 1))?;
+        let x_inv = x.inverse_spd::<M>().ok_or_else(|| singular(time, k + 1))?;
         let eps = delta - gp;
         let sigma = m + delta - 2.0 * gp;
+        let eps2 = eps * eps;
         // A_k = U (diag(d, sigma, sigma) - E X^-1 E) U^T.
         let local = Sym {
-            xx: added - added * added * x_inv.xx,
-            yy: sigma - eps * eps * x_inv.yy,
-            zz: sigma - eps * eps * x_inv.zz,
+            xx: M::madd(-added * added, x_inv.xx, added),
+            yy: M::madd(-eps2, x_inv.yy, sigma),
+            zz: M::madd(-eps2, x_inv.zz, sigma),
             xy: -added * eps * x_inv.xy,
             xz: -added * eps * x_inv.xz,
-            yz: -eps * eps * x_inv.yz,
+            yz: -eps2 * x_inv.yz,
         };
         // The bias: g_w = D_t^-1 g, y = X^-1 g_w, b_k = f1 + f2 - U (g_w - E y).
-        let f1 = chain.force.get(k) - c0 * m;
-        let f2 = b - a.mul(&t0);
-        let extra = chain.extra.get(k);
+        let f1 = axpy::<M>(&c0, -m, &force.get(k));
+        let f2 = b - a.mul::<M>(&t0);
+        let ext = extra.get(k);
         let ratio = rho_c * inv_rho_t;
         let g_w = V3::new(
-            u0.dot(&f1) + u0.dot(&f2) - spring,
-            u1.dot(&f1) * ratio + u1.dot(&f2) + u1.dot(&extra) * inv_rho_t,
-            u2.dot(&f1) * ratio + u2.dot(&f2) + u2.dot(&extra) * inv_rho_t,
+            dot::<M>(&u0, &f1) + dot::<M>(&u0, &f2) - spring,
+            M::madd(
+                dot_xz::<M>(&u1, &f1),
+                ratio,
+                M::madd(dot_xz::<M>(&u1, &ext), inv_rho_t, dot_xz::<M>(&u1, &f2)),
+            ),
+            M::madd(
+                dot::<M>(&u2, &f1),
+                ratio,
+                M::madd(dot::<M>(&u2, &ext), inv_rho_t, dot::<M>(&u2, &f2)),
+            ),
         );
-        let y = x_inv.mul(&g_w);
-        let r = V3::new(g_w.x - added * y.x, g_w.y - eps * y.y, g_w.z - eps * y.z);
-        b = f1 + f2 - (u0 * r.x + u1 * r.y + u2 * r.z);
-        a = local.in_frame(&u0, &u1, &u2);
+        let y = x_inv.mul::<M>(&g_w);
+        let r = V3::new(
+            M::madd(-added, y.x, g_w.x),
+            M::madd(-eps, y.y, g_w.y),
+            M::madd(-eps, y.z, g_w.z),
+        );
+        let ur = axpy::<M>(&u0, r.x, &axpy::<M>(&u1, r.y, &(u2 * r.z)));
+        b = f1 + f2 - ur;
+        a = local.in_frame::<M>(&u0, &u1, &u2);
         let art = &mut work[k];
         art.x_inv = x_inv;
         art.e_d = added;
@@ -322,6 +369,7 @@ pub(crate) fn solve(
         art.y = y;
         art.t0 = t0;
         art.inv_rho_t = inv_rho_t;
+        art.inv_cos = inv_cos;
         if want_tensions {
             art.a = a;
             art.b = b;
@@ -329,29 +377,84 @@ pub(crate) fn solve(
     }
     let mut acc = V3::zeros();
     let mut tensions = tensions;
-    for (k, art) in work.iter().enumerate() {
-        let cos_psi = chain.cos_psi[k];
-        let (u0, u1, u2) = (
-            chain.e.get(k),
-            chain.e_phi.get(k) / cos_psi,
-            chain.e_psi.get(k),
-        );
+    let (stretch_qdd, angles_qdd) = qdd.split_at_mut(1);
+    let (angles_qdd, rest_qdd) = angles_qdd.split_at_mut(2 * n);
+    let rest_qdd = &mut rest_qdd[..n - 1];
+    for (k, (art, angles)) in work.iter().zip(angles_qdd.chunks_exact_mut(2)).enumerate() {
+        let u0 = e.get(k);
+        let u1 = V3::new(e_phi.x[k] * art.inv_cos, 0.0, e_phi.z[k] * art.inv_cos);
+        let u2 = e_psi.get(k);
         if let Some(t) = tensions.as_deref_mut() {
-            t[k] = (art.b - art.a.mul(&acc)).dot(&u0);
+            t[k] = dot::<M>(&(art.b - art.a.mul::<M>(&acc)), &u0);
         }
         // w'' = y - a_loc + X^-1 E a_loc, z'' = D_t^-1 w''.
-        let a_loc = V3::new(u0.dot(&acc), u1.dot(&acc), u2.dot(&acc));
+        let a_loc = V3::new(
+            dot::<M>(&u0, &acc),
+            dot_xz::<M>(&u1, &acc),
+            dot::<M>(&u2, &acc),
+        );
         let ea = V3::new(art.e_d * a_loc.x, art.e_eps * a_loc.y, art.e_eps * a_loc.z);
-        let wdd = art.y - a_loc + art.x_inv.mul(&ea);
-        qdd[stretch_index(n, k)] = wdd.x;
-        qdd[1 + 2 * k] = wdd.y * art.inv_rho_t / cos_psi;
-        qdd[2 + 2 * k] = wdd.z * art.inv_rho_t;
-        acc += art.t0 + u0 * wdd.x + u1 * wdd.y + u2 * wdd.z;
+        let wdd = art.y - a_loc + art.x_inv.mul::<M>(&ea);
+        if k == 0 {
+            stretch_qdd[0] = wdd.x;
+        } else {
+            rest_qdd[k - 1] = wdd.x;
+        }
+        angles[0] = wdd.y * art.inv_rho_t * art.inv_cos;
+        angles[1] = wdd.z * art.inv_rho_t;
+        acc += axpy::<M>(
+            &u0,
+            wdd.x,
+            &axpy::<M>(&u1, wdd.y, &axpy::<M>(&u2, wdd.z, &art.t0)),
+        );
     }
     if let Some(t) = tensions {
-        t[n] = (chain.tip_force - acc * c.tip_mass).dot(&chain.e.get(n - 1));
+        t[n] = dot::<M>(
+            &axpy::<M>(&acc, -c.tip_mass, &chain.tip_force),
+            &chain.e.get(n - 1),
+        );
     }
     Ok(())
+}
+
+/// The stretches and their rates, of the state and of the element's force, by segment (segment
+/// 1's at index 0 of q, the others' at 2n + k), read without bounds checks in the sweep.
+struct Stretches<'a> {
+    first: [f64; 4],
+    s: &'a [f64],
+    sd: &'a [f64],
+    spring_s: &'a [f64],
+    spring_sd: &'a [f64],
+}
+
+impl<'a> Stretches<'a> {
+    #[inline(always)]
+    fn new(
+        n: usize,
+        q: &'a [f64],
+        qd: &'a [f64],
+        spring_s: &'a [f64],
+        spring_sd: &'a [f64],
+    ) -> Self {
+        let tail = |v: &'a [f64]| &v[2 * n..3 * n];
+        Stretches {
+            first: [q[0], qd[0], spring_s[0], spring_sd[0]],
+            s: tail(q),
+            sd: tail(qd),
+            spring_s: tail(spring_s),
+            spring_sd: tail(spring_sd),
+        }
+    }
+
+    /// `(s, s', spring's s, spring's s')` of segment k (k < n).
+    #[inline(always)]
+    fn get(&self, k: usize) -> (f64, f64, f64, f64) {
+        if k == 0 {
+            (self.first[0], self.first[1], self.first[2], self.first[3])
+        } else {
+            (self.s[k], self.sd[k], self.spring_s[k], self.spring_sd[k])
+        }
+    }
 }
 
 /// Stores `v` at (r, c) of the lower triangle of a row-major `dim x dim` matrix.

@@ -735,7 +735,7 @@ impl TetherModel {
             let c = self.distributed_constants();
             let report = self.prepare::<M, S>(time, q, qd, surroundings)?;
             let ws = &mut self.ws;
-            distributed::solve(
+            distributed::solve::<M>(
                 time,
                 &c,
                 &ws.chain,
@@ -1528,47 +1528,56 @@ mod tests {
     }
 
     /// Both builds of the recursive solver (plain multiply-adds, used where the processor has no
-    /// FMA, and fused ones) agree with the dense solver; the public entry points pick one of them
-    /// at run time, so the other is checked here.
+    /// FMA, and fused ones) agree with the dense solver, for both elasticities; the public entry
+    /// points pick one of them at run time, so the other is checked here.
     #[test]
     fn plain_and_fused_recursive_builds_match_dense() {
-        use crate::reference;
-        for n in [1usize, 2, 7, 30] {
-            let cfg = TetherConfig {
-                segments: n,
-                ..TetherConfig::table3()
-            };
-            let (cfg, flow) = reference::towed(&cfg, reference::StandInBody::accd()).unwrap();
-            let mut model = TetherModel::new(&cfg).unwrap();
-            let dim = cfg.dofs();
-            let (q, qd) = wavy_state(n);
-            let mut dense = vec![0.0; dim];
-            model
-                .accelerations_dense(0.5, &q, &qd, &flow, &mut dense)
-                .unwrap();
-            let scale = dense.iter().fold(0.0f64, |a, b| a.max(b.abs()));
-            let check = |a: &[f64], what: &str| {
-                let err = a
-                    .iter()
-                    .zip(&dense)
-                    .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
-                assert!(
-                    err <= 1e-10 * scale,
-                    "n = {n}, {what}: {err:e} of {scale:e}"
-                );
-            };
-            let mut plain = vec![0.0; dim];
-            model
-                .solve_recursive_body::<Plain, _>(0.5, &q, &qd, &flow, &mut plain, None, None)
-                .unwrap();
-            check(&plain, "plain");
-            let mut fused = vec![0.0; dim];
-            model
-                .solve_recursive_body::<crate::arith::Fused, _>(
-                    0.5, &q, &qd, &flow, &mut fused, None, None,
-                )
-                .unwrap();
-            check(&fused, "fused");
+        use crate::{reference, Elasticity};
+        for elasticity in [Elasticity::Attachment, Elasticity::Distributed] {
+            for n in [1usize, 2, 7, 30] {
+                let cfg = TetherConfig {
+                    segments: n,
+                    elasticity,
+                    ..TetherConfig::table3()
+                };
+                let (cfg, flow) = reference::towed(&cfg, reference::StandInBody::accd()).unwrap();
+                let mut model = TetherModel::new(&cfg).unwrap();
+                let dim = cfg.dofs();
+                let (mut q, mut qd) = wavy_state(n);
+                // The distributed model's stretches of segments 2 ... n, small and varied.
+                for k in (1..n).filter(|_| elasticity == Elasticity::Distributed) {
+                    q.push(0.01 * (0.5 * k as f64).sin());
+                    qd.push(0.02 * (0.8 * k as f64).cos());
+                }
+                assert_eq!(q.len(), dim);
+                let mut dense = vec![0.0; dim];
+                model
+                    .accelerations_dense(0.5, &q, &qd, &flow, &mut dense)
+                    .unwrap();
+                let scale = dense.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+                let check = |a: &[f64], what: &str| {
+                    let err = a
+                        .iter()
+                        .zip(&dense)
+                        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+                    assert!(
+                        err <= 1e-10 * scale,
+                        "{elasticity:?}, n = {n}, {what}: {err:e} of {scale:e}"
+                    );
+                };
+                let mut plain = vec![0.0; dim];
+                model
+                    .solve_recursive_body::<Plain, _>(0.5, &q, &qd, &flow, &mut plain, None, None)
+                    .unwrap();
+                check(&plain, "plain");
+                let mut fused = vec![0.0; dim];
+                model
+                    .solve_recursive_body::<crate::arith::Fused, _>(
+                        0.5, &q, &qd, &flow, &mut fused, None, None,
+                    )
+                    .unwrap();
+                check(&fused, "fused");
+            }
         }
     }
 }
