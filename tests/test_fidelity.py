@@ -227,3 +227,78 @@ def test_tension_and_sweep_studies_write_their_outputs_on_shortened_inputs(tmp_p
     assert "| 0 | drag relative, n 30, c_b per mass, C_n 0.35 | 26.4 / 24.4 |" in text
     for png in ("tension.png", "sweep.png"):
         assert (tmp_path / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_fig9_under_the_implicit_scheme_matches_the_explicit_reference(tmp_path):
+    # Every model at the default 0.01 s step (ten times RK4's) against RK4 at 1e-3 s, which the
+    # document carries beside it. Measured: statics and frequencies within 0.4 %, amplitudes
+    # 0.5 %, the release's first peak in the swing -0.9 % (the ring the step damps).
+    doc = runner.run(["fig9"], tmp_path, progress=False, scheme="implicit_axial")["fig9"]
+    assert doc["inputs"]["scheme"] == "implicit_axial" and doc["inputs"]["time_step"] == fidelity.IMPLICIT_TIME_STEP_S
+    assert doc["reference"]["time_step"] == fidelity.FIG9_TIME_STEP_S
+    tolerance = {"static_m": 1e-4, "mean_m": 0.002, "frequency_hz": 0.005, "amplitude_m": 0.01, "first_peak_m": 0.02}
+    for case, models in doc["difference"].items():
+        for key, diffs in models.items():
+            for metric, d in diffs.items():
+                assert abs(d) < tolerance[metric], (case, key, metric, d)
+    closed = doc["closed_forms"]
+    assert doc["cases"]["vertical"]["full-nk"]["static_m"] == pytest.approx(closed["full_nk_static_m"], rel=1e-6)
+    assert doc["cases"]["vertical"]["simplified"]["frequency_hz"] == pytest.approx(closed["simplified_frequency_hz"], rel=0.005)
+    md = (tmp_path / "fig9.md").read_text()
+    assert "implicit scheme at 0.01 s" in md and "largest difference from explicit RK4" in md
+
+
+def test_max_tension_under_the_implicit_scheme_matches_the_small_step_reference():
+    # The full model at n = 10: RK4 needs 0.002 s (its axial modes), the implicit scheme runs at
+    # 0.01 s. Measured: peaks 7e-7 apart, histories 4e-6 of the peak.
+    case = study.MaxTensionCase(duration_s=9.0)
+    runs = (fidelity.TensionRun("distributed", 10, 0.002), fidelity.TensionRun("distributed", 10, 0.01, scheme="implicit_axial"))
+    explicit, implicit = (study.simulate_max_tension(case, overrides=r.overrides()) for r in runs)
+    peak = explicit.tension.max()
+    assert implicit.tension.max() == pytest.approx(peak, rel=1e-5)
+    assert np.max(np.abs(np.interp(implicit.time, explicit.time, explicit.tension) - implicit.tension)) < 1e-4 * peak
+    assert implicit.time.size == explicit.time.size  # both sampled every 0.01 s
+
+
+def test_capture_replay_under_the_implicit_scheme_matches_the_small_step_reference():
+    # Wake, turbulence and flap commands on the full model at n = 10. Measured: peak -0.14 %,
+    # history within 0.42 % of the peak, against the full-vs-simplified difference of 0.46 %.
+    episode = {"flap_commands_deg": np.tile([6.0, 6.0, -4.0, -4.0], (20, 1)), "agent_step": 0.1, "wake_seed": 1}
+    (ta, a), (tb, b) = (
+        fidelity.replay_capture(episode, run, settle_s=5.0)
+        for run in (fidelity.TensionRun("distributed", 10, 0.002), fidelity.TensionRun("distributed", 10, 0.01, scheme="implicit_axial"))
+    )
+    assert tb.size == 200 and ta.size == 1000
+    assert b.max() == pytest.approx(a.max(), rel=0.005)
+    assert np.max(np.abs(np.interp(tb, ta, a) - b)) < 0.01 * a.max()
+
+
+def test_tension_study_under_the_implicit_scheme_runs_every_tether_at_the_default_step(tmp_path, monkeypatch):
+    short = {"flap_commands_deg": np.tile([4.0, 4.0, 0.0, 0.0], (5, 1)), "agent_step": 0.1, "wake_seed": 2,
+             "peak_tension_N": np.ones(5), "captured": False, "seed": 0}
+    monkeypatch.setattr(fidelity, "guidance_episode", lambda seed=0: short)
+    monkeypatch.setattr(fidelity, "CAPTURE_SETTLE_S", 2.0)
+    doc = runner.run_study("tension", tmp_path, progress=False, scheme="implicit_axial")
+    runs = [*doc["max_tension"].values(), *doc["capture"]["runs"].values()]
+    assert doc["scheme"] == "implicit_axial" and len(runs) == 10
+    assert all(r["scheme"] == "implicit_axial" and r["time_step"] == 0.01 for r in runs)
+    # The full model at n = 30 over the whole maximum-tension run (the explicit study: a 10 s window).
+    full = doc["max_tension"]["distributed-n30-dt0.01-implicit"]
+    assert full["duration_s"] == study.MaxTensionCase().duration_s and full["mean_tension_N"] is not None
+    assert doc["peak_ratios"]["max_tension_distributed_over_attachment_n30"] == pytest.approx(1.0, abs=0.01)
+    assert "## tension, implicit scheme at 0.01 s" in (tmp_path / "tension.md").read_text()
+
+
+def test_the_scheme_option_names_what_it_applies_to(tmp_path, capsys):
+    from accd_gym.cli import main
+
+    with pytest.raises(ValueError, match=r"scheme = 'rk2' is outside the allowed range \['explicit', 'implicit_axial'\]"):
+        runner.run(["fig9"], tmp_path, scheme="rk2")
+    with pytest.raises(ValueError, match="applies to the fig9 and tension studies only, not material"):
+        runner.run(["fig9", "material"], tmp_path, scheme="implicit_axial")
+    assert main(["study", "all", "--scheme", "implicit_axial", "--out", str(tmp_path), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "--scheme" in err and "not material, length, diameter, selected, max-tension" in err
+    assert not list(tmp_path.iterdir())  # refused before anything ran
+    assert main(["study", "fig9", "--scheme", "implicit_axial", "--out", str(tmp_path), "--quiet"]) == 0
+    assert json.loads((tmp_path / "fig9.json").read_text())["inputs"]["scheme"] == "implicit_axial"

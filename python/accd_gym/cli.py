@@ -25,7 +25,11 @@ def _study(args: argparse.Namespace) -> int:
     from accd_gym.studies import runner
 
     out = Path(args.out)
-    docs = runner.run(args.studies, out, progress=not args.quiet, dpi=args.dpi)
+    try:
+        runner.check_scheme(args.studies, args.scheme)
+    except ValueError as e:
+        raise _usage(f"--scheme: {e}".replace("invalid config: ", "")) from None
+    docs = runner.run(args.studies, out, progress=not args.quiet, dpi=args.dpi, scheme=args.scheme)
     for name, doc in docs.items():
         print(f"{name}: wrote {', '.join(str(out / f) for f in doc['figures'])}, {out / (name + '.json')}, {out / (name + '.md')}")
     if len(docs) > 1:
@@ -323,6 +327,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"one or more of: {', '.join(STUDIES)}, all (these), or the longer {', '.join(EXTRA_STUDIES)}")
     p.add_argument("--out", default="runs/study", help="output folder (default: runs/study)")
     p.add_argument("--dpi", type=int, default=90, help="resolution of the PNGs (default 90)")
+    p.add_argument("--scheme", choices=["explicit", "implicit_axial"], default="explicit",
+                   help="the tether's integration scheme for fig9 and tension: explicit RK4 at each run's stable "
+                        "step (default) or implicit_axial, every run at the default 0.01 s step")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_study)
     p = sub.add_parser("export-aero", help="write the default ACCD aerodynamic tables (JSON) to start your own")

@@ -20,7 +20,15 @@ each of those springs is, so two readings are run (:data:`FIG9_MODELS`):
   model with ``axial_stiffness = k / n``, ``axial_damping_per_mass = c1 / n``: a chain n times
   softer in series.
 
-RK4 at :data:`FIG9_TIME_STEP_S` (the chain's axial ring is 7 Hz), every step sampled.
+RK4 at :data:`FIG9_TIME_STEP_S` (the chain's axial ring is 7 Hz), every step sampled. With
+``scheme = "implicit_axial"`` (``accd-gym study fig9 --scheme implicit_axial``) every model runs
+the linearly implicit scheme at the default step :data:`IMPLICIT_TIME_STEP_S` instead, and the
+document compares each metric with the explicit reference's.
+
+**Schemes.** ``accd-gym study tension --scheme implicit_axial`` runs every tether of the tension
+study (:data:`IMPLICIT_TENSION_RUNS`, :data:`IMPLICIT_CAPTURE_RUNS`) with the implicit scheme at
+the default 0.01 s step: the full model at n = 30 over the whole maximum-tension run, in seconds
+of CPU instead of the explicit scheme's minutes for a window of it.
 """
 
 from __future__ import annotations
@@ -41,6 +49,11 @@ from accd_gym import files as _files
 FIG9_DURATION_S = 10.0
 #: RK4 step of the Fig. 9 runs, s (sampled every step).
 FIG9_TIME_STEP_S = 1e-3
+#: The integration schemes a study can run with: explicit RK4 (each run at its stable step) and
+#: the linearly implicit ``implicit_axial`` (every run at :data:`IMPLICIT_TIME_STEP_S`).
+SCHEMES = ("explicit", "implicit_axial")
+#: The step of every run under ``implicit_axial``: the tether's default, s.
+IMPLICIT_TIME_STEP_S = 0.01
 #: Case (b) starts from phi = psi = pi/4 (paper 2.3.6), rad.
 FIG9_RELEASE_ANGLE_RAD = math.pi / 4
 #: Case (a) is plotted over its first seconds (the axial ring; the level then stays), s.
@@ -87,11 +100,20 @@ FIG9_CASES = (
 )
 
 
-def fig9_tether(model: Fig9Model, case: str, time_step: float = FIG9_TIME_STEP_S) -> accd_gym.Tether:
+def _scheme(scheme: str) -> str:
+    if scheme not in SCHEMES:
+        raise ValueError(f"invalid config: scheme = {scheme!r} is outside the allowed range {list(SCHEMES)}")
+    return scheme
+
+
+def fig9_tether(
+    model: Fig9Model, case: str, time_step: float = FIG9_TIME_STEP_S, scheme: str = "explicit"
+) -> accd_gym.Tether:
     """Table 1's chain under ``model`` in the start state of ``case`` (``vertical`` or ``swing``),
-    at rest and unstretched, in vacuum."""
+    at rest and unstretched, in vacuum, integrated by ``scheme`` (one of :data:`SCHEMES`)."""
     table1 = accd_gym.tether_config("table1")
-    tether = accd_gym.Tether({"time_step": time_step, **model.overrides(table1)}, preset="table1")
+    overrides = {"time_step": time_step, "scheme": _scheme(scheme), **model.overrides(table1)}
+    tether = accd_gym.Tether(overrides, preset="table1")
     n = tether.segments
     if case == "vertical":
         tether.set_state(np.tile([0.0, 0.0, 1.0], (n, 1)))
@@ -104,11 +126,15 @@ def fig9_tether(model: Fig9Model, case: str, time_step: float = FIG9_TIME_STEP_S
 
 
 def simulate_fig9(
-    model: Fig9Model, case: str, duration_s: float = FIG9_DURATION_S, time_step: float = FIG9_TIME_STEP_S
+    model: Fig9Model,
+    case: str,
+    duration_s: float = FIG9_DURATION_S,
+    time_step: float = FIG9_TIME_STEP_S,
+    scheme: str = "explicit",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Runs one Fig. 9 case; returns (time in s, total elongation in m), sampled every step from
     t = 0."""
-    tether = fig9_tether(model, case, time_step)
+    tether = fig9_tether(model, case, time_step, scheme)
     steps = round(duration_s / time_step)
     time, elongation = np.empty(steps + 1), np.empty(steps + 1)
     time[0], elongation[0] = tether.time, tether.total_elongation
@@ -122,12 +148,31 @@ def _maxima(x: np.ndarray) -> np.ndarray:
     return np.nonzero((x[1:-1] > x[:-2]) & (x[1:-1] >= x[2:]))[0] + 1
 
 
+def _vertex(time: np.ndarray, x: np.ndarray, i: int) -> tuple[float, float]:
+    """(time, value) of the maximum near sample ``i`` (a local maximum of ``x``): the vertex of the
+    parabola through samples i - 1, i, i + 1, so that a peak is not read a sampling step off (the
+    implicit scheme's runs are sampled at 0.01 s, a fourteenth of the 7 Hz ring's period)."""
+    a, b, c = x[i - 1], x[i], x[i + 1]
+    curvature = a - 2.0 * b + c
+    if curvature >= 0.0:  # flat top
+        return float(time[i]), float(b)
+    offset = 0.5 * (a - c) / curvature
+    return float(time[i] + offset * (time[i + 1] - time[i])), float(b - 0.25 * (a - c) * offset)
+
+
+def _largest(time: np.ndarray, x: np.ndarray) -> float:
+    """The largest value of ``x``, at the vertex of its parabola where it is an interior sample."""
+    i = int(np.argmax(x))
+    return _vertex(time, x, i)[1] if 0 < i < x.size - 1 else float(x[i])
+
+
 def fig9_metrics(case: str, time: np.ndarray, elongation: np.ndarray) -> dict[str, float]:
     """Amplitude (m) and frequency (Hz) of the elongation's oscillation in one Fig. 9 run.
 
     * ``vertical``: the axial ring of the release. ``static_m`` the level it settles to (mean over
       the last second), ``first_peak_m``, ``amplitude_m`` = first peak minus the static level,
-      ``frequency_hz`` from the first two maxima.
+      ``frequency_hz`` from the first two maxima (each the vertex of the parabola through its
+      three samples).
     * ``swing``: the elongation follows the swing (it peaks as the chain passes the bottom, twice
       per swing). After :data:`FIG9_SWING_FROM_S`: ``amplitude_m`` half the range,
       ``mean_m`` the mean, ``frequency_hz`` from the spacing of the maxima of the elongation
@@ -136,9 +181,9 @@ def fig9_metrics(case: str, time: np.ndarray, elongation: np.ndarray) -> dict[st
     """
     if case == "vertical":
         static = float(np.mean(elongation[time >= time[-1] - 1.0]))
-        peaks = _maxima(elongation)
-        first = float(elongation[peaks[0]]) if peaks.size else float("nan")
-        freq = 1.0 / float(time[peaks[1]] - time[peaks[0]]) if peaks.size > 1 else float("nan")
+        peaks = [_vertex(time, elongation, i) for i in _maxima(elongation)[:2]]
+        first = peaks[0][1] if peaks else float("nan")
+        freq = 1.0 / (peaks[1][0] - peaks[0][0]) if len(peaks) > 1 else float("nan")
         return {"static_m": static, "first_peak_m": first, "amplitude_m": first - static, "frequency_hz": freq}
     late = time >= FIG9_SWING_FROM_S
     t, s = time[late], elongation[late]
@@ -151,7 +196,7 @@ def fig9_metrics(case: str, time: np.ndarray, elongation: np.ndarray) -> dict[st
         "mean_m": float(np.mean(s)),
         "amplitude_m": 0.5 * float(np.max(s) - np.min(s)),
         "frequency_hz": freq,
-        "first_peak_m": float(np.max(elongation[~late])),
+        "first_peak_m": _largest(time[~late], elongation[~late]),
     }
 
 
@@ -172,21 +217,33 @@ def fig9_closed_forms() -> dict[str, float]:
     }
 
 
-def run_fig9(out_dir: Path, dpi: int = 90, duration_s: float = FIG9_DURATION_S) -> tuple[dict[str, Any], str]:
+def run_fig9(
+    out_dir: Path, dpi: int = 90, duration_s: float = FIG9_DURATION_S, scheme: str = "explicit"
+) -> tuple[dict[str, Any], str]:
     """Runs Fig. 9 (both cases, every model), plots it side by side as the paper does, and returns
-    (the JSON document, the markdown) for :func:`accd_gym.studies.study.run_study` to write."""
+    (the JSON document, the markdown) for :func:`accd_gym.studies.study.run_study` to write.
+
+    ``scheme = "implicit_axial"``: every run with the implicit scheme at
+    :data:`IMPLICIT_TIME_STEP_S`; the document also holds the explicit reference's metrics
+    (``reference``, RK4 at :data:`FIG9_TIME_STEP_S`) and each metric's relative difference from
+    them (``difference``)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(12, 3.8), constrained_layout=True)
+    implicit = _scheme(scheme) == "implicit_axial"
+    time_step = IMPLICIT_TIME_STEP_S if implicit else FIG9_TIME_STEP_S
     results: dict[str, dict[str, Any]] = {}
+    reference: dict[str, dict[str, Any]] = {}
     for ax, (case, title) in zip(axes, FIG9_CASES):
-        results[case] = {}
+        results[case], reference[case] = {}, {}
         for model in FIG9_MODELS:
-            t, s = simulate_fig9(model, case, duration_s)
+            t, s = simulate_fig9(model, case, duration_s, time_step, scheme)
             results[case][model.key] = fig9_metrics(case, t, s)
+            if implicit:
+                reference[case][model.key] = fig9_metrics(case, *simulate_fig9(model, case, duration_s))
             ax.plot(t, s * 1e3, lw=0.9, label=model.label)
         if case == "vertical":
             ax.set_xlim(0.0, min(FIG9_VERTICAL_PLOT_S, duration_s))  # the ring; then it stays level
@@ -195,7 +252,10 @@ def run_fig9(out_dir: Path, dpi: int = 90, duration_s: float = FIG9_DURATION_S) 
         ax.set_title(title, fontsize=10)
         ax.grid(True, alpha=0.3)
     axes[0].legend(fontsize=8)
-    fig.suptitle("Fig. 9: comparison of elongation approaches (Table 1: n = 4, L = 10 m, 5 kg, k = 1e4 N/m, c1 = 20)")
+    fig.suptitle(
+        "Fig. 9: comparison of elongation approaches (Table 1: n = 4, L = 10 m, 5 kg, k = 1e4 N/m, c1 = 20)"
+        + (f"; implicit scheme at {time_step:g} s" if implicit else "")
+    )
     _files.save_figure(fig, out_dir / "fig9.png", dpi=dpi)
     plt.close(fig)
     closed = fig9_closed_forms()
@@ -205,7 +265,8 @@ def run_fig9(out_dir: Path, dpi: int = 90, duration_s: float = FIG9_DURATION_S) 
         "figures": ["fig9.png"],
         "inputs": {
             "preset": "table1",
-            "time_step": FIG9_TIME_STEP_S,
+            "scheme": scheme,
+            "time_step": time_step,
             "duration_s": duration_s,
             "models": {m.key: {"label": m.label, "overrides": m.overrides(accd_gym.tether_config("table1"))} for m in FIG9_MODELS},
         },
@@ -214,22 +275,33 @@ def run_fig9(out_dir: Path, dpi: int = 90, duration_s: float = FIG9_DURATION_S) 
         "paper": "the full model 'appears to have larger amplitude of oscillations' in both (a) and (b) (2.3.6)",
         "verdict": verdict,
     }
+    if implicit:
+        doc["reference"] = {"scheme": "explicit", "time_step": FIG9_TIME_STEP_S, "cases": reference}
+        doc["difference"] = {
+            case: {key: {k: m[k] / reference[case][key][k] - 1.0 for k in m} for key, m in models.items()}
+            for case, models in results.items()
+        }
     lines = [
-        "## fig9 (paper 2.3.6, Fig. 9)",
+        "## fig9 (paper 2.3.6, Fig. 9)" + (f", implicit scheme at {time_step:g} s" if implicit else ""),
         "",
         "![fig9](fig9.png)",
         "",
-        "| case | model | amplitude [mm] | frequency [Hz] | level [mm] | first peak [mm] |",
-        "|---|---|---|---|---|---|",
+        "| case | model | amplitude [mm] | frequency [Hz] | level [mm] | first peak [mm] |"
+        + (" largest difference from explicit RK4 at 0.001 s |" if implicit else ""),
+        "|---|---|---|---|---|---|" + ("---|" if implicit else ""),
     ]
     for case, _ in FIG9_CASES:
         for model in FIG9_MODELS:
             m = results[case][model.key]
             level = m.get("static_m", m.get("mean_m"))
-            lines.append(
+            row = (
                 f"| {case} | {model.label} | {m['amplitude_m'] * 1e3:.2f} | {m['frequency_hz']:.2f} | "
                 f"{level * 1e3:.2f} | {m['first_peak_m'] * 1e3:.2f} |"
             )
+            if implicit:
+                worst = max(doc["difference"][case][model.key].items(), key=lambda kv: abs(kv[1]))
+                row += f" {worst[1]:+.2%} ({worst[0]}) |"
+            lines.append(row)
     lines += [
         "",
         (
@@ -275,24 +347,29 @@ def fig9_verdict(results: dict[str, dict[str, Any]]) -> str:
 
 @dataclass(frozen=True)
 class TensionRun:
-    """One tether discretization of the tension study: ``elasticity``, ``segments`` and the RK4
-    ``time_step`` (s) it needs (the distributed model's stiff axial modes set it, see
-    :data:`TENSION_RUNS`); ``window_s`` limits the maximum-tension run to its first seconds
-    (None: the whole run)."""
+    """One tether discretization of the tension study: ``elasticity``, ``segments``, the
+    ``time_step`` (s) and the integration ``scheme`` (explicit RK4: the step the distributed
+    model's stiff axial modes need, see :data:`TENSION_RUNS`; ``implicit_axial``: the default
+    step); ``window_s`` limits the maximum-tension run to its first seconds (None: the whole
+    run)."""
 
     elasticity: str
     segments: int
     time_step: float
     window_s: Optional[float] = None
+    scheme: str = "explicit"
 
     @property
     def key(self) -> str:
-        """Short name, ``<elasticity>-n<segments>-dt<time_step>``."""
-        return f"{self.elasticity}-n{self.segments}-dt{self.time_step:g}"
+        """Short name, ``<elasticity>-n<segments>-dt<time_step>``, with ``-implicit`` appended
+        under the implicit scheme."""
+        suffix = "" if self.scheme == "explicit" else "-implicit"
+        return f"{self.elasticity}-n{self.segments}-dt{self.time_step:g}{suffix}"
 
     def overrides(self) -> dict[str, Any]:
         """Tether config overrides of this run."""
-        return {"elasticity": self.elasticity, "segments": self.segments, "time_step": self.time_step}
+        return {"elasticity": self.elasticity, "segments": self.segments, "time_step": self.time_step,
+                "scheme": self.scheme}
 
 
 #: The runs of the tension study. With Table 3's axial damping (c_k = 100 per kg) the distributed
@@ -312,6 +389,20 @@ TENSION_RUNS = (
     TensionRun("distributed", 5, 0.005),
     TensionRun("distributed", 10, 0.002),
     TensionRun("distributed", 30, 2.5e-4, window_s=TENSION_N30_WINDOW_S),
+)
+#: The runs of ``accd-gym study tension --scheme implicit_axial``: both elasticities at n = 5, 10,
+#: 30, every one at the default step with the implicit scheme and over the whole run.
+IMPLICIT_TENSION_RUNS = tuple(
+    TensionRun(elasticity, n, IMPLICIT_TIME_STEP_S, scheme="implicit_axial")
+    for elasticity in ("attachment", "distributed")
+    for n in (30, 10, 5)
+)
+#: The capture runs under the implicit scheme: both elasticities at n = 30 and 10, at the env's
+#: step.
+IMPLICIT_CAPTURE_RUNS = tuple(
+    TensionRun(elasticity, n, IMPLICIT_TIME_STEP_S, scheme="implicit_axial")
+    for n in (30, 10)
+    for elasticity in ("attachment", "distributed")
 )
 #: The capture episode of the tension study: the default env (wake and turbulence) flown by the
 #: default guidance baseline from this reset seed (it captures after 16.8 s).
@@ -415,10 +506,15 @@ def tension_ratios(max_runs: dict[str, Any], cap_runs: dict[str, Any]) -> dict[s
     return out
 
 
-def run_tension(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[dict[str, Any], str]:
+def run_tension(
+    out_dir: Path, dpi: int = 90, progress: bool = True, scheme: str = "explicit"
+) -> tuple[dict[str, Any], str]:
     """The maximum-tension case (:func:`accd_gym.studies.study.simulate_max_tension`) and one
     capture episode's tension (:func:`replay_capture`) under both elasticities, the peak ratios,
-    and what they say about the paper's factor of safety of 3. Writes ``tension.png``."""
+    and what they say about the paper's factor of safety of 3. Writes ``tension.png``.
+
+    ``scheme``: ``explicit`` runs :data:`TENSION_RUNS` and :data:`CAPTURE_RUNS`,
+    ``implicit_axial`` :data:`IMPLICIT_TENSION_RUNS` and :data:`IMPLICIT_CAPTURE_RUNS`."""
     import time as clock
 
     import matplotlib
@@ -428,10 +524,13 @@ def run_tension(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[di
 
     from accd_gym.studies import study
 
+    implicit = _scheme(scheme) == "implicit_axial"
+    tension_runs = IMPLICIT_TENSION_RUNS if implicit else TENSION_RUNS
+    capture_runs = IMPLICIT_CAPTURE_RUNS if implicit else CAPTURE_RUNS
     base = study.MaxTensionCase()
     fig, axes = plt.subplots(1, 2, figsize=(12, 3.8), constrained_layout=True)
     max_runs: dict[str, Any] = {}
-    for run in TENSION_RUNS:
+    for run in tension_runs:
         case = study.MaxTensionCase(
             duration_s=run.window_s if run.window_s is not None else base.duration_s, time_step=run.time_step
         )
@@ -444,6 +543,7 @@ def run_tension(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[di
             "elasticity": run.elasticity,
             "segments": run.segments,
             "time_step": run.time_step,
+            "scheme": run.scheme,
             "duration_s": case.duration_s,
             "cpu_s": cpu,
             "cpu_s_per_simulated_s": cpu / case.duration_s,
@@ -456,7 +556,7 @@ def run_tension(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[di
         axes[0].plot(result.time, result.tension / 1e3, lw=0.9, label=run.key)
     episode = guidance_episode()
     cap_runs: dict[str, Any] = {}
-    for run in CAPTURE_RUNS:
+    for run in capture_runs:
         cpu = clock.process_time()
         t, tension = replay_capture(episode, run, settle_s=CAPTURE_SETTLE_S)
         cpu = clock.process_time() - cpu
@@ -464,6 +564,7 @@ def run_tension(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[di
             "elasticity": run.elasticity,
             "segments": run.segments,
             "time_step": run.time_step,
+            "scheme": run.scheme,
             "cpu_s": cpu,
             "simulated_s": CAPTURE_SETTLE_S + float(t[-1]),
             "cpu_s_per_simulated_s": cpu / (CAPTURE_SETTLE_S + float(t[-1])),
@@ -483,7 +584,10 @@ def run_tension(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[di
         ax.set_ylabel("tension at the attachment [kN]")
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7)
-    fig.suptitle("Attachment tension: simplified (attachment) vs full (distributed) elasticity")
+    fig.suptitle(
+        "Attachment tension: simplified (attachment) vs full (distributed) elasticity"
+        + (f"; implicit scheme at {IMPLICIT_TIME_STEP_S:g} s" if implicit else "")
+    )
     _files.save_figure(fig, out_dir / "tension.png", dpi=dpi)
     plt.close(fig)
 
@@ -493,6 +597,7 @@ def run_tension(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[di
     peak = max(simplified, key=lambda r: r["segments"])["peak_tension_N"]
     doc = {
         "study": "tension",
+        "scheme": scheme,
         "figures": ["tension.png"],
         "max_tension": max_runs,
         "capture": {
@@ -508,7 +613,7 @@ def run_tension(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[di
         "safety_factor_on_peak": breaking / peak,
     }
     lines = [
-        "## tension",
+        "## tension" + (f", implicit scheme at {IMPLICIT_TIME_STEP_S:g} s" if implicit else ""),
         "",
         "![tension](tension.png)",
         "",
@@ -855,13 +960,18 @@ def run_sweep(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[dict
     return doc, "\n".join(lines)
 
 
-def run_study(study: str, out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[dict[str, Any], str]:
+def run_study(
+    study: str, out_dir: Path, dpi: int = 90, progress: bool = True, scheme: str = "explicit"
+) -> tuple[dict[str, Any], str]:
     """Runs ``fig9``, ``tension`` or ``sweep`` into ``out_dir`` (its PNGs); returns (the JSON
-    document, the markdown) for :func:`accd_gym.studies.study.run_study` to write."""
+    document, the markdown) for :func:`accd_gym.studies.study.run_study` to write. ``scheme``
+    (one of :data:`SCHEMES`) is the tether's integration scheme of ``fig9`` and ``tension``."""
+    if study not in ("fig9", "tension") and _scheme(scheme) != "explicit":
+        raise ValueError(f"invalid config: scheme = {scheme!r} applies to the fig9 and tension studies only, not {study!r}")
     if study == "fig9":
-        return run_fig9(out_dir, dpi=dpi)
+        return run_fig9(out_dir, dpi=dpi, scheme=scheme)
     if study == "tension":
-        return run_tension(out_dir, dpi=dpi, progress=progress)
+        return run_tension(out_dir, dpi=dpi, progress=progress, scheme=scheme)
     if study == "sweep":
         return run_sweep(out_dir, dpi=dpi, progress=progress)
     raise ValueError(f"unknown study {study!r}")

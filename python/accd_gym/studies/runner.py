@@ -61,6 +61,7 @@ def run_study(
     commands: Optional[Sequence[CommandPhase]] = None,
     dpi: int = 90,
     max_tension: MaxTensionCase = MaxTensionCase(),
+    scheme: str = "explicit",
 ) -> dict[str, Any]:
     """Runs one study and writes ``<figure>.png``, ``<study>.json`` and ``<study>.md`` into ``out_dir``.
 
@@ -71,14 +72,17 @@ def run_study(
         commands: flap commands for the commanded studies (default :func:`fig12_commands`).
         dpi: resolution of the PNGs.
         max_tension: inputs of the ``max-tension`` study.
+        scheme: the tether's integration scheme of ``fig9`` and ``tension`` (one of
+            :data:`accd_gym.studies.fidelity.SCHEMES`; the other studies take ``explicit`` only).
 
     Returns:
         The JSON document written: per figure, per case, the metrics and the paper's numbers.
     """
+    check_scheme([study], scheme)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     if study in ("fig9", *EXTRA_STUDIES):
-        doc, md = fidelity.run_study(study, out_dir, dpi=dpi, progress=progress)
+        doc, md = fidelity.run_study(study, out_dir, dpi=dpi, progress=progress, scheme=scheme)
     elif study == "max-tension":
         case = max_tension
         samples = round(case.duration_s / (max(1, round(SAMPLE_INTERVAL_S / case.time_step)) * case.time_step))
@@ -129,22 +133,43 @@ def run_study(
     return doc
 
 
+#: The studies that take ``scheme = "implicit_axial"``.
+SCHEME_STUDIES = ("fig9", "tension")
+
+
+def check_scheme(names: Sequence[str], scheme: str) -> None:
+    """Raises ValueError naming the scheme and the allowed values, or the studies of ``names``
+    (``all`` standing for :data:`STUDIES`) that do not take it."""
+    names = [*(STUDIES if "all" in names else ()), *(n for n in names if n != "all")]
+    if scheme not in fidelity.SCHEMES:
+        raise ValueError(f"invalid config: scheme = {scheme!r} is outside the allowed range {list(fidelity.SCHEMES)}")
+    others = [n for n in names if n not in SCHEME_STUDIES]
+    if scheme != "explicit" and others:
+        raise ValueError(
+            f"invalid config: scheme = {scheme!r} applies to the {' and '.join(SCHEME_STUDIES)} studies only, "
+            f"not {', '.join(others)}; run those without it"
+        )
+
+
 def run(
     studies: Sequence[str],
     out_dir: Path,
     progress: bool = True,
     dpi: int = 90,
+    scheme: str = "explicit",
 ) -> dict[str, dict[str, Any]]:
     """Runs ``studies`` (names from :data:`STUDIES` or :data:`EXTRA_STUDIES`, or ``all`` for every
     one of :data:`STUDIES`) into ``out_dir``; with more than one, also writes ``summary.md`` (every
-    study's tables). Returns {study: its JSON document}."""
+    study's tables). ``scheme``: the tether's integration scheme, ``explicit`` or, for the studies
+    of :data:`SCHEME_STUDIES` only, ``implicit_axial``. Returns {study: its JSON document}."""
     names = list(dict.fromkeys([*(STUDIES if "all" in studies else ()), *(s for s in studies if s != "all")]))
     for name in names:
         if name not in STUDIES + EXTRA_STUDIES:
             raise ValueError(f"unknown study {name!r}; choose from {', '.join(STUDIES + EXTRA_STUDIES)} or all")
+    check_scheme(names, scheme)
     docs = {}
     for name in names:
-        docs[name] = run_study(name, out_dir, progress=progress, dpi=dpi)
+        docs[name] = run_study(name, out_dir, progress=progress, dpi=dpi, scheme=scheme)
     if len(names) > 1:
         parts = [(Path(out_dir) / f"{n}.md").read_text() for n in names]
         _files.write_text(Path(out_dir) / "summary.md", "# Design studies (paper section 4)\n\n" + "\n".join(parts))
