@@ -141,3 +141,29 @@ print('ok')
     assert done.returncode == 0 and done.stdout.strip().endswith("ok"), done.stderr[-3000:]
     assert "--ray-chunk sets the episodes per Ray task; it needs --ray" in done.stderr
     assert done.stderr.count("needs the ray extra") == 3 and "pip install 'accd-gym[ray]'" in done.stderr
+
+
+def test_validation_episodes_are_training_episodes_and_never_the_held_out_ones(tmp_path):
+    import json
+
+    from accd_gym.evals import sweep
+    from accd_gym.evals.episodes import EVAL_BASE_SEED, VALIDATION_BASE_SEED
+
+    wake, base = sweep.eval_episodes("validation")
+    assert wake == accd_gym.VALIDATION_WAKE_SEEDS and len(wake) == len(accd_gym.HELD_OUT_WAKE_SEEDS)
+    assert wake.start in accd_gym.TRAINING_WAKE_SEEDS and wake[-1] in accd_gym.TRAINING_WAKE_SEEDS
+    assert not set(wake) & set(accd_gym.HELD_OUT_WAKE_SEEDS)
+    # Initial conditions other than the held-out evaluation's, for every episode index in use.
+    assert abs(base - EVAL_BASE_SEED) >= len(wake)
+    assert sweep.eval_episodes("held_out") == (accd_gym.HELD_OUT_WAKE_SEEDS, EVAL_BASE_SEED)
+    train = tmp_path / "ppo.json"
+    train.write_text(json.dumps({"algo": "ppo", "total_timesteps": 64, "num_envs": 4}))
+    assert sweep.validate_config({"train_config": str(train)})["eval_split"] == "held_out"
+    assert sweep.validate_config({"train_config": str(train), "eval_split": "validation"})["eval_split"] == "validation"
+    with pytest.raises(accd_gym.ConfigError, match=r"`eval_split` = 'test' is outside the allowed range \['held_out', 'validation'\]"):
+        sweep.validate_config({"train_config": str(train), "eval_split": "test"})
+    with pytest.raises(accd_gym.ConfigError, match=r"`episodes` = 1001 is outside the allowed range 1..1000 \(validation"):
+        sweep.validate_config({"train_config": str(train), "eval_split": "validation", "episodes": 1001})
+    md = sweep.summary_markdown({"config": {"train_config": "x", "episodes": 8, "eval_split": "validation"},
+                                 "trials": [], "failed": [], "aggregates": [], "wall_time_s": 1.0})
+    assert "Validation: 8 episodes of training wake seeds" in md

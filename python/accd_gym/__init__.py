@@ -15,7 +15,8 @@ Public API:
   the native vector env (:class:`InAirCaptureVectorEnv`); :class:`AccdVecEnv` -- the native
   stable-baselines3 VecEnv (imports stable-baselines3 on first use).
 * :func:`env_config`, :func:`default_config` -- validated environment configurations;
-  :data:`TRAINING_WAKE_SEEDS`, :data:`HELD_OUT_WAKE_SEEDS` -- the wake-seed sets;
+  :data:`TRAINING_WAKE_SEEDS`, :data:`HELD_OUT_WAKE_SEEDS`, :data:`VALIDATION_WAKE_SEEDS` -- the
+  wake-seed sets (validation: training wake seeds that tuning evaluates on);
   :func:`reward_bounds`.
 * :class:`CaptureSim` -- one capture episode's physics (tether, 6-DoF capturing device, towing
   aircraft, RLV boom) for scripted runs; :func:`mix_flaps` turns pitch/yaw/roll into flaps.
@@ -49,7 +50,7 @@ from accd_gym._core import reward_bounds as _core_reward_bounds
 from accd_gym import _aliases
 from accd_gym.errors import AccdError, ConfigError, OutputError, SimulationError, StateError
 from accd_gym.envs.config import EXACT_AIR_SCHEME, default_config, env_config
-from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, PARAMETER_NAMES, TRAINING_WAKE_SEEDS
+from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, PARAMETER_NAMES, TRAINING_WAKE_SEEDS, VALIDATION_WAKE_SEEDS
 from accd_gym.envs.env import InAirCaptureEnv
 from accd_gym.envs.vector import InAirCaptureVectorEnv
 from accd_gym.replays.recording import Recording, RecordEpisode, record_episodes
@@ -109,6 +110,7 @@ __all__ = [
     "TIERS",
     "LqrPolicy",
     "TRAINING_WAKE_SEEDS",
+    "VALIDATION_WAKE_SEEDS",
     "default_config",
     "env_config",
     "reward_bounds",

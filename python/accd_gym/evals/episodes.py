@@ -20,6 +20,9 @@ from accd_gym.errors import ConfigError
 
 #: Base seed of evaluation episodes (initial conditions and RLV motion); fixed so runs compare.
 EVAL_BASE_SEED: int = 20_240_607
+#: Base seed of validation episodes (with :data:`accd_gym.envs.task.VALIDATION_WAKE_SEEDS`):
+#: initial conditions other than the held-out evaluation's.
+VALIDATION_BASE_SEED: int = 7_340_033
 
 
 @dataclass

@@ -18,7 +18,13 @@ seeds                training seeds (default ``[0, 1, 2, 3, 4]``)
 grid                 ``{"dotted.key": [values...]}`` of the training config, e.g.
                      ``{"algo_kwargs.learning_rate": [0.0003, 0.001]}`` (default none)
 timesteps            total steps per trial (default: the training config's)
-episodes             held-out evaluation episodes per trial (default 200)
+episodes             evaluation episodes per trial (default 200)
+eval_split           which episodes evaluate the trials: ``"held_out"`` (default: the first
+                     ``episodes`` held-out wake seeds, the benchmark's episodes) or
+                     ``"validation"`` (wake seeds of the training set,
+                     :data:`accd_gym.envs.task.VALIDATION_WAKE_SEEDS`, from base seed
+                     :data:`accd_gym.evals.episodes.VALIDATION_BASE_SEED`): tune on
+                     ``validation``, so that the held-out episodes stay unseen until the benchmark
 num_envs             evaluation batch size (default 16)
 eval_env             env overrides of the evaluation (default: the training config's ``env``)
 cpus_per_trial       CPUs Tune reserves per trial, also the threads stepping its envs (default 1)
@@ -58,6 +64,7 @@ DEFAULTS: dict[str, Any] = {
     "grid": {},
     "timesteps": None,
     "episodes": 200,
+    "eval_split": "held_out",
     "num_envs": 16,
     "eval_env": None,
     "cpus_per_trial": 1,
@@ -118,10 +125,12 @@ def validate_config(raw: Any) -> dict[str, Any]:
         v = cfg[key]
         if not isinstance(v, int) or isinstance(v, bool) or v < low:
             raise ConfigError(f"invalid config: `{key}` = {v!r} is outside the allowed range: an integer >= {low}")
-    from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS
-
-    if cfg["episodes"] > len(HELD_OUT_WAKE_SEEDS):
-        raise ConfigError(f"invalid config: `episodes` = {cfg['episodes']} is outside the allowed range 1..{len(HELD_OUT_WAKE_SEEDS)} (held-out wake seeds)")
+    if cfg["eval_split"] not in EVAL_SPLITS:
+        raise ConfigError(f"invalid config: `eval_split` = {cfg['eval_split']!r} is outside the allowed range {list(EVAL_SPLITS)}")
+    wake_seeds, _ = eval_episodes(cfg["eval_split"])
+    if cfg["episodes"] > len(wake_seeds):
+        raise ConfigError(f"invalid config: `episodes` = {cfg['episodes']} is outside the allowed range 1..{len(wake_seeds)} "
+                          f"({cfg['eval_split']} wake seeds)")
     t = cfg["timesteps"]
     if t is not None and (not isinstance(t, int) or isinstance(t, bool) or t < 1):
         raise ConfigError(f"invalid config: `timesteps` = {t!r} is outside the allowed range: null or an integer >= 1")
@@ -135,6 +144,23 @@ def validate_config(raw: Any) -> dict[str, Any]:
     for point in grid_points(grid):
         train_config(cfg, point, seeds[0])  # raises ConfigError naming the bad field
     return cfg
+
+
+#: The episode sets a sweep can evaluate on (``eval_split``).
+EVAL_SPLITS = ("held_out", "validation")
+
+
+def eval_episodes(split: str) -> tuple[range, int]:
+    """(wake seeds, base seed) of the evaluation episodes of ``split`` (one of :data:`EVAL_SPLITS`):
+    episode k has wake seed ``wake_seeds[k]`` and seed ``base + k``."""
+    from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, VALIDATION_WAKE_SEEDS
+    from accd_gym.evals.episodes import EVAL_BASE_SEED, VALIDATION_BASE_SEED
+
+    if split == "held_out":
+        return HELD_OUT_WAKE_SEEDS, EVAL_BASE_SEED
+    if split == "validation":
+        return VALIDATION_WAKE_SEEDS, VALIDATION_BASE_SEED
+    raise ConfigError(f"invalid config: `eval_split` = {split!r} is outside the allowed range {list(EVAL_SPLITS)}")
 
 
 def grid_points(grid: dict[str, list[Any]]) -> list[dict[str, Any]]:
@@ -182,14 +208,14 @@ def trial_name(seed: int, point: dict[str, Any]) -> str:
 
 
 def _trial(params: dict[str, Any]) -> None:
-    """One Tune trial: trains into its own run folder, evaluates on the held-out seeds, reports."""
+    """One Tune trial: trains into its own run folder, evaluates on the sweep's episodes
+    (``eval_split``), reports."""
     from ray import tune
 
     from accd_gym.learning import rllib, training
     from accd_gym.evals.episodes import run_episodes
     from accd_gym.evals.evaluation import summarize
     from accd_gym.evals.policies import load_policy
-    from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS
 
     sweep, point, seed = params["sweep"], params["point"], params["seed"]
     cfg = train_config(sweep, point, seed)
@@ -204,8 +230,9 @@ def _trial(params: dict[str, Any]) -> None:
     episodes = sweep["episodes"]
     env = cfg["env"] if sweep["eval_env"] is None else sweep["eval_env"]
     policy = load_policy(str(run))
-    eps = run_episodes(policy, episodes, wake_seeds=list(HELD_OUT_WAKE_SEEDS[:episodes]), num_envs=sweep["num_envs"],
-                       num_threads=sweep["cpus_per_trial"], config=env)
+    wake_seeds, base_seed = eval_episodes(sweep["eval_split"])
+    eps = run_episodes(policy, episodes, seed=base_seed, wake_seeds=list(wake_seeds[:episodes]),
+                       num_envs=sweep["num_envs"], num_threads=sweep["cpus_per_trial"], config=env)
     s = summarize(eps)
     doc = {"trial": name, "seed": seed, "point": point, "trainer": "rllib" if rllib.is_rllib_config(cfg) else "sb3",
            "algo": cfg["algo"], "timesteps": meta["timesteps"], "status": meta["status"], "train_wall_s": round(train_s, 2),
@@ -236,11 +263,17 @@ def aggregate(trials: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
+def _episodes_line(cfg: dict[str, Any]) -> str:
+    if cfg.get("eval_split", "held_out") == "validation":
+        return (f"Validation: {cfg['episodes']} episodes of training wake seeds (`VALIDATION_WAKE_SEEDS`), the same "
+                "episodes for every trial; the held-out set is not used.")
+    return f"Held-out evaluation: the first {cfg['episodes']} held-out wake seeds, the same episodes for every trial."
+
+
 def summary_markdown(doc: dict[str, Any]) -> str:
     """The sweep's table: every trial, then the aggregates over seeds per grid point."""
     lines = [f"# Sweep: {len(doc['trials'])} trials of `{doc['config']['train_config']}`", "",
-             f"Held-out evaluation: the first {doc['config']['episodes']} held-out wake seeds, the same episodes for every "
-             f"trial. Wall time {doc['wall_time_s']:.0f} s.", "",
+             _episodes_line(doc["config"]) + f" Wall time {doc['wall_time_s']:.0f} s.", "",
              "| trial | seed | grid point | trainer | steps | capture rate | 95 % CI (Wilson) | miss median (m) | training steps/s |",
              "|---|---|---|---|---|---|---|---|---|"]
     for t in doc["trials"]:
