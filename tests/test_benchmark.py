@@ -261,3 +261,82 @@ def test_a_residual_job_keeps_its_recipes_env_options(tmp_path, monkeypatch):
         benchmark.run_job(job, str(tmp_path), 4, 4)
     env = seen[0]["env"]
     assert env["tier"] == "hard" and env["residual"]["base"] == "lqr" and env["history"] == 4
+
+
+def _interrupt_benchmark_at_a_checkpoint(cfg_path, out, newer_than=0):
+    """Runs ``accd-gym benchmark`` in a child process and sends it SIGINT once its training run
+    has a checkpoint of more than ``newer_than`` steps; returns (exit code, stderr)."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from accd_gym.learning import training
+
+    run = out / "runs" / "nominal_ppo_seed0"
+    child = subprocess.Popen([sys.executable, "-m", "accd_gym", "benchmark", "--config", str(cfg_path), "--out", str(out)],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline:
+        assert child.poll() is None, child.stderr.read()
+        latest = training.latest_checkpoint(run) if run.is_dir() else None
+        if latest is not None and latest["steps"] > newer_than:
+            break
+        time.sleep(0.1)
+    child.send_signal(signal.SIGINT)
+    _, err = child.communicate(timeout=300)
+    return child.returncode, err
+
+
+def test_ctrl_c_on_the_command_exits_130_with_the_report_and_the_same_command_resumes(tmp_path):
+    # The command itself, in a child process: Ctrl+C while training writes the checkpoint, the
+    # report of what is finished, and exits 130; the same command again continues that run.
+    train = tmp_path / "tiny_ppo.json"
+    train.write_text(json.dumps({"algo": "ppo", "total_timesteps": 10**7, "num_envs": 4, "num_threads": 1,
+                                 "env": {"capture_window": 5.0},
+                                 "algo_kwargs": {"n_steps": 32, "batch_size": 64, "n_epochs": 1},
+                                 "policy_kwargs": {"net_arch": [16, 16]}, "checkpoint_every": 256}))
+    cfg = tmp_path / "benchmark.json"
+    cfg.write_text(json.dumps({"tiers": ["nominal"], "baselines": ["zero"], "episodes": 4, "num_envs": 4,
+                               "learners": {"ppo": {"train_config": str(train), "seeds": [0], "timesteps": 10**7}}}))
+    out = tmp_path / "out"
+    rc, err = _interrupt_benchmark_at_a_checkpoint(cfg, out)
+    assert rc == 130, err
+    assert "benchmark interrupted" in err and "run the same command again to resume" in err and "Traceback" not in err
+    report = (out / "benchmark.md").read_text()
+    assert "## Missing / unfinished runs" in report and "nominal_ppo_seed0" in report
+    run = out / "runs" / "nominal_ppo_seed0"
+    first = json.loads((run / "run.json").read_text())
+    assert first["status"] == "interrupted" and first["timesteps"] > 0
+    rc, err = _interrupt_benchmark_at_a_checkpoint(cfg, out, newer_than=first["timesteps"])
+    assert rc == 130, err
+    second = json.loads((run / "run.json").read_text())
+    assert second["resumed"][0]["from_steps"] == first["timesteps"] and second["timesteps"] > first["timesteps"]
+
+
+def test_a_result_is_keyed_by_the_whole_package_and_the_recipes_bytes_not_their_paths(tmp_path):
+    import dataclasses
+    import shutil
+
+    import accd_gym
+
+    package = Path(accd_gym.__file__).parent
+    sources = {p.relative_to(package).as_posix() for p in benchmark.digest_sources()}
+    # The env wrappers and controllers a learned policy runs with count, not only the benchmark's own code.
+    assert {"envs/residual.py", "control/lqr.py", "evals/benchmark.py", "learning/training.py"} <= sources
+    assert any(s.startswith("_core") for s in sources)
+    # The same recipe elsewhere (a moved or fresh checkout) gives the same key and the same claim.
+    cfg = benchmark.load_config(ROOT / "training" / "benchmark.json", quick=True)
+    job = benchmark.jobs(cfg)[0]
+    moved = tmp_path / "elsewhere" / Path(job.train_config).name
+    moved.parent.mkdir()
+    shutil.copy(job.train_config, moved)
+    assert benchmark.job_key(job, 4, 4) == benchmark.job_key(dataclasses.replace(job, train_config=str(moved)), 4, 4)
+    out = tmp_path / "out"
+    out.mkdir()
+    benchmark._claim(out, cfg)
+    spec = dict(cfg["learners"]["ppo"], train_config=str(moved))
+    benchmark._claim(out, {**cfg, "learners": {**cfg["learners"], "ppo": spec}})  # accepted
+    moved.write_text(moved.read_text() + "\n")  # an edited recipe is another config
+    with pytest.raises(ConfigError, match=r"differs in \['learners'\]"):
+        benchmark._claim(out, {**cfg, "learners": {**cfg["learners"], "ppo": spec}})

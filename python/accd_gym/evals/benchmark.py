@@ -280,16 +280,25 @@ RESULT_FILE = "result.json"
 
 
 @functools.lru_cache(maxsize=1)
+def digest_sources() -> list[Path]:
+    """The files :func:`build_digest` hashes: the native extension and every Python source of the
+    package (envs, control, learning, evals, ...), in a fixed order."""
+    from accd_gym import _core
+
+    package = Path(_core.__file__).parent
+    return [Path(_core.__file__), *sorted(package.rglob("*.py"))]
+
+
 def build_digest() -> str:
     """SHA-256 of the code a result comes from: the native extension's bytes and the package's
     Python sources (the version number alone does not change with a rebuild)."""
     import hashlib
 
-    from accd_gym import _core
-
-    h = hashlib.sha256(Path(_core.__file__).read_bytes())
-    for src in sorted(Path(__file__).parent.rglob("*.py")):
-        h.update(src.relative_to(Path(__file__).parent).as_posix().encode())
+    sources = digest_sources()
+    package = sources[0].parent
+    h = hashlib.sha256()
+    for src in sources:
+        h.update(src.relative_to(package).as_posix().encode())
         h.update(src.read_bytes())
     return h.hexdigest()
 
@@ -298,12 +307,32 @@ def job_key(job: Job, episodes: int, num_envs: int) -> dict[str, Any]:
     """What a job's result depends on: the job, the training config's bytes (SHA-256), the tier's
     configuration, the code (:func:`build_digest`), the evaluation's episodes and batch size. A
     stored result with another key is not reused."""
-    import hashlib
-
     from accd_gym.envs.tiers import tier as _tier
 
-    return {"job": dict(job.__dict__), "train_config_sha256": hashlib.sha256(Path(job.train_config).read_bytes()).hexdigest(),
+    # The recipe by its name and bytes, not its path: a benchmark folder stays valid for a moved
+    # or freshly cloned checkout.
+    return {"job": {**job.__dict__, "train_config": Path(job.train_config).name},
+            "train_config_sha256": _sha256(job.train_config),
             "tier_config": _tier(job.tier).config(), "build": build_digest(), "episodes": episodes, "num_envs": num_envs}
+
+
+def _sha256(path: str | Path) -> str:
+    import hashlib
+
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def _portable(config: dict[str, Any]) -> dict[str, Any]:
+    """``config`` with every learner's recipe path replaced by its file name and SHA-256: what
+    :func:`_claim` records and compares, independent of where the checkout lies."""
+    out = json.loads(json.dumps(config))
+    for spec in out.get("learners", {}).values():
+        recipe = spec.get("train_config")
+        if isinstance(recipe, dict):
+            spec["train_config"] = {t: {"file": Path(p).name, "sha256": _sha256(p)} for t, p in recipe.items()}
+        elif isinstance(recipe, str):
+            spec["train_config"] = {"file": Path(recipe).name, "sha256": _sha256(recipe)}
+    return out
 
 
 def _stored_result(run: Path, key: dict[str, Any]) -> Optional[dict[str, Any]]:
@@ -442,10 +471,12 @@ CONFIG_FILE = "benchmark_config.json"
 
 def _claim(out: Path, config: dict[str, Any]) -> None:
     """Records ``config`` in ``out`` (first run) or refuses a folder made with another one:
-    ConfigError naming the folder and the keys that differ."""
+    ConfigError naming the folder and the keys that differ. Recipes count by their name and
+    bytes (:func:`_portable`): the same recipes from another checkout are the same config, an
+    edited recipe is another."""
     from accd_gym import files
 
-    mine = json.loads(json.dumps(config))
+    mine = _portable(config)
     path = out / CONFIG_FILE
     try:
         stored = json.loads(path.read_text())

@@ -405,7 +405,7 @@ IMPLICIT_CAPTURE_RUNS = tuple(
     for elasticity in ("attachment", "distributed")
 )
 #: The capture episode of the tension study: the default env (wake and turbulence) flown by the
-#: default guidance baseline from this reset seed (it captures after 16.8 s).
+#: default guidance baseline from this reset seed (it captures after 17.6 s).
 CAPTURE_SEED = 3
 #: Before the replayed commands the tether settles this long behind the aircraft with neutral
 #: flaps (the env's ``initial.settle_time``), s.
