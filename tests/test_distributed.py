@@ -167,3 +167,23 @@ def test_validation_episodes_are_training_episodes_and_never_the_held_out_ones(t
     md = sweep.summary_markdown({"config": {"train_config": "x", "episodes": 8, "eval_split": "validation"},
                                  "trials": [], "failed": [], "aggregates": [], "wall_time_s": 1.0})
     assert "Validation: 8 episodes of training wake seeds" in md
+
+
+def test_a_sweeps_baselines_run_on_its_episodes_without_the_agents_options(tmp_path):
+    import json
+
+    from accd_gym.control.baselines import make_baseline
+    from accd_gym.evals import sweep
+
+    train = tmp_path / "ppo.json"
+    env = {**SHORT, "residual": {"base": "lqr", "scale": 0.3}}
+    train.write_text(json.dumps({"algo": "ppo", "total_timesteps": 64, "num_envs": 4, "env": env}))
+    cfg = sweep.validate_config({"train_config": str(train), "episodes": 4, "num_envs": 4, "eval_split": "validation",
+                                 "baselines": ["lqr", "zero"]})
+    rates = sweep.baseline_rates(cfg)
+    wake, base = sweep.eval_episodes("validation")
+    for name in ("lqr", "zero"):
+        eps = run_episodes(make_baseline(name, 0, SHORT), 4, seed=base, wake_seeds=list(wake[:4]), num_envs=2, config=SHORT)
+        assert rates[name]["captures"] == sum(e.captured for e in eps) and rates[name]["episodes"] == 4
+    with pytest.raises(accd_gym.ConfigError, match=r"`baselines` = \['pid'\] is outside the allowed values"):
+        sweep.validate_config({"train_config": str(train), "baselines": ["pid"]})

@@ -229,14 +229,16 @@ def test_a_sweep_of_two_tiny_trials_writes_its_table(cluster, tmp_path):
     assert sum(e.captured for e in eps) == doc["trials"][1]["captures"]
     # Tuning evaluates on validation episodes (training wake seeds), never the held-out ones.
     val = sweep.validate_config({"train_config": str(train), "seeds": [1], "episodes": 4, "num_envs": 4,
-                                 "eval_split": "validation"})
+                                 "eval_split": "validation", "baselines": ["zero"]})
     vdoc = sweep.run(val, tmp_path / "validation", progress=False)
     wake, base = sweep.eval_episodes("validation")
     eps = run_episodes(load_policy(str(tmp_path / "validation" / "trials" / "seed1")), 4, seed=base,
                        wake_seeds=list(wake[:4]), num_envs=4, num_threads=1, config=SHORT)
     assert sum(e.captured for e in eps) == vdoc["trials"][0]["captures"]
     assert all(e.wake_seed in accd_gym.TRAINING_WAKE_SEEDS for e in eps)
-    assert "Validation: 4 episodes of training wake seeds" in (tmp_path / "validation" / "summary.md").read_text()
+    vtable = (tmp_path / "validation" / "summary.md").read_text()
+    assert "Validation: 4 episodes of training wake seeds" in vtable and "| baseline zero |" in vtable
+    assert vdoc["baselines"]["zero"]["episodes"] == 4
     with pytest.raises(accd_gym.ConfigError, match="`seeds`"):
         sweep.validate_config({"train_config": str(train), "seeds": [1, 1]})
     with pytest.raises(accd_gym.ConfigError, match="learning_rat"):

@@ -27,6 +27,10 @@ eval_split           which episodes evaluate the trials: ``"held_out"`` (default
                      ``validation``, so that the held-out episodes stay unseen until the benchmark
 num_envs             evaluation batch size (default 16)
 eval_env             env overrides of the evaluation (default: the training config's ``env``)
+baselines            built-in baselines (``zero``, ``random``, ``guidance``, ``lqr``) evaluated once on
+                     the same episodes, on the evaluation's env without the agent's options
+                     (``residual``, ``history``), as the reference the trials are read against
+                     (default none)
 cpus_per_trial       CPUs Tune reserves per trial, also the threads stepping its envs (default 1)
 max_concurrent_trials  at most this many trials at once (default 0: as the CPUs allow)
 ray_address          ``"local"`` (default), ``"auto"`` or ``HOST:PORT``
@@ -67,6 +71,7 @@ DEFAULTS: dict[str, Any] = {
     "eval_split": "held_out",
     "num_envs": 16,
     "eval_env": None,
+    "baselines": [],
     "cpus_per_trial": 1,
     "max_concurrent_trials": 0,
     "ray_address": "local",
@@ -136,6 +141,11 @@ def validate_config(raw: Any) -> dict[str, Any]:
         raise ConfigError(f"invalid config: `timesteps` = {t!r} is outside the allowed range: null or an integer >= 1")
     if cfg["eval_env"] is not None and not isinstance(cfg["eval_env"], dict):
         raise ConfigError(f"invalid config: `eval_env` = {cfg['eval_env']!r} is outside the allowed range: null or a JSON object")
+    from accd_gym.control.baselines import BASELINES
+
+    if not isinstance(cfg["baselines"], list) or [b for b in cfg["baselines"] if b not in BASELINES]:
+        raise ConfigError(f"invalid config: `baselines` = {cfg['baselines']!r} is outside the allowed values: a list of "
+                          f"{sorted(BASELINES)}")
     grid = cfg["grid"]
     if not isinstance(grid, dict) or any(not isinstance(v, list) or not v for v in grid.values()):
         raise ConfigError(f"invalid config: `grid` = {grid!r} is outside the allowed range: an object of non-empty lists")
@@ -263,6 +273,31 @@ def aggregate(trials: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
+def baseline_rates(sweep: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """The sweep's ``baselines`` on its evaluation episodes (``eval_split``, ``episodes``), each on
+    the evaluation env without the agent's options: {name: captures, episodes, capture_rate, its
+    Wilson 95 % interval, miss median}."""
+    from accd_gym.control.baselines import make_baseline
+    from accd_gym.envs.agent_io import AGENT_KEYS
+    from accd_gym.evals.episodes import run_episodes
+    from accd_gym.evals.evaluation import summarize
+    from accd_gym.envs.config import read_json_object
+
+    env = sweep["eval_env"]
+    if env is None:
+        env = read_json_object(sweep["train_config"], "train_config (training config)").get("env") or {}
+    env = {k: v for k, v in env.items() if k not in AGENT_KEYS}
+    wake_seeds, base_seed = eval_episodes(sweep["eval_split"])
+    out = {}
+    for name in sweep["baselines"]:
+        eps = run_episodes(make_baseline(name, 0, env), sweep["episodes"], seed=base_seed,
+                           wake_seeds=list(wake_seeds[:sweep["episodes"]]), num_envs=sweep["num_envs"], config=env)
+        s = summarize(eps)
+        out[name] = {"captures": s["captures"], "episodes": sweep["episodes"], "capture_rate": s["capture_rate"],
+                     "capture_rate_ci95": list(s["capture_rate_ci95"]), "miss_distance_median_m": s["miss_distance_m"]["median"]}
+    return out
+
+
 def _episodes_line(cfg: dict[str, Any]) -> str:
     if cfg.get("eval_split", "held_out") == "validation":
         return (f"Validation: {cfg['episodes']} episodes of training wake seeds (`VALIDATION_WAKE_SEEDS`), the same "
@@ -284,6 +319,10 @@ def summary_markdown(doc: dict[str, Any]) -> str:
                      f"| {t['miss_distance_median_m']:.2f} | {t['steps_per_s']} |")
     for f in doc["failed"]:
         lines.append(f"| {f['trial']} | {f['seed']} | {f['point']} | failed: {f['error']} | | | | | |")
+    for name, b in doc.get("baselines", {}).items():
+        lo, hi = b["capture_rate_ci95"]
+        lines.append(f"| baseline {name} | - | - | - | - | {b['captures']}/{b['episodes']} = {b['capture_rate']:.1%} "
+                     f"| {lo:.1%} - {hi:.1%} | {b['miss_distance_median_m']:.2f} | - |")
     lines += ["", "| grid point | seeds | IQM capture rate | 95 % bootstrap interval over seeds | mean | min - max |",
               "|---|---|---|---|---|---|"]
     for a in doc["aggregates"]:
@@ -360,11 +399,12 @@ def run(config: dict[str, Any] | str | Path, out: str | Path, *, progress: bool 
                            "error": " ".join(str(result.error).split())[:200]})
     trials.sort(key=lambda t: (json.dumps(t["point"], sort_keys=True), t["seed"]))
     doc = {"config": cfg, "trials": trials, "failed": failed, "aggregates": aggregate(trials) if trials else [],
+           "baselines": baseline_rates(cfg),
            "wall_time_s": time.perf_counter() - t0, "cluster_cpus": int(ray.cluster_resources().get("CPU", 0))}
     _files.write_text(out / "sweep.json", json.dumps(doc, indent=1))
     _files.write_text(out / "summary.md", summary_markdown(doc))
     return doc
 
 
-__all__ = ["DEFAULTS", "aggregate", "bootstrap_interval", "grid_points", "iqm", "load_config", "run", "summary_markdown",
-           "train_config", "trial_name", "validate_config"]
+__all__ = ["DEFAULTS", "EVAL_SPLITS", "aggregate", "baseline_rates", "bootstrap_interval", "eval_episodes", "grid_points",
+           "iqm", "load_config", "run", "summary_markdown", "train_config", "trial_name", "validate_config"]
