@@ -60,7 +60,7 @@ def test_jobs_follow_the_config():
     ppo = [j for j in jobs if j.algo == "ppo"]
     sac = [j for j in jobs if j.algo == "sac"]
     assert len(ppo) == 5 * len(cfg["tiers"]) and {j.seed for j in ppo} == {0, 1, 2, 3, 4}
-    assert len(sac) == 3 and {j.tier for j in sac} == {"precision"}
+    assert len(sac) == 5 and {j.tier for j in sac} == {"precision"}
     assert cfg["episodes"] == 500
     quick = benchmark.load_config(ROOT / "training" / "benchmark.json", quick=True)
     assert quick["episodes"] == 16 and quick["learners"]["ppo"]["timesteps"] == 4096
