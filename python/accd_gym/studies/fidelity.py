@@ -100,7 +100,8 @@ FIG9_CASES = (
 )
 
 
-def _scheme(scheme: str) -> str:
+def check_scheme(scheme: str) -> str:
+    """``scheme`` if it is one of :data:`SCHEMES`; ValueError naming it and the allowed values."""
     if scheme not in SCHEMES:
         raise ValueError(f"invalid config: scheme = {scheme!r} is outside the allowed range {list(SCHEMES)}")
     return scheme
@@ -112,7 +113,7 @@ def fig9_tether(
     """Table 1's chain under ``model`` in the start state of ``case`` (``vertical`` or ``swing``),
     at rest and unstretched, in vacuum, integrated by ``scheme`` (one of :data:`SCHEMES`)."""
     table1 = accd_gym.tether_config("table1")
-    overrides = {"time_step": time_step, "scheme": _scheme(scheme), **model.overrides(table1)}
+    overrides = {"time_step": time_step, "scheme": check_scheme(scheme), **model.overrides(table1)}
     tether = accd_gym.Tether(overrides, preset="table1")
     n = tether.segments
     if case == "vertical":
@@ -233,7 +234,7 @@ def run_fig9(
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(12, 3.8), constrained_layout=True)
-    implicit = _scheme(scheme) == "implicit_axial"
+    implicit = check_scheme(scheme) == "implicit_axial"
     time_step = IMPLICIT_TIME_STEP_S if implicit else FIG9_TIME_STEP_S
     results: dict[str, dict[str, Any]] = {}
     reference: dict[str, dict[str, Any]] = {}
@@ -524,7 +525,7 @@ def run_tension(
 
     from accd_gym.studies import study
 
-    implicit = _scheme(scheme) == "implicit_axial"
+    implicit = check_scheme(scheme) == "implicit_axial"
     tension_runs = IMPLICIT_TENSION_RUNS if implicit else TENSION_RUNS
     capture_runs = IMPLICIT_CAPTURE_RUNS if implicit else CAPTURE_RUNS
     base = study.MaxTensionCase()
@@ -966,7 +967,7 @@ def run_study(
     """Runs ``fig9``, ``tension`` or ``sweep`` into ``out_dir`` (its PNGs); returns (the JSON
     document, the markdown) for :func:`accd_gym.studies.study.run_study` to write. ``scheme``
     (one of :data:`SCHEMES`) is the tether's integration scheme of ``fig9`` and ``tension``."""
-    if study not in ("fig9", "tension") and _scheme(scheme) != "explicit":
+    if study not in ("fig9", "tension") and check_scheme(scheme) != "explicit":
         raise ValueError(f"invalid config: scheme = {scheme!r} applies to the fig9 and tension studies only, not {study!r}")
     if study == "fig9":
         return run_fig9(out_dir, dpi=dpi, scheme=scheme)

@@ -141,8 +141,7 @@ def check_scheme(names: Sequence[str], scheme: str) -> None:
     """Raises ValueError naming the scheme and the allowed values, or the studies of ``names``
     (``all`` standing for :data:`STUDIES`) that do not take it."""
     names = [*(STUDIES if "all" in names else ()), *(n for n in names if n != "all")]
-    if scheme not in fidelity.SCHEMES:
-        raise ValueError(f"invalid config: scheme = {scheme!r} is outside the allowed range {list(fidelity.SCHEMES)}")
+    fidelity.check_scheme(scheme)
     others = [n for n in names if n not in SCHEME_STUDIES]
     if scheme != "explicit" and others:
         raise ValueError(
