@@ -9,6 +9,13 @@ result (per-episode capture outcomes from a results JSON such as docs/results/re
         --run training/runs/residual_ppo/precision_s2 \\
         --results docs/results/residual_ppo_device.json --key residual_ppo_s2 [--check 8]
 
+``--results`` may also be a benchmark folder (``accd-gym benchmark --out DIR``); ``--key`` is then
+the benchmark's run name, its recorded outcomes those of ``DIR/runs/KEY/result.json`` and the LQR's
+those of the same folder's baseline:
+
+    python scripts/ship_policies.py --name residual_sac_hard --run bench/runs/hard_residual_sac_seed3 \
+        --results bench --key hard_residual_sac_seed3
+
 ``--check K`` runs the shipped policy on its first K held-out episodes and stores each one's
 outcome, steps and miss distance in policy.json (tests/test_trained_policies.py compares them)
 and checks the outcomes against the recorded ones. Every file is written atomically; an
@@ -46,13 +53,34 @@ def stripped_model(zip_bytes: bytes, algo: str) -> bytes:
     return buf.getvalue()
 
 
+def benchmark_results(folder: Path, name: str) -> dict:
+    """The ``{tier: {"base_seed", name: {"captured"}, "lqr": {"captured"}}}`` view of one run of a
+    benchmark folder: its held-out outcomes and the LQR's on the same episodes."""
+    from accd_gym.evals.episodes import EVAL_BASE_SEED
+
+    path = folder / "runs" / name / "result.json"
+    if not path.is_file():
+        runs = sorted(p.parent.name for p in (folder / "runs").glob("*/result.json"))
+        raise ConfigError(f"invalid config: --key {name!r} has no result in {str(folder)!r} (allowed: {runs})")
+    doc = read_user_json(path, "benchmark result")
+    tier = doc["key"]["job"]["tier"]
+    as_bits = lambda xs: "".join("1" if x else "0" for x in xs)  # noqa: E731
+    out = {"base_seed": EVAL_BASE_SEED, name: {"captured": as_bits(doc["result"]["episodes"]["captured"])}}
+    lqr = folder / "baselines" / f"{tier}_lqr.json"
+    if lqr.is_file():
+        out["lqr"] = {"captured": as_bits(read_user_json(lqr, "benchmark baseline")["record"]["captured"])}
+    return {tier: out}
+
+
 def main(argv: list[str] | None = None) -> int:
     """Ships one run's newest checkpoint (or final model) under ``--name``; 0 on success."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--name", required=True, help="the shipped policy's name (a folder name)")
     ap.add_argument("--run", required=True, help="the training run folder (run.json, checkpoints/)")
-    ap.add_argument("--results", required=True, help="results JSON with {tier: {key: {captured: '0101..'}}}")
-    ap.add_argument("--key", required=True, help="the run's entry in --results (e.g. residual_ppo_s2)")
+    ap.add_argument("--results", required=True,
+                    help="results JSON with {tier: {key: {captured: '0101..'}}}, or a benchmark folder")
+    ap.add_argument("--key", required=True,
+                    help="the run's entry in --results (e.g. residual_ppo_s2, or a benchmark run's name)")
     ap.add_argument("--check", type=int, default=8, help="held-out episodes to run and store (default 8)")
     ap.add_argument("--replace", action="store_true", help="replace a shipped policy of that name")
     args = ap.parse_args(argv)
@@ -72,7 +100,8 @@ def main(argv: list[str] | None = None) -> int:
         if ckpt is None:
             raise ConfigError(f"invalid config: --run {str(run)!r} has no final model and no checkpoint")
         model_path, stats_path, steps = ckpt["model"], ckpt["vecnormalize"], ckpt["steps"]
-    results = read_user_json(args.results, "results")
+    results = (benchmark_results(Path(args.results), args.key) if Path(args.results).is_dir()
+               else read_user_json(args.results, "results"))
     if tier not in results or args.key not in results[tier]:
         raise ConfigError(f"invalid config: --key {args.key!r} is not in {args.results!r}[{tier!r}] "
                           f"(allowed: {sorted(k for k, v in results.get(tier, {}).items() if isinstance(v, dict))})")

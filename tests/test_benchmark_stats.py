@@ -35,10 +35,15 @@ def test_target_is_read_from_the_numbers():
     assert t["tiers"]["precision"]["p_value"] == pytest.approx(2 * 0.5 ** 8)
     assert t["tiers"]["hard"]["at_least_lqr"] and not t["tiers"]["hard"]["significantly_better"]
     assert t["met"]
-    # a learned method whose seeds spread by more than 20 points fails the target
+    # a learned method whose seeds spread by more than 20 points fails the target, even beside a
+    # better method of the same tier; the verdict names it
     tiers["hard"] = _tiers([0.95, 0.70], 0.90, [0.70, 0.95])
+    tiers["hard"]["policies"]["residual_sac"] = {"kind": "learned", "rates": [0.96, 0.95], "iqm": 0.955,
+                                                 "ci95": [0.93, 0.97]}
     t = target(tiers, eps)
     assert not t["tiers"]["hard"]["spread_ok"] and not t["met"]
+    assert t["tiers"]["hard"]["method"] == "residual_sac" and t["tiers"]["hard"]["widest_spread_method"] == "ppo"
+    assert t["tiers"]["hard"]["max_seed_spread"] == pytest.approx(0.25)
     # below the LQR with an interval that does not reach it fails too
     tiers["hard"] = _tiers([0.80, 0.80], 0.90, [0.76, 0.84])
     assert not target(tiers, eps)["tiers"]["hard"]["at_least_lqr"]
@@ -52,6 +57,14 @@ def test_report_has_a_target_section_only_with_its_numbers():
     doc["target"] = target({"hard": _tiers([1.0], 0.5, [1.0, 1.0])}, {"hard": {"lqr": lqr, "hard_ppo_seed0": [True, True]}})
     md = report_markdown(doc)
     assert "## Target" in md and "Target not met on these runs." in md and "| hard | PPO 100.0 %" in md
+    assert "| 0.0 points, PPO (yes) |" in md
+
+
+def test_method_labels():
+    from accd_gym.evals.benchmark import method_label
+
+    assert [method_label(a) for a in ("ppo", "residual_sac", "residual_ppo", "tqc")] == [
+        "PPO", "residual SAC", "residual PPO", "TQC"]
 
 
 def test_failure_table_numbers_by_hand():

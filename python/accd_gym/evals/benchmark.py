@@ -576,7 +576,7 @@ def probability_of_improvement(x: Sequence[float], y: Sequence[float]) -> float:
     return float((gt + 0.5 * eq) / (a.size * b.size))
 
 
-#: Issue criteria of the report's Target section: the largest seed spread of a learned method
+#: The criteria of the report's Target section: the largest seed spread of a learned method
 #: (rate points) and the significance level of the paired McNemar test.
 TARGET_MAX_SPREAD = 0.20
 TARGET_ALPHA = 0.05
@@ -606,13 +606,16 @@ def target(tiers: dict[str, Any], episodes: dict[str, dict[str, Any]]) -> Option
         a, b = np.asarray(runs[best_run], dtype=bool), np.asarray(episodes[tier]["lqr"], dtype=bool)
         only_a, only_b = int(np.sum(a & ~b)), int(np.sum(~a & b))
         p = mcnemar_exact(only_a, only_b)
-        spread = max(max(r["rates"]) - min(r["rates"]) for r in learned.values())
+        spreads = {k: max(r["rates"]) - min(r["rates"]) for k, r in learned.items()}
+        widest = max(spreads, key=lambda k: (spreads[k], k))
+        spread = spreads[widest]
         at_least = (best["iqm"] >= lqr_rate and best["ci95"][1] >= lqr_rate
                     and not (only_b > only_a and p < TARGET_ALPHA))
         out[tier] = {"method": best_algo, "iqm": best["iqm"], "ci95": best["ci95"], "lqr_rate": lqr_rate,
                      "best_run": best_run, "only_learned": only_a, "only_lqr": only_b, "p_value": p,
                      "at_least_lqr": bool(at_least), "significantly_better": bool(only_a > only_b and p < TARGET_ALPHA),
-                     "max_seed_spread": spread, "spread_ok": bool(spread <= TARGET_MAX_SPREAD)}
+                     "max_seed_spread": spread, "widest_spread_method": widest,
+                     "spread_ok": bool(spread <= TARGET_MAX_SPREAD)}
     if not out:
         return None
     met = (all(v["at_least_lqr"] and v["spread_ok"] for v in out.values())
@@ -683,7 +686,7 @@ def performance_profile(results: list[dict[str, Any]], baselines: dict[str, dict
     each tau (rliable's performance profile on the run scores)."""
     scores: dict[str, list[float]] = {}
     for r in results:
-        scores.setdefault(r["job"]["algo"].upper(), []).append(float(np.mean(r["episodes"]["captured"])))
+        scores.setdefault(method_label(r["job"]["algo"]), []).append(float(np.mean(r["episodes"]["captured"])))
     for tier_runs in baselines.values():
         for name, rec in tier_runs.items():
             if rec is not None:
@@ -718,6 +721,14 @@ def _pct(x: float) -> str:
     return f"{100 * x:.1f} %"
 
 
+_ALGORITHM_WORDS = frozenset({"ppo", "sac", "tqc", "td3", "a2c", "ddpg", "dqn", "trpo", "crossq"})
+
+
+def method_label(algo: str) -> str:
+    """A learner's name as the report prints it: ``residual_sac`` -> ``residual SAC``, ``ppo`` -> ``PPO``."""
+    return " ".join(w.upper() if w in _ALGORITHM_WORDS else w for w in algo.split("_"))
+
+
 def _reuse_note(doc: dict[str, Any]) -> str:
     """The header's account of jobs reused from an earlier invocation into the same folder."""
     reused = [r for r in doc["runs"] if r.get("reused")]
@@ -738,13 +749,14 @@ def _target_markdown(t: Optional[dict[str, Any]]) -> list[str]:
              f"significantly more on at least one (p < {TARGET_ALPHA}), and no learned method's seeds spread by more "
              f"than {100 * TARGET_MAX_SPREAD:.0f} points.", "",
              "| tier | best method (IQM) | LQR | best run: only learned / only LQR, p | at least the LQR | "
-             "significantly more | largest seed spread |", "|---|---|---|---|---|---|---|"]
+             "significantly more | largest seed spread (method) |", "|---|---|---|---|---|---|---|"]
     yes = {True: "yes", False: "no"}
     for tier, v in t["tiers"].items():
-        lines.append(f"| {tier} | {v['method'].upper()} {_pct(v['iqm'])} ({_pct(v['ci95'][0])} - {_pct(v['ci95'][1])}) "
+        lines.append(f"| {tier} | {method_label(v['method'])} {_pct(v['iqm'])} ({_pct(v['ci95'][0])} - {_pct(v['ci95'][1])}) "
                      f"| {_pct(v['lqr_rate'])} | `{v['best_run']}`: {v['only_learned']} / {v['only_lqr']}, "
                      f"p = {v['p_value']:.3g} | {yes[v['at_least_lqr']]} | {yes[v['significantly_better']]} "
-                     f"| {100 * v['max_seed_spread']:.1f} points ({yes[v['spread_ok']]}) |")
+                     f"| {100 * v['max_seed_spread']:.1f} points, {method_label(v['widest_spread_method'])} "
+                     f"({yes[v['spread_ok']]}) |")
     lines += ["", f"Target {'met' if t['met'] else 'not met'} on these runs."]
     return lines
 
@@ -754,7 +766,7 @@ def report_markdown(doc: dict[str, Any]) -> str:
     from accd_gym.envs.tiers import TIERS
 
     cfg = doc["config"]
-    learners = ", ".join(f"{a.upper()} {len(s['seeds'])} seeds x {s['timesteps']:,} steps"
+    learners = ", ".join(f"{method_label(a)} {len(s['seeds'])} seeds x {s['timesteps']:,} steps"
                          + (f" (tiers {', '.join(s['tiers'])})" if s["tiers"] else "") for a, s in cfg["learners"].items())
     learned = (f"Learned: {learners}, trained on training wake seeds only. Capture rate of a learned algorithm: the IQM "
                "over seeds with a 95 % two-level stratified bootstrap interval (seeds, then episodes); of a baseline: "
@@ -780,7 +792,7 @@ def report_markdown(doc: dict[str, Any]) -> str:
             ttc = "-" if row["capture_time_median_s"] is None else f"{row['capture_time_median_s']:.1f}"
             if row["kind"] == "learned":
                 seeds = ", ".join(_pct(r) for r in row["rates"])
-                lines.append(f"| {name.upper()} (IQM of {len(row['rates'])}) | {_pct(row['iqm'])} | {_pct(lo)} - {_pct(hi)} "
+                lines.append(f"| {method_label(name)} (IQM of {len(row['rates'])}) | {_pct(row['iqm'])} | {_pct(lo)} - {_pct(hi)} "
                              f"| {seeds} | {row['miss_median_m']:.2f} | {ttc} |")
             else:
                 lines.append(f"| {name} | {_pct(row['rate'])} | {_pct(lo)} - {_pct(hi)} | - | {row['miss_median_m']:.2f} | {ttc} |")
@@ -792,7 +804,7 @@ def report_markdown(doc: dict[str, Any]) -> str:
                       "at capture and time to capture.", "",
                       "| policy | missed | outcomes of the missed | miss median (m) | closing speed at closest approach "
                       "(m/s) | closing speed at capture (m/s) | time to capture (s) |", "|---|---|---|---|---|---|---|"]
-            lines += [f"| {n.upper() if t['policies'][n]['kind'] == 'learned' else n} | {f['missed']}/{f['episodes']} "
+            lines += [f"| {method_label(n) if t['policies'][n]['kind'] == 'learned' else n} | {f['missed']}/{f['episodes']} "
                       f"| {', '.join(f'{k} {v}' for k, v in sorted(f['outcomes'].items())) or '-'} "
                       f"| {f2(f['missed_miss_median_m'])} | {f2(f['missed_closest_speed_median_mps'])} "
                       f"| {f2(f['capture_speed_median_mps'])} | {f2(f['capture_time_median_s'])} |" for n, f in fails]
@@ -801,7 +813,7 @@ def report_markdown(doc: dict[str, Any]) -> str:
             lines += ["", "Relative to the LQR (LQR = 1.0; IQM and interval divided by the LQR's rate) and rliable's "
                       "probability of improvement P(seed's rate > LQR's, ties one half, averaged over the seeds):", "",
                       "| policy | normalized IQM | 95 % interval | P(improvement over LQR) |", "|---|---|---|---|"]
-            lines += [f"| {n.upper()} | {r['vs_lqr'][0]:.3f} | {r['vs_lqr'][1]:.3f} - {r['vs_lqr'][2]:.3f} "
+            lines += [f"| {method_label(n)} | {r['vs_lqr'][0]:.3f} | {r['vs_lqr'][1]:.3f} - {r['vs_lqr'][2]:.3f} "
                       f"| {r['p_improvement_over_lqr']:.2f} |" for n, r in rel]
         m = t["mcnemar"]
         if m:
