@@ -187,6 +187,32 @@ def test_configurations_with_one_plant_share_one_design(monkeypatch):
     assert not np.allclose(heavier.design.k, nominal.design.k)
 
 
+_DESIGN_BITS = """
+import hashlib, numpy as np
+from accd_gym.control.lqr import default_tuning, design, linearize
+from accd_gym.envs.tiers import tier
+d = design(linearize(tier("hard").config()), default_tuning())
+print(hashlib.sha256(b"".join(np.ascontiguousarray(getattr(d, f)).tobytes() for f in ("k", "k_ff", "l"))).hexdigest())
+"""
+
+
+def test_the_design_is_bitwise_the_same_whatever_the_blas_thread_count():
+    # A process with one BLAS thread (a Ray worker, `accd-gym train`) and one with several (a
+    # command-line evaluation) must design the same gains: their last bits decide episodes.
+    import os
+    import subprocess
+    import sys
+
+    bits = set()
+    for threads in ("1", "2", "3"):
+        env = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS")}
+        env["OPENBLAS_NUM_THREADS"] = threads
+        r = subprocess.run([sys.executable, "-c", _DESIGN_BITS], env=env, capture_output=True, text=True, timeout=120)
+        assert r.returncode == 0, r.stderr
+        bits.add(r.stdout.strip())
+    assert len(bits) == 1, bits
+
+
 def test_bad_configs_and_tunings_are_config_errors():
     with pytest.raises(ConfigError, match="segments"):
         linearize(tether={"segments": 0})

@@ -187,7 +187,19 @@ def _dare(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray) -> np.ndar
 
 
 def design(lin: Any, tuning: LqrTuning) -> LqrDesign:
-    """The LQR and Kalman gains for a linearization ``lin`` (:func:`linearize`) and ``tuning``."""
+    """The LQR and Kalman gains for a linearization ``lin`` (:func:`linearize`) and ``tuning``,
+    computed with every BLAS library (numpy's and SciPy's) on one thread. The Riccati solvers'
+    last bits depend on the BLAS thread count, and the gains' last bits decide episodes near the
+    capture boundary: one thread gives every process the same design (a training process, a Ray
+    worker and a command-line evaluation on a machine of any size)."""
+    import scipy.linalg  # noqa: F401  (loaded first: threadpoolctl limits the libraries loaded when it is entered)
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _design(lin, tuning)
+
+
+def _design(lin: Any, tuning: LqrTuning) -> LqrDesign:
     t = tuning
     a, b, e, c = lin.a, lin.b, lin.e, lin.c
     n = a.shape[0]
