@@ -3,18 +3,15 @@
 state (the weights are unchanged; the file is about a third of the checkpoint's size), the
 VecNormalize statistics, the run's run.json (env options: residual control, history) and
 policy.json with its metadata (tier, algorithm, seed, steps, source run) and the recorded held-out
-result (per-episode capture outcomes from a results JSON such as docs/results/residual_ppo_device.json).
-
-    python scripts/ship_policies.py --name residual_ppo_precision \\
-        --run training/runs/residual_ppo/precision_s2 \\
-        --results docs/results/residual_ppo_device.json --key residual_ppo_s2 [--check 8]
-
-``--results`` may also be a benchmark folder (``accd-gym benchmark --out DIR``); ``--key`` is then
-the benchmark's run name, its recorded outcomes those of ``DIR/runs/KEY/result.json`` and the LQR's
-those of the same folder's baseline:
+result (per-episode capture outcomes, from a benchmark folder or a results JSON).
 
     python scripts/ship_policies.py --name residual_sac_hard --run bench/runs/hard_residual_sac_seed3 \
-        --results bench --key hard_residual_sac_seed3
+        --results bench --key hard_residual_sac_seed3 [--check 8]
+
+``--results`` is a benchmark folder (``accd-gym benchmark --out DIR``) with ``--key`` the
+benchmark's run name: the recorded outcomes are those of ``DIR/runs/KEY/result.json`` and the
+LQR's those of the same folder's baseline. It may instead be a JSON file of the form
+``{tier: {KEY: {"captured": "0101.."}, "lqr": {...}, "base_seed": ...}}``.
 
 ``--check K`` runs the shipped policy on its first K held-out episodes and stores each one's
 outcome, steps and miss distance in policy.json (tests/test_trained_policies.py compares them)
@@ -100,8 +97,8 @@ def main(argv: list[str] | None = None) -> int:
         if ckpt is None:
             raise ConfigError(f"invalid config: --run {str(run)!r} has no final model and no checkpoint")
         model_path, stats_path, steps = ckpt["model"], ckpt["vecnormalize"], ckpt["steps"]
-    results = (benchmark_results(Path(args.results), args.key) if Path(args.results).is_dir()
-               else read_user_json(args.results, "results"))
+    from_benchmark = Path(args.results).is_dir()
+    results = benchmark_results(Path(args.results), args.key) if from_benchmark else read_user_json(args.results, "results")
     if tier not in results or args.key not in results[tier]:
         raise ConfigError(f"invalid config: --key {args.key!r} is not in {args.results!r}[{tier!r}] "
                           f"(allowed: {sorted(k for k, v in results.get(tier, {}).items() if isinstance(v, dict))})")
@@ -117,11 +114,12 @@ def main(argv: list[str] | None = None) -> int:
         "seed": meta["config"].get("seed"),
         "steps": int(steps),
         "total_timesteps": meta.get("total_timesteps"),
-        "source_run": str(run.resolve().relative_to(ROOT)) if run.resolve().is_relative_to(ROOT) else str(run),
+        "source_run": (str(run.resolve().relative_to(ROOT)) if run.resolve().is_relative_to(ROOT)
+                       else f"accd-gym benchmark run {args.key}" if from_benchmark else str(run)),
         "source_checkpoint": model_path.name,
         "env": meta["config"]["env"],
         "held_out": {
-            "results": args.results,
+            "results": "docs/benchmark.md" if from_benchmark else args.results,
             "key": args.key,
             "episodes": len(captured),
             "base_seed": results.get(tier, {}).get("base_seed"),

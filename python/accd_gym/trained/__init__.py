@@ -5,12 +5,12 @@ trained with (residual control, observation history), copied from a training run
 ``scripts/ship_policies.py`` with its recorded held-out result (docs/trained-policies.md)::
 
     from accd_gym import trained
-    trained.available()                                # ['residual_ppo_hard', 'residual_ppo_precision']
-    trained.info("residual_ppo_hard")["tier"]          # 'hard'
-    policy = trained.load_policy("residual_ppo_hard")  # predict(obs) -> flap commands
-    episodes = trained.held_out_episodes("residual_ppo_hard", 20)
+    trained.available()        # ['residual_ppo_hard', 'residual_ppo_precision', 'residual_sac_hard', ...]
+    trained.info("residual_sac_hard")["tier"]          # 'hard'
+    policy = trained.load_policy("residual_sac_hard")  # predict(obs) -> flap commands
+    episodes = trained.held_out_episodes("residual_sac_hard", 20)
 
-On the command line: ``accd-gym evaluate --policy residual_ppo_hard`` (its tier unless
+On the command line: ``accd-gym evaluate --policy residual_sac_hard`` (its tier unless
 ``--tier`` says otherwise); ``rollout`` and ``replay`` take the name too. Loading needs
 stable-baselines3 (``pip install 'accd-gym[sb3]'``).
 """
