@@ -56,8 +56,13 @@ def test_report_has_a_target_section_only_with_its_numbers():
     lqr = [True, False]
     doc["target"] = target({"hard": _tiers([1.0], 0.5, [1.0, 1.0])}, {"hard": {"lqr": lqr, "hard_ppo_seed0": [True, True]}})
     md = report_markdown(doc)
-    assert "## Target" in md and "Target not met on these runs." in md and "| hard | PPO 100.0 %" in md
+    assert "## Target" in md and "Target not met on these runs:" in md and "| hard | PPO 100.0 %" in md
     assert "| 0.0 points, PPO (yes) |" in md
+    # why it is not met, with the numbers: 2 episodes cannot make p < 0.05
+    assert "- no tier's best run captures significantly more than the LQR (smallest p: hard, 1)." in md
+    doc["target"] = target({"hard": _tiers([1.0, 0.5], 0.5, [0.5, 1.0])},
+                           {"hard": {"lqr": lqr, "hard_ppo_seed0": [True, True], "hard_ppo_seed1": [True, False]}})
+    assert "- hard: PPO's seeds spread by 50.0 points, 30.0 more than the 20 allowed." in report_markdown(doc)
 
 
 def test_method_labels():

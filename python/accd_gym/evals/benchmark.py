@@ -757,8 +757,29 @@ def _target_markdown(t: Optional[dict[str, Any]]) -> list[str]:
                      f"p = {v['p_value']:.3g} | {yes[v['at_least_lqr']]} | {yes[v['significantly_better']]} "
                      f"| {100 * v['max_seed_spread']:.1f} points, {method_label(v['widest_spread_method'])} "
                      f"({yes[v['spread_ok']]}) |")
-    lines += ["", f"Target {'met' if t['met'] else 'not met'} on these runs."]
+    lines += ["", f"Target {'met' if t['met'] else 'not met'} on these runs" + ("." if t["met"] else ":")]
+    if not t["met"]:
+        lines += [""] + [f"- {reason}" for reason in _target_misses(t)]
     return lines
+
+
+def _target_misses(t: dict[str, Any]) -> list[str]:
+    """The criteria a :func:`target` verdict misses, with the numbers by which it misses them."""
+    out = []
+    for tier, v in t["tiers"].items():
+        if not v["at_least_lqr"]:
+            out.append(f"{tier}: the best method, {method_label(v['method'])}, captures {_pct(v['iqm'])} (IQM, "
+                       f"interval up to {_pct(v['ci95'][1])}) against the LQR's {_pct(v['lqr_rate'])}; its best run "
+                       f"{v['only_learned']} / {v['only_lqr']} episodes against the LQR, p = {v['p_value']:.3g}.")
+        if not v["spread_ok"]:
+            out.append(f"{tier}: {method_label(v['widest_spread_method'])}'s seeds spread by "
+                       f"{100 * v['max_seed_spread']:.1f} points, {100 * (v['max_seed_spread'] - TARGET_MAX_SPREAD):.1f} "
+                       f"more than the {100 * TARGET_MAX_SPREAD:.0f} allowed.")
+    if not any(v["significantly_better"] for v in t["tiers"].values()):
+        best = min(t["tiers"].items(), key=lambda kv: kv[1]["p_value"])
+        out.append(f"no tier's best run captures significantly more than the LQR (smallest p: {best[0]}, "
+                   f"{best[1]['p_value']:.3g}).")
+    return out
 
 
 def report_markdown(doc: dict[str, Any]) -> str:
