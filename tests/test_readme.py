@@ -1,6 +1,7 @@
 """Every code block of README.md runs: the Python blocks as scripts, the shell blocks' `accd-gym`
 commands through `python -m accd_gym`, and the install block is the command `scripts/setup.sh`
-itself runs. The generated sections of README.md match the declarations they come from."""
+itself runs. The generated sections of README.md match the declarations they come from, and its
+results table the benchmark report (docs/benchmark.md)."""
 
 import os
 import re
@@ -80,3 +81,46 @@ def test_cli_commands_run_in_order(tmp_path):
 def test_every_shell_command_is_tested():
     tested = {"accd-gym", "pip"}
     assert {c[0] for c in shell_commands()} <= tested, "a README shell command that no test runs"
+
+
+def _table_after(text: str, heading: str) -> list[list[str]]:
+    """The rows (cells stripped) of the first Markdown table after ``heading``, header first."""
+    lines = text[text.index(heading):].splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("|"))
+    rows = []
+    for line in lines[start:]:
+        if not line.startswith("|"):
+            break
+        if not set(line) <= set("|-: "):
+            rows.append([c.strip() for c in line.strip().strip("|").split("|")])
+    return rows
+
+
+def _report_rates() -> dict[str, dict[str, str]]:
+    """docs/benchmark.md's capture rates: {tier: {policy row name: rate}}."""
+    report = (ROOT / "docs" / "benchmark.md").read_text()
+    out = {}
+    for tier in re.findall(r"^## (\w+) \(`accd_gym/", report, re.M):
+        rows = _table_after(report, f"## {tier} (")
+        assert rows[0][:2] == ["policy", "capture rate"]
+        out[tier] = {r[0]: r[1] for r in rows[1:]}
+    return out
+
+
+#: README results column -> the report's row name (learned methods: "PPO, IQM of 5 seeds" is the
+#: row "PPO (IQM of 5)").
+_BASELINE_COLUMNS = {"LQR + Kalman filter": "lqr", "PID (guidance)": "guidance", "zero flaps": "zero"}
+
+
+def test_results_table_is_the_benchmark_reports():
+    rates = _report_rates()
+    rows = _table_after(README, "## Results")
+    header = rows[0]
+    assert header[0] == "tier" and [r[0] for r in rows[1:]] == list(rates), "one README row per report tier, in order"
+    for column, name in enumerate(header[1:], 1):
+        learned = re.fullmatch(r"(.+), IQM of (\d+) seeds", name)
+        row_name = f"{learned[1]} (IQM of {learned[2]})" if learned else _BASELINE_COLUMNS[name]
+        for row in rows[1:]:
+            tier, cell = row[0], row[column]
+            expected = rates[tier].get(row_name, "-")
+            assert cell == expected, f"README results, {tier} / {name}: {cell!r}, docs/benchmark.md: {expected!r}"
