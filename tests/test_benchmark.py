@@ -337,6 +337,8 @@ def test_a_result_is_keyed_by_the_whole_package_and_the_recipes_bytes_not_their_
     benchmark._claim(out, cfg)
     spec = dict(cfg["learners"]["ppo"], train_config=str(moved))
     benchmark._claim(out, {**cfg, "learners": {**cfg["learners"], "ppo": spec}})  # accepted
+    # the config file itself read from another checkout: accepted
+    benchmark._claim(out, {**cfg, "source": str(tmp_path / "clone" / "training" / "benchmark.json")})
     moved.write_text(moved.read_text() + "\n")  # an edited recipe is another config
     with pytest.raises(ConfigError, match=r"differs in \['learners'\]"):
         benchmark._claim(out, {**cfg, "learners": {**cfg["learners"], "ppo": spec}})

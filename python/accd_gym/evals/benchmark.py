@@ -323,9 +323,12 @@ def _sha256(path: str | Path) -> str:
 
 
 def _portable(config: dict[str, Any]) -> dict[str, Any]:
-    """``config`` with every learner's recipe path replaced by its file name and SHA-256: what
-    :func:`_claim` records and compares, independent of where the checkout lies."""
+    """``config`` with every learner's recipe path replaced by its file name and SHA-256, and the
+    config file's path (``source``) by its name: what :func:`_claim` records and compares,
+    independent of where the checkout lies."""
     out = json.loads(json.dumps(config))
+    if isinstance(out.get("source"), str):
+        out["source"] = Path(out["source"]).name
     for spec in out.get("learners", {}).values():
         recipe = spec.get("train_config")
         if isinstance(recipe, dict):
