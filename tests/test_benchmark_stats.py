@@ -49,6 +49,34 @@ def test_target_is_read_from_the_numbers():
     assert not target(tiers, eps)["tiers"]["hard"]["at_least_lqr"]
 
 
+def test_the_target_scores_the_precision_and_hard_tiers_and_the_spread_on_every_tier():
+    lqr = [True] * 90 + [False] * 10
+    better = [True] * 98 + [False] * 2
+    tiers = {"nominal": _tiers([0.99, 0.99], 1.0, [0.98, 1.0]),
+             "precision": _tiers([0.98, 0.98], 0.90, [0.96, 0.99]), "hard": _tiers([0.90, 0.90], 0.90, [0.88, 0.92])}
+    eps = {"nominal": {"lqr": [True] * 100, "nominal_ppo_seed0": [True] * 99 + [False]},
+           "precision": {"lqr": lqr, "precision_ppo_seed0": better}, "hard": {"lqr": lqr, "hard_ppo_seed0": lqr}}
+    t = target(tiers, eps)
+    # one episode short of a perfect LQR on the nominal tier: shown, not scored
+    assert not t["tiers"]["nominal"]["at_least_lqr"] and not t["tiers"]["nominal"]["scored"]
+    assert t["tiers"]["precision"]["scored"] and t["tiers"]["hard"]["scored"] and t["met"]
+    md = _target_report(t)
+    assert "On the precision and hard tiers" in md and "| nominal | PPO 99.0 %" in md and "| - | - |" in md
+    # the spread criterion holds on every tier
+    tiers["nominal"] = _tiers([0.99, 0.60], 1.0, [0.6, 1.0])
+    t = target(tiers, eps)
+    assert not t["met"] and "- nominal: PPO's seeds spread by 39.0 points" in _target_report(t)
+    # a config without the target tiers scores every tier it has
+    t = target({"nominal": tiers["nominal"]}, {"nominal": eps["nominal"]})
+    assert t["tiers"]["nominal"]["scored"]
+
+
+def _target_report(t):
+    doc = {"config": {"learners": {}, "episodes": 1, "source": "x"}, "command": "c", "date": "d", "machine": "m",
+           "wall_time_s": 60, "train_wall_s": 0, "baseline_wall_s": 60, "tiers": {}, "runs": [], "target": t}
+    return report_markdown(doc)
+
+
 def test_report_has_a_target_section_only_with_its_numbers():
     doc = {"config": {"learners": {}, "episodes": 1, "source": "x"}, "command": "c", "date": "d", "machine": "m",
            "wall_time_s": 60, "train_wall_s": 0, "baseline_wall_s": 60, "tiers": {}, "runs": []}
