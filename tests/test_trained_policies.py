@@ -41,18 +41,44 @@ def test_unknown_name_is_one_error_naming_the_value_and_the_shipped_names():
         trained.info("nope")
 
 
+#: The OpenBLAS kernel family the stored check episodes were recorded with. The LQR's design and
+#: its Kalman filter run on numpy/SciPy's OpenBLAS, whose kernels are chosen per CPU (AVX-512
+#: kernels round differently from the AVX2 ones), and a residual policy's closed loop can turn
+#: those last bits into other step counts (docs/decisions.md, "Known limitations"). The check
+#: therefore runs on the kernels it was recorded with, which every x86-64 CPU with AVX2 has.
+RECORDED_OPENBLAS_CORETYPE = "Haswell"
+
+_CHECK = """
+import json, sys
+from accd_gym import trained
+name, n = sys.argv[1], int(sys.argv[2])
+eps = trained.held_out_episodes(name, n)
+print(json.dumps([{"index": e.index, "outcome": e.outcome, "steps": e.steps, "min_distance": e.min_distance,
+                   "captured": bool(e.captured)} for e in eps]))
+"""
+
+
 @pytest.mark.parametrize("name", SHIPPED)
 def test_shipped_policy_reproduces_its_stored_held_out_episodes(name):
     pytest.importorskip("stable_baselines3")
+    import os
+    import platform
+
+    if platform.machine() not in ("x86_64", "AMD64"):
+        pytest.skip("the stored check episodes were recorded with OpenBLAS's x86-64 AVX2 kernels")
     doc = trained.info(name)
     stored = doc["check_episodes"]
-    episodes = trained.held_out_episodes(name, len(stored))
-    assert [e.index for e in episodes] == [s["index"] for s in stored]
-    assert [e.outcome for e in episodes] == [s["outcome"] for s in stored]
-    assert [e.steps for e in episodes] == [s["steps"] for s in stored]
-    np.testing.assert_allclose([e.min_distance for e in episodes], [s["min_distance"] for s in stored], atol=1e-3)
+    env = dict(os.environ, OPENBLAS_CORETYPE=RECORDED_OPENBLAS_CORETYPE)
+    r = subprocess.run([sys.executable, "-c", _CHECK, name, str(len(stored))], capture_output=True, text=True,
+                       timeout=600, env=env)
+    assert r.returncode == 0, r.stderr[-3000:]
+    episodes = json.loads(r.stdout.splitlines()[-1])
+    assert [e["index"] for e in episodes] == [s["index"] for s in stored]
+    assert [e["outcome"] for e in episodes] == [s["outcome"] for s in stored]
+    assert [e["steps"] for e in episodes] == [s["steps"] for s in stored]
+    np.testing.assert_allclose([e["min_distance"] for e in episodes], [s["min_distance"] for s in stored], atol=1e-3)
     recorded = doc["held_out"]["captured"][: len(stored)]
-    assert "".join("1" if e.captured else "0" for e in episodes) == recorded
+    assert "".join("1" if e["captured"] else "0" for e in episodes) == recorded
 
 
 def test_load_policy_resolves_a_shipped_name():
