@@ -754,7 +754,7 @@ def _target_markdown(t: Optional[dict[str, Any]]) -> list[str]:
     """The report's Target section from :func:`target`'s numbers (nothing without them)."""
     if not t:
         return []
-    scored = [tier for tier, v in t["tiers"].items() if v.get("scored", True)]
+    scored = [tier for tier, v in t["tiers"].items() if v["scored"]]
     lines = ["", "## Target", "",
              f"On the {' and '.join(scored)} tier{'s' if len(scored) > 1 else ''} a learned policy captures at least "
              "as many held-out episodes as the LQR (IQM >= the LQR's rate, its interval reaching it, the best run not "
@@ -766,7 +766,7 @@ def _target_markdown(t: Optional[dict[str, Any]]) -> list[str]:
              "significantly more | largest seed spread (method) |", "|---|---|---|---|---|---|---|"]
     yes = {True: "yes", False: "no"}
     for tier, v in t["tiers"].items():
-        at_least, better = ((yes[v["at_least_lqr"]], yes[v["significantly_better"]]) if v.get("scored", True)
+        at_least, better = ((yes[v["at_least_lqr"]], yes[v["significantly_better"]]) if v["scored"]
                             else ("-", "-"))
         lines.append(f"| {tier} | {method_label(v['method'])} {_pct(v['iqm'])} ({_pct(v['ci95'][0])} - {_pct(v['ci95'][1])}) "
                      f"| {_pct(v['lqr_rate'])} | `{v['best_run']}`: {v['only_learned']} / {v['only_lqr']}, "
@@ -783,7 +783,7 @@ def _target_misses(t: dict[str, Any]) -> list[str]:
     """The criteria a :func:`target` verdict misses, with the numbers by which it misses them."""
     out = []
     for tier, v in t["tiers"].items():
-        if v.get("scored", True) and not v["at_least_lqr"]:
+        if v["scored"] and not v["at_least_lqr"]:
             out.append(f"{tier}: the best method, {method_label(v['method'])}, captures {_pct(v['iqm'])} (IQM, "
                        f"interval up to {_pct(v['ci95'][1])}) against the LQR's {_pct(v['lqr_rate'])}; its best run "
                        f"{v['only_learned']} / {v['only_lqr']} episodes against the LQR, p = {v['p_value']:.3g}.")
@@ -791,7 +791,7 @@ def _target_misses(t: dict[str, Any]) -> list[str]:
             out.append(f"{tier}: {method_label(v['widest_spread_method'])}'s seeds spread by "
                        f"{100 * v['max_seed_spread']:.1f} points, {100 * (v['max_seed_spread'] - TARGET_MAX_SPREAD):.1f} "
                        f"more than the {100 * TARGET_MAX_SPREAD:.0f} allowed.")
-    scored = {tier: v for tier, v in t["tiers"].items() if v.get("scored", True)}
+    scored = {tier: v for tier, v in t["tiers"].items() if v["scored"]}
     if not any(v["significantly_better"] for v in scored.values()):
         best = min(scored.items(), key=lambda kv: kv[1]["p_value"])
         out.append(f"no tier's best run captures significantly more than the LQR (smallest p: {best[0]}, "
