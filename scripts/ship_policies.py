@@ -21,12 +21,23 @@ existing policy of that name is replaced only with ``--replace``.
 
 from __future__ import annotations
 
-import argparse
-import io
-import sys
-from pathlib import Path
+import os
 
-from accd_gym.errors import ConfigError
+#: The OpenBLAS kernels the check episodes run with (set before numpy loads its OpenBLAS). The
+#: LQR's design and Kalman filter run on numpy's and SciPy's OpenBLAS, whose kernels are chosen
+#: per CPU and round differently, and a residual policy's closed loop can turn those last bits
+#: into other episode lengths; the AVX2 kernels are on every x86-64 CPU with AVX2, so the check
+#: can be rerun there. policy.json records the kernels that ran (``check_blas_kernels``).
+CHECK_OPENBLAS_CORETYPE = "Haswell"
+if __name__ == "__main__":
+    os.environ["OPENBLAS_CORETYPE"] = CHECK_OPENBLAS_CORETYPE
+
+import argparse  # noqa: E402
+import io  # noqa: E402
+import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+from accd_gym.errors import ConfigError  # noqa: E402
 from accd_gym.files import read_user_json, write_bytes, write_text
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -48,6 +59,16 @@ def stripped_model(zip_bytes: bytes, algo: str) -> bytes:
     buf = io.BytesIO()
     model.save(buf)
     return buf.getvalue()
+
+
+def blas_kernels() -> str:
+    """The kernels of the OpenBLAS that numpy and SciPy loaded (``"Haswell"``, ``"SkylakeX"``, ...;
+    several joined by ``/`` if they differ, ``""`` without OpenBLAS)."""
+    import numpy  # noqa: F401
+    import scipy.linalg  # noqa: F401
+    from threadpoolctl import threadpool_info
+
+    return "/".join(sorted({i.get("architecture") or "" for i in threadpool_info() if i.get("internal_api") == "openblas"}))
 
 
 def benchmark_results(folder: Path, name: str) -> dict:
@@ -114,8 +135,9 @@ def main(argv: list[str] | None = None) -> int:
         "seed": meta["config"].get("seed"),
         "steps": int(steps),
         "total_timesteps": meta.get("total_timesteps"),
-        "source_run": (str(run.resolve().relative_to(ROOT)) if run.resolve().is_relative_to(ROOT)
-                       else f"accd-gym benchmark run {args.key}" if from_benchmark else str(run)),
+        # A benchmark run by its name (its folder is local, runs/ is not in the repository).
+        "source_run": (f"accd-gym benchmark run {args.key}" if from_benchmark
+                       else str(run.resolve().relative_to(ROOT)) if run.resolve().is_relative_to(ROOT) else str(run)),
         "source_checkpoint": model_path.name,
         "env": meta["config"]["env"],
         "held_out": {
@@ -142,6 +164,7 @@ def main(argv: list[str] | None = None) -> int:
         eps = trained.held_out_episodes(args.name, args.check)
         doc["check_episodes"] = [{"index": e.index, "outcome": e.outcome, "steps": e.steps,
                                   "min_distance": round(float(e.min_distance), 6)} for e in eps]
+        doc["check_blas_kernels"] = blas_kernels()
         got = "".join("1" if e.outcome == "captured" else "0" for e in eps)
         if got != captured[: args.check]:
             print(f"warning: {args.name}: first {args.check} held-out outcomes {got} differ from the recorded "

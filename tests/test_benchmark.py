@@ -128,6 +128,14 @@ def test_quick_benchmark_runs_the_whole_pipeline(tmp_path, monkeypatch):
     job = benchmark.jobs(cfg)[0]
     fresh = benchmark.run_job(job, str(out), cfg["episodes"] + 1, cfg["num_envs"])
     assert not fresh["reused"] and len(fresh["episodes"]["captured"]) == cfg["episodes"] + 1
+    # ... and reports the run's own training time with the run trained by an earlier invocation.
+    meta = json.loads((out / "runs" / job.name / "run.json").read_text())
+    assert not fresh["trained_now"] and fresh["train_wall_s"] == meta["wall_time_s"] > 0
+    assert all(r["trained_now"] for r in doc["runs"])
+    n = len(again_doc["runs"])
+    evaluated_now = {**again_doc, "runs": [{**r, "reused": False, "trained_now": False} for r in again_doc["runs"]]}
+    assert f"{n} of {n} runs were trained by an earlier invocation" in benchmark.report_markdown(evaluated_now)
+    assert "trained by an earlier invocation" not in benchmark.report_markdown(doc)
 
     # Filters: an unknown value is one error line naming it and the allowed ones (exit 2); a run of
     # some jobs reports every finished one and lists the others as missing.
@@ -342,3 +350,17 @@ def test_a_result_is_keyed_by_the_whole_package_and_the_recipes_bytes_not_their_
     moved.write_text(moved.read_text() + "\n")  # an edited recipe is another config
     with pytest.raises(ConfigError, match=r"differs in \['learners'\]"):
         benchmark._claim(out, {**cfg, "learners": {**cfg["learners"], "ppo": spec}})
+
+
+def test_the_report_names_the_cpu_and_the_blas_kernels_it_ran_on():
+    """The LQR's last bits follow the BLAS kernels chosen for the CPU, so the report says which."""
+    import platform
+
+    from threadpoolctl import threadpool_info
+
+    machine = benchmark._machine()
+    assert machine.startswith(platform.machine()) and f"Python {platform.python_version()}" in machine
+    blas = [i for i in threadpool_info() if i.get("user_api") == "blas"]
+    assert blas, "numpy/SciPy load a BLAS"
+    assert f"BLAS kernels {blas[0]['internal_api']}" in machine
+    assert all(i.get("architecture", "") in machine for i in blas)

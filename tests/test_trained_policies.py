@@ -41,13 +41,6 @@ def test_unknown_name_is_one_error_naming_the_value_and_the_shipped_names():
         trained.info("nope")
 
 
-#: The OpenBLAS kernel family the stored check episodes were recorded with. The LQR's design and
-#: its Kalman filter run on numpy/SciPy's OpenBLAS, whose kernels are chosen per CPU (AVX-512
-#: kernels round differently from the AVX2 ones), and a residual policy's closed loop can turn
-#: those last bits into other step counts (docs/decisions.md, "Known limitations"). The check
-#: therefore runs on the kernels it was recorded with, which every x86-64 CPU with AVX2 has.
-RECORDED_OPENBLAS_CORETYPE = "Haswell"
-
 _CHECK = """
 import json, sys
 from accd_gym import trained
@@ -64,11 +57,16 @@ def test_shipped_policy_reproduces_its_stored_held_out_episodes(name):
     import os
     import platform
 
-    if platform.machine() not in ("x86_64", "AMD64"):
-        pytest.skip("the stored check episodes were recorded with OpenBLAS's x86-64 AVX2 kernels")
     doc = trained.info(name)
     stored = doc["check_episodes"]
-    env = dict(os.environ, OPENBLAS_CORETYPE=RECORDED_OPENBLAS_CORETYPE)
+    # The LQR inside a residual policy runs on numpy's and SciPy's OpenBLAS, whose kernels are
+    # chosen per CPU and round differently; the check runs on the kernels it was recorded with
+    # (docs/decisions.md, "Known limitations"), which the x86-64 CPUs with AVX2 all have.
+    kernels = doc["check_blas_kernels"]
+    assert kernels == "Haswell", f"{name}: check episodes recorded with OpenBLAS kernels {kernels!r}"
+    if platform.machine() not in ("x86_64", "AMD64"):
+        pytest.skip(f"the stored check episodes were recorded with OpenBLAS's x86-64 {kernels} kernels")
+    env = dict(os.environ, OPENBLAS_CORETYPE=kernels)
     r = subprocess.run([sys.executable, "-c", _CHECK, name, str(len(stored))], capture_output=True, text=True,
                        timeout=600, env=env)
     assert r.returncode == 0, r.stderr[-3000:]
