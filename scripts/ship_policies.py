@@ -61,16 +61,6 @@ def stripped_model(zip_bytes: bytes, algo: str) -> bytes:
     return buf.getvalue()
 
 
-def blas_kernels() -> str:
-    """The kernels of the OpenBLAS that numpy and SciPy loaded (``"Haswell"``, ``"SkylakeX"``, ...;
-    several joined by ``/`` if they differ, ``""`` without OpenBLAS)."""
-    import numpy  # noqa: F401
-    import scipy.linalg  # noqa: F401
-    from threadpoolctl import threadpool_info
-
-    return "/".join(sorted({i.get("architecture") or "" for i in threadpool_info() if i.get("internal_api") == "openblas"}))
-
-
 def benchmark_results(folder: Path, name: str) -> dict:
     """The ``{tier: {"base_seed", name: {"captured"}, "lqr": {"captured"}}}`` view of one run of a
     benchmark folder: its held-out outcomes and the LQR's on the same episodes."""
@@ -164,7 +154,9 @@ def main(argv: list[str] | None = None) -> int:
         eps = trained.held_out_episodes(args.name, args.check)
         doc["check_episodes"] = [{"index": e.index, "outcome": e.outcome, "steps": e.steps,
                                   "min_distance": round(float(e.min_distance), 6)} for e in eps]
-        doc["check_blas_kernels"] = blas_kernels()
+        from accd_gym.control.lqr import blas_kernels
+
+        doc["check_blas_kernels"] = "/".join(sorted({arch for api, arch in blas_kernels() if api == "openblas"}))
         got = "".join("1" if e.outcome == "captured" else "0" for e in eps)
         if got != captured[: args.check]:
             print(f"warning: {args.name}: first {args.check} held-out outcomes {got} differ from the recorded "

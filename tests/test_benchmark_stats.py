@@ -73,13 +73,13 @@ def test_the_target_scores_the_precision_and_hard_tiers_and_the_spread_on_every_
 
 def _target_report(t):
     doc = {"config": {"learners": {}, "episodes": 1, "source": "x"}, "command": "c", "date": "d", "machine": "m",
-           "wall_time_s": 60, "train_wall_s": 0, "baseline_wall_s": 60, "tiers": {}, "runs": [], "target": t}
+           "wall_time_s": 60, "jobs_wall_s": 0, "baseline_wall_s": 60, "tiers": {}, "runs": [], "target": t}
     return report_markdown(doc)
 
 
 def test_report_has_a_target_section_only_with_its_numbers():
     doc = {"config": {"learners": {}, "episodes": 1, "source": "x"}, "command": "c", "date": "d", "machine": "m",
-           "wall_time_s": 60, "train_wall_s": 0, "baseline_wall_s": 60, "tiers": {}, "runs": []}
+           "wall_time_s": 60, "jobs_wall_s": 0, "baseline_wall_s": 60, "tiers": {}, "runs": []}
     assert "## Target" not in report_markdown(doc)
     lqr = [True, False]
     doc["target"] = target({"hard": _tiers([1.0], 0.5, [1.0, 1.0])}, {"hard": {"lqr": lqr, "hard_ppo_seed0": [True, True]}})

@@ -403,6 +403,18 @@ class LqrPolicy:
         self._z, self._u, self._fresh = z.astype(np.float64), u.astype(np.float64), fresh.astype(bool)
 
 
+def blas_kernels() -> list[tuple[str, str]]:
+    """The BLAS libraries that numpy and SciPy loaded and the kernels each chose for this CPU,
+    ``[(internal_api, architecture), ...]`` sorted (e.g. ``[("openblas", "SkylakeX")]``). The
+    LQR's design and Kalman filter run on them and their last bits follow the kernels
+    (docs/decisions.md, "Known limitations")."""
+    import scipy.linalg  # noqa: F401  (loaded first: threadpoolctl reports the libraries loaded)
+    from threadpoolctl import threadpool_info
+
+    return sorted({(i["internal_api"], i.get("architecture") or "") for i in threadpool_info()
+                   if i.get("user_api") == "blas"})
+
+
 def is_lqr_tuning(path: str) -> bool:
     """Whether the JSON file ``path`` is an LQR tuning result (``"policy": "lqr"``)."""
     from pathlib import Path
@@ -435,5 +447,5 @@ def lqr_from_tuning(path: str, config: Any = None) -> LqrPolicy:
     return policy
 
 
-__all__ = ["LqrDesign", "LqrPolicy", "LqrTuning", "default_tuning", "design", "is_lqr_tuning", "linearize",
-           "lqr_from_tuning"]
+__all__ = ["LqrDesign", "LqrPolicy", "LqrTuning", "blas_kernels", "default_tuning", "design", "is_lqr_tuning",
+           "linearize", "lqr_from_tuning"]
