@@ -94,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
 
     from accd_gym.learning.training import latest_checkpoint
-    from accd_gym.trained.catalog import TRAINED_DIR
+    from accd_gym.evals.shipped import TRAINED_DIR
 
     if not args.name.replace("_", "").isalnum():
         raise ConfigError(f"invalid config: --name {args.name!r} is outside the allowed range [A-Za-z0-9_]+")

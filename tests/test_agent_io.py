@@ -249,7 +249,7 @@ def test_states_of_other_options_or_plain_envs_are_refused_and_change_nothing():
     ({"residual": {"scale": 5}}, r"`residual.scale` = 5 is outside the allowed range \(0, 2\]"),
     ({"residual": {"scale": 0.0}}, r"`residual.scale` = 0.0 is outside the allowed range"),
     ({"residual": {"scale": float("nan")}}, r"`residual.scale` = nan"),
-    ({"residual": {"base": "pid"}}, r"`residual.base` = 'pid' is outside the allowed range: one of 'lqr', 'guidance'"),
+    ({"residual": {"base": "pid"}}, r"`residual.base` = 'pid' is outside the allowed range: one of 'guidance', 'lqr'"),
     ({"residual": {"gain": 1}}, r"`residual` key\(s\) \['gain'\] outside the allowed set"),
     ({"residual": {"observe_base": 1}}, r"`residual.observe_base` = 1"),
     ({"residual": 3}, r"`residual` = 3 is outside the allowed range"),

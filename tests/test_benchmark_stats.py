@@ -118,10 +118,10 @@ def test_failure_table_numbers_by_hand():
 def test_episodes_record_the_closing_speeds_from_their_trajectory():
     import numpy as np
 
-    from accd_gym.control.baselines import make_baseline
+    from accd_gym.control.registry import make_controller
     from accd_gym.evals.episodes import run_episodes
 
-    for e in run_episodes(make_baseline("lqr", 0, None), 2, num_envs=2):
+    for e in run_episodes(make_controller("lqr", 0, None), 2, num_envs=2):
         p = e.trajectory.astype(np.float64)
         dt = e.time / e.steps
         assert e.final_speed == pytest.approx(np.linalg.norm(p[-1] - p[-2]) / dt)

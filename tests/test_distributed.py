@@ -172,7 +172,7 @@ def test_validation_episodes_are_training_episodes_and_never_the_held_out_ones(t
 def test_a_sweeps_baselines_run_on_its_episodes_without_the_agents_options(tmp_path):
     import json
 
-    from accd_gym.control.baselines import make_baseline
+    from accd_gym.control.registry import make_controller
     from accd_gym.evals import sweep
 
     train = tmp_path / "ppo.json"
@@ -183,7 +183,7 @@ def test_a_sweeps_baselines_run_on_its_episodes_without_the_agents_options(tmp_p
     rates = sweep.baseline_rates(cfg)
     wake, base = sweep.eval_episodes("validation")
     for name in ("lqr", "zero"):
-        eps = run_episodes(make_baseline(name, 0, SHORT), 4, seed=base, wake_seeds=list(wake[:4]), num_envs=2, config=SHORT)
+        eps = run_episodes(make_controller(name, 0, SHORT), 4, seed=base, wake_seeds=list(wake[:4]), num_envs=2, config=SHORT)
         assert rates[name]["captures"] == sum(e.captured for e in eps) and rates[name]["episodes"] == 4
     with pytest.raises(accd_gym.ConfigError, match=r"`baselines` = \['pid'\] is outside the allowed values"):
         sweep.validate_config({"train_config": str(train), "baselines": ["pid"]})

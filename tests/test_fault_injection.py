@@ -368,7 +368,7 @@ def test_ctrl_c_on_a_full_disk_keeps_the_checkpoints_and_resumes_after_space_is_
 
 
 def test_evaluate_on_a_full_disk_keeps_the_previous_results(tmp_path, capsys, monkeypatch):
-    from accd_gym import evaluation
+    from accd_gym.evals import evaluation
 
     with _tmpfs(tmp_path / "disk", "8m") as disk:
         out = disk / "eval"
@@ -415,13 +415,14 @@ def read_only_folder(tmp_path):
 @pytest.mark.parametrize("command", ["evaluate", "replay", "train"])
 def test_a_read_only_output_folder_is_refused_before_any_episode(command, read_only_folder, tmp_path, capsys,
                                                                   monkeypatch):
-    from accd_gym import evaluation, recording
+    from accd_gym.evals import evaluation
+    from accd_gym.replays import replay
 
     def ran(*args, **kwargs):
         raise AssertionError("episodes ran before the output folder was checked")
 
     monkeypatch.setattr(evaluation, "run_episodes", ran)
-    monkeypatch.setattr(recording, "iter_recordings", ran)
+    monkeypatch.setattr(replay, "iter_recordings", ran)
     out = str(read_only_folder / "out")
     if command == "train":
         cfg = tmp_path / "cfg.json"

@@ -1,7 +1,9 @@
 """The package's import graph, read from the source with ``ast``: every import of an accd_gym
 module, at module level or inside a function, absolute or relative, is an edge; the graph has no
-cycle, every edge ends at a module that exists at its new path, and no module imports another
-module's private names (``_x``; the ``_core`` extension module is the binding, not private)."""
+cycle, every edge points down the layers of :data:`LAYERS` (docs/architecture.md draws them),
+every edge ends at a module that exists, no module imports another module's private names (``_x``;
+the ``_core`` extension module is the binding, not private), and an import of the package's own
+modules inside a function says why it is deferred (an optional dependency or start-up time)."""
 
 from __future__ import annotations
 
@@ -15,6 +17,23 @@ import accd_gym
 PACKAGE_DIR = Path(accd_gym.__file__).parent
 #: Modules that exist without a Python source of their own.
 EXTENSIONS = {"accd_gym._core"}
+
+#: The package's layers, bottom first: a module may import modules of its own layer and of the
+#: layers below, never one above. A module belongs to the layer of the longest prefix that
+#: names it (``accd_gym.envs.task`` is in "task", the rest of ``accd_gym.envs`` in "envs").
+LAYERS: list[tuple[str, tuple[str, ...]]] = [
+    ("foundation", ("accd_gym._core", "accd_gym.errors", "accd_gym.files")),
+    ("task", ("accd_gym.envs.task", "accd_gym.envs.config", "accd_gym.envs.overrides", "accd_gym.envs.tables",
+              "accd_gym.envs.tiers", "accd_gym.envs.history")),
+    ("control", ("accd_gym.control",)),
+    ("envs", ("accd_gym.envs",)),
+    ("learning", ("accd_gym.learning", "accd_gym.zoo")),
+    ("evals", ("accd_gym.evals",)),
+    ("applications", ("accd_gym.replays", "accd_gym.studies", "accd_gym.trained")),
+    ("interface", ("accd_gym.cli", "accd_gym.__main__", "accd_gym")),
+]
+#: What a deferred import's comment starts with (on its line or the line above).
+DEFERRED = "# deferred:"
 
 
 def modules_of(root: Path, package: str) -> dict[str, Path]:
@@ -164,3 +183,102 @@ def test_the_private_name_check_sees_private_imports(tmp_path):
     _write(pkg, {"__init__.py": "", "x.py": "def _h():\n    pass\n", "y.py": "def g():\n    from .x import _h\n"})
     known = set(modules_of(pkg, "pkg"))
     assert ("pkg.x", "_h", 2) in imports_of("pkg.y", pkg / "y.py", known)
+
+
+# -- layers -----------------------------------------------------------------------------------
+
+def layer_of(module: str, layers: list[tuple[str, tuple[str, ...]]] = LAYERS) -> int:
+    """The index in ``layers`` of the layer whose longest prefix names ``module``."""
+    best, best_len = None, -1
+    for index, (_, prefixes) in enumerate(layers):
+        for prefix in prefixes:
+            if (module == prefix or module.startswith(prefix + ".")) and len(prefix) > best_len:
+                best, best_len = index, len(prefix)
+    if best is None:
+        raise KeyError(f"{module} is in no layer")
+    return best
+
+
+def upward_edges(graph: dict[str, set[str]], layers: list[tuple[str, tuple[str, ...]]] = LAYERS) -> list[str]:
+    """Every edge of ``graph`` from a module to one in a higher layer, as text."""
+    out = []
+    for src, targets in sorted(graph.items()):
+        for dst in sorted(targets):
+            a, b = layer_of(src, layers), layer_of(dst, layers)
+            if b > a:
+                out.append(f"{src} ({layers[a][0]}) -> {dst} ({layers[b][0]})")
+    return out
+
+
+def test_every_import_points_down_the_layers():
+    graph = import_graph(PACKAGE_DIR, "accd_gym", EXTENSIONS)
+    for module in graph:
+        layer_of(module)  # every module has a layer
+    bad = upward_edges(graph)
+    assert not bad, "imports against the layers:\n" + "\n".join(bad)
+
+
+def test_the_layer_check_finds_an_injected_upward_import():
+    graph = import_graph(PACKAGE_DIR, "accd_gym", EXTENSIONS)
+    assert layer_of("accd_gym.envs.task") < layer_of("accd_gym.control.lqr") < layer_of("accd_gym.envs.residual")
+    assert layer_of("accd_gym") > layer_of("accd_gym.replays.recording")
+    graph["accd_gym.envs.vector"] = graph["accd_gym.envs.vector"] | {"accd_gym.evals.episodes"}
+    assert upward_edges(graph) == ["accd_gym.envs.vector (envs) -> accd_gym.evals.episodes (evals)"]
+
+
+def test_the_layer_check_sees_upward_imports_in_functions(tmp_path):
+    pkg = tmp_path / "pkg"
+    _write(pkg, {
+        "__init__.py": "",
+        "low/__init__.py": "",
+        "low/a.py": "def f():\n    from pkg.high import b\n    return b\n",
+        "high/__init__.py": "",
+        "high/b.py": "from ..low import a\n",
+    })
+    layers = [("low", ("pkg.low",)), ("high", ("pkg.high", "pkg"))]
+    graph = import_graph(pkg, "pkg")
+    assert upward_edges(graph, layers) == ["pkg.low.a (low) -> pkg.high.b (high)"]
+    (pkg / "low" / "a.py").write_text("X = 1\n")
+    assert upward_edges(import_graph(pkg, "pkg"), layers) == []
+
+
+# -- imports inside functions -----------------------------------------------------------------
+
+def deferred_imports(name: str, path: Path) -> list[tuple[int, bool]]:
+    """``(line, has its reason)`` of every import of the package's own modules inside a function
+    of module ``name``: the reason is a :data:`DEFERRED` comment on the import's line or on the
+    line above the block of import lines it is in."""
+    root = name.split(".")[0]
+    lines = path.read_text().splitlines()
+    out = []
+    for fn in ast.walk(ast.parse("\n".join(lines), str(path))):
+        if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            continue
+        for node in ast.walk(fn):
+            own = (isinstance(node, ast.ImportFrom) and (node.level or (node.module or "").split(".")[0] == root)) or (
+                isinstance(node, ast.Import) and any(a.name.split(".")[0] == root for a in node.names))
+            if own:
+                above = node.lineno - 2
+                while above >= 0 and lines[above].strip().startswith(("from ", "import ")):
+                    above -= 1
+                reason = above >= 0 and lines[above].strip().startswith(DEFERRED)
+                out.append((node.lineno, DEFERRED in lines[node.lineno - 1] or reason))
+    return sorted(set(out))
+
+
+def test_every_import_inside_a_function_says_why_it_is_deferred():
+    mods = modules_of(PACKAGE_DIR, "accd_gym")
+    found = {name: deferred_imports(name, path) for name, path in mods.items()}
+    assert sum(len(v) for v in found.values()) < 60  # the few an optional dependency or start-up needs
+    bad = [f"{mods[name].relative_to(PACKAGE_DIR)}:{line}" for name, v in found.items() for line, ok in v if not ok]
+    assert not bad, f"imports inside functions without a {DEFERRED!r} comment:\n" + "\n".join(bad)
+
+
+def test_the_deferred_import_check_sees_one_without_a_reason(tmp_path):
+    pkg = tmp_path / "pkg"
+    _write(pkg, {"__init__.py": "", "m.py": (
+        "def f():\n    from pkg import n\n\n"
+        "def g():\n    # deferred: start-up time\n    from pkg import n\n\n"
+        "def h():\n    import json\n\n"
+        "def k():\n    # deferred: start-up time\n    from pkg import n\n    from pkg import o\n    x = 1\n    from pkg import p\n")})
+    assert deferred_imports("pkg.m", pkg / "m.py") == [(2, False), (6, True), (13, True), (14, True), (16, False)]

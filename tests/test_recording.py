@@ -12,7 +12,7 @@ import pytest
 
 import accd_gym
 from accd_gym import ENV_ID, ConfigError
-from accd_gym.control.baselines import make_baseline
+from accd_gym.control.registry import make_controller
 from accd_gym.evals.evaluation import run_episodes
 from accd_gym.replays.recording import SAMPLE_FIELDS, STEP_FIELDS, Recording, RecordEpisode, record_episodes
 from accd_gym.envs.render import render_frame
@@ -37,7 +37,7 @@ def rotation(q):
 def test_recording_equals_a_single_envs_own_outputs_step_for_step(extra):
     config = dict(SHORT, **extra)
     wake = [1_000_000_003, 1_000_000_004]
-    recs = record_episodes(make_baseline("random", 5), 2, config=config, seed=BASE, wake_seeds=wake, num_envs=2)
+    recs = record_episodes(make_controller("random", 5), 2, config=config, seed=BASE, wake_seeds=wake, num_envs=2)
     assert [r.meta["episode"] for r in recs] == [0, 1]
     for i, rec in enumerate(recs):
         # The same episode in a plain env that nobody reads anything from but its outputs:
@@ -76,8 +76,8 @@ def test_recorded_episodes_are_the_evaluations_episodes(policy):
     """Same batch, seeds and policy calls as run_episodes, so a stateful or random policy's
     episode k is the evaluation's episode k (evaluate --replay relies on it)."""
     kw = dict(seed=BASE, wake_seeds=list(accd_gym.HELD_OUT_WAKE_SEEDS[:5]), num_envs=2, config=SHORT)
-    evaluated = run_episodes(make_baseline(policy, 0), 5, **kw)
-    recs = record_episodes(make_baseline(policy, 0), 5, **kw)
+    evaluated = run_episodes(make_controller(policy, 0), 5, **kw)
+    recs = record_episodes(make_controller(policy, 0), 5, **kw)
     for e, rec in zip(evaluated, recs):
         assert rec.meta["episode"] == e.index
         assert rec.outcome == e.outcome and rec.steps == e.steps
@@ -89,7 +89,7 @@ def test_recorded_episodes_are_the_evaluations_episodes(policy):
         np.testing.assert_allclose(rec["capture_point"] - rec["boom_tip"], e.trajectory, rtol=0, atol=1e-5)
         np.testing.assert_allclose(-rec["observation"][:, 0:3] / OBSERVATION_SCALE["boom_rel_x"], e.trajectory, rtol=0, atol=1e-5)
     # keep= records only the chosen episodes, and they are the same.
-    (again,) = record_episodes(make_baseline(policy, 0), 5, keep=[3], **kw)
+    (again,) = record_episodes(make_controller(policy, 0), 5, keep=[3], **kw)
     for name in recs[3].arrays:
         np.testing.assert_array_equal(again[name], recs[3][name])
 
@@ -158,7 +158,7 @@ print(json.dumps({{"shapes": out, "outcome": meta["outcome"], "segments": meta["
 def test_wrapper_records_what_drives_the_env(tmp_path):
     wake = 1_000_000_009
     env = RecordEpisode(gym.make(ENV_ID, **SHORT), folder=tmp_path)
-    policy = make_baseline("guidance", 0)
+    policy = make_controller("guidance", 0)
     obs, _ = env.reset(seed=BASE, options={"wake_seed": wake})
     policy.reset(None)
     done = False

@@ -7,7 +7,8 @@ import pytest
 
 import accd_gym
 from accd_gym.learning import training
-from accd_gym.control.baselines import BASELINES, GuidancePolicy, RandomPolicy, ZeroPolicy, quaternion_to_euler
+from accd_gym.control.registry import CONTROLLERS, make_controller
+from accd_gym.control.baselines import GuidancePolicy, RandomPolicy, ZeroPolicy, quaternion_to_euler
 from accd_gym.cli import main
 from accd_gym.evals.evaluation import mcnemar_exact, paired_comparisons, run_episodes, summarize, wilson_interval
 from accd_gym.envs.task import OBS_DIM, OBSERVATION_SCALE, observation_indices
@@ -23,9 +24,9 @@ def _obs(n=3, rel=(0.0, 0.0, 0.0)):
     return o
 
 
-@pytest.mark.parametrize("name", sorted(BASELINES))
+@pytest.mark.parametrize("name", sorted(CONTROLLERS))
 def test_baselines_give_bounded_actions_of_the_right_shape(name):
-    policy = accd_gym.control.baselines.make_baseline(name, seed=3)
+    policy = make_controller(name, seed=3)
     obs = np.random.default_rng(0).uniform(-1, 1, (5, 25)).astype(np.float32)
     quat = observation_indices("quat_w", "quat_x", "quat_y", "quat_z")
     obs[:, quat] /= np.linalg.norm(obs[:, quat], axis=1, keepdims=True)
@@ -119,7 +120,7 @@ def test_guidance_closes_in_on_the_boom_better_than_zero_flaps():
     assert guid["captures"] > zero["captures"]
 
 
-@pytest.mark.parametrize("name", sorted(BASELINES))
+@pytest.mark.parametrize("name", sorted(CONTROLLERS))
 def test_rollout_command_with_each_baseline(name, capsys):
     rc = main(["rollout", "--policy", name, "--episodes", "3", "--num-envs", "3", "--num-threads", "1",
                "--env", json.dumps(SHORT), "--quiet", "--json"])

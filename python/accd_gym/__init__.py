@@ -47,9 +47,8 @@ from accd_gym._core import (
     towed_tether,
 )
 from accd_gym._core import reward_bounds as _core_reward_bounds
-from accd_gym import _aliases
 from accd_gym.errors import AccdError, ConfigError, OutputError, SimulationError, StateError
-from accd_gym.envs.config import EXACT_AIR_SCHEME, default_config, env_config
+from accd_gym.envs.config import EXACT_AIR_SCHEME, default_config, env_config, config_json
 from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, PARAMETER_NAMES, TRAINING_WAKE_SEEDS, VALIDATION_WAKE_SEEDS
 from accd_gym.envs.env import InAirCaptureEnv
 from accd_gym.envs.vector import InAirCaptureVectorEnv
@@ -57,8 +56,6 @@ from accd_gym.replays.recording import Recording, RecordEpisode, record_episodes
 from accd_gym.envs.tiers import TIERS
 from accd_gym.envs.tiers import register_tiers as _register_tiers
 from accd_gym.control.lqr import LqrPolicy, linearize
-
-_aliases.register()
 
 #: The registered id of the nominal env (``gymnasium.make(ENV_ID)``, ``gymnasium.make_vec(ENV_ID, n)``);
 #: the benchmark tiers' ids are in :data:`accd_gym.envs.tiers.TIERS`. A ``str`` whose pickle imports
@@ -71,8 +68,6 @@ _register_tiers()
 
 def reward_bounds(config: Optional[dict[str, Any]] = None, **overrides: Any) -> tuple[float, float]:
     """Lowest and highest reward of one agent step under a configuration (keyword overrides)."""
-    from accd_gym.envs.config import config_json
-
     return _core_reward_bounds(config_json(env_config(config, **overrides)))
 
 
@@ -81,20 +76,17 @@ if TYPE_CHECKING:
 else:
 
     def __getattr__(name: str) -> Any:
-        """Imports :class:`AccdVecEnv` (and with it stable-baselines3) on first use, and the modules
-        of the deprecated flat paths (``accd_gym.envs.vector``: :mod:`accd_gym._aliases`); hidden from
+        """Imports :class:`AccdVecEnv` (and with it stable-baselines3) on first use; hidden from
         type checkers, which see the import above and nothing else."""
         if name == "AccdVecEnv":
             try:
+                # deferred: stable-baselines3, an optional dependency (accd_gym.envs.sb3 imports it)
                 from accd_gym.envs.sb3 import AccdVecEnv
             except ModuleNotFoundError as e:
                 raise ModuleNotFoundError(
                     f"accd_gym.AccdVecEnv needs stable-baselines3 ({e}): pip install 'accd-gym[sb3]'", name=e.name
                 ) from e
             return AccdVecEnv
-        module = _aliases.old_module(name)
-        if module is not None:
-            return module
         raise AttributeError(f"module 'accd_gym' has no attribute {name!r}")
 
 

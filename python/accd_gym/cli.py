@@ -8,10 +8,16 @@ import signal
 import sys
 from pathlib import Path
 from typing import NoReturn, Optional, Sequence
+
 from accd_gym import files as _files
+from accd_gym._core import default_aero_table_json
+from accd_gym.envs.tiers import TIERS
+from accd_gym.errors import AccdError, ConfigError
+from accd_gym.files import read_user_json
 
 
 def _settle(args: argparse.Namespace) -> int:
+    # deferred: start-up time (a command imports only what it runs)
     from accd_gym.studies import settle
 
     summary = settle.run(Path(args.out), preset=args.preset, duration=args.duration, progress=not args.quiet)
@@ -22,6 +28,7 @@ def _settle(args: argparse.Namespace) -> int:
 
 
 def _study(args: argparse.Namespace) -> int:
+    # deferred: start-up time (a command imports only what it runs)
     from accd_gym.studies import runner
 
     out = Path(args.out)
@@ -38,8 +45,6 @@ def _study(args: argparse.Namespace) -> int:
 
 
 def _export_aero(args: argparse.Namespace) -> int:
-    from accd_gym import default_aero_table_json
-
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     _files.write_text(out, default_aero_table_json())
@@ -48,12 +53,14 @@ def _export_aero(args: argparse.Namespace) -> int:
 
 
 def _train(args: argparse.Namespace) -> int:
+    # deferred: start-up time (a command imports only what it runs)
     from accd_gym.learning import training
 
     if args.resume:
         if args.config is not None or args.timesteps is not None or args.seed is not None or args.tier:
             raise _usage("--resume continues a run with its own config; drop --config, --timesteps, --seed and --tier")
         out = Path(args.resume)
+        # deferred: start-up time (a command imports only what it runs)
         from accd_gym.learning.rllib import is_rllib_run
 
         if is_rllib_run(out):
@@ -66,6 +73,7 @@ def _train(args: argparse.Namespace) -> int:
             raise _usage("train needs --out RUN (or --resume RUN)")
         out = Path(args.out)
         if _is_rllib_config(args.config):
+            # deferred: start-up time (a command imports only what it runs)
             from accd_gym.learning import rllib
 
             meta = rllib.train(rllib.load_config(args.config, seed=args.seed), out, timesteps=args.timesteps,
@@ -93,8 +101,7 @@ def _train(args: argparse.Namespace) -> int:
 def _is_rllib_config(path: Optional[str]) -> bool:
     """Whether the training config file at ``path`` asks for the RLlib trainer (a file that cannot
     be read is left to the loader's error)."""
-    from accd_gym.errors import ConfigError
-    from accd_gym.files import read_user_json
+    # deferred: start-up time (a command imports only what it runs)
     from accd_gym.learning.rllib import is_rllib_config
 
     try:
@@ -104,6 +111,7 @@ def _is_rllib_config(path: Optional[str]) -> bool:
 
 
 def _benchmark(args: argparse.Namespace) -> int:
+    # deferred: start-up time (a command imports only what it runs)
     from accd_gym.evals import benchmark
 
     cfg = benchmark.load_config(args.config, quick=args.quick)
@@ -141,6 +149,7 @@ def _seeds(text: Optional[str]) -> Optional[list[int]]:
 
 
 def _sweep(args: argparse.Namespace) -> int:
+    # deferred: start-up time (a command imports only what it runs)
     from accd_gym.evals import sweep
 
     doc = sweep.run(args.config, args.out, progress=not args.quiet)
@@ -229,7 +238,8 @@ def _env_of(args: argparse.Namespace) -> dict:
     if getattr(args, "tier", None):
         env = {"tier": args.tier, **env}
     elif "tier" not in env:
-        from accd_gym.trained.catalog import info, is_trained
+        # deferred: start-up time (a command imports only what it runs)
+        from accd_gym.trained import info, is_trained
 
         specs = args.policy if isinstance(getattr(args, "policy", None), list) else [getattr(args, "policy", "")]
         tiers = sorted({info(s)["tier"] for s in specs if isinstance(s, str) and is_trained(s)})
@@ -241,8 +251,6 @@ def _env_of(args: argparse.Namespace) -> dict:
 
 def _env_overrides(text: Optional[str]) -> dict:
     """The --env JSON object (environment config overrides)."""
-    from accd_gym.errors import ConfigError
-
     if not text:
         return {}
     try:
@@ -255,14 +263,17 @@ def _env_overrides(text: Optional[str]) -> dict:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
+    # deferred: start-up time (a command imports only what it runs)
     from accd_gym.evals import evaluation
+    from accd_gym.replays import replay
 
     if args.ray_chunk is not None and args.ray is None:
         raise _usage("--ray-chunk sets the episodes per Ray task; it needs --ray")
 
     results = evaluation.evaluate(args.policy, args.episodes, args.out, num_envs=args.num_envs, num_threads=args.num_threads,
                                   config=_env_of(args), progress=not args.quiet,
-                                  allow_unnormalized=args.allow_unnormalized, replay=args.replay,
+                                  allow_unnormalized=args.allow_unnormalized,
+                                  replay_writer=replay.evaluation_replays(args.replay) if args.replay else None,
                                   ray_address=args.ray, ray_chunk=args.ray_chunk)
     for spec, doc in results["policies"].items():
         if doc.get("note"):
@@ -276,6 +287,7 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
+    # deferred: start-up time (a command imports only what it runs)
     from accd_gym.replays import replay
 
     written = replay.run_replay(args.policy, args.episodes, args.out, seed=args.seed, config=_env_of(args),
@@ -289,6 +301,7 @@ def _replay(args: argparse.Namespace) -> int:
 
 
 def _rollout(args: argparse.Namespace) -> int:
+    # deferred: start-up time (a command imports only what it runs)
     from accd_gym.evals import evaluation
 
     config = _env_of(args)
@@ -309,8 +322,6 @@ def _rollout(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``accd-gym`` and its subcommands."""
-    from accd_gym.envs.tiers import TIERS
-
     parser = _Parser(prog="accd-gym", description="accd-gym: In-Air Capturing simulation tools.")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("settle", help="simulate a towed tether settling behind the aircraft and plot it")
@@ -320,6 +331,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="simulated time in seconds (default 120)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_settle)
+    # deferred: start-up time (a command imports only what it runs)
     from accd_gym.studies.study import EXTRA_STUDIES, STUDIES
 
     p = sub.add_parser("study", help="run the paper's section-4 tether design studies: plots, JSON, markdown tables")
@@ -425,8 +437,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Runs ``accd-gym`` with ``argv`` (default: the process arguments); returns the exit code."""
-    from accd_gym.errors import AccdError
-
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)

@@ -1,11 +1,12 @@
 """Built-in baseline policies: zero flaps, random flaps, a classical guidance controller and an
 LQR with a disturbance observer (:class:`accd_gym.control.lqr.LqrPolicy`, designed for the env's config).
 
-Every policy here (and :class:`accd_gym.evals.evaluation.SB3Policy`) has the same interface:
+Every policy here has the interface :class:`accd_gym.control.registry.Policy`:
 ``predict(obs_batch) -> actions`` with ``obs_batch`` of shape (N, 25) (the observation of
 :class:`accd_gym.InAirCaptureEnv`) and actions of shape (N, 4) in [-1, 1] (flaps right, left,
 top, bottom); ``reset(mask)`` clears the internal state of the envs whose episode just ended
-(the guidance controller's integrators; the others ignore it).
+(the guidance controller's integrators; the others ignore it); ``get_state``/``set_state`` the
+per-env state. They are registered by name in :mod:`accd_gym.control.registry`.
 
 Signs, checked on the physics (``crates/sim/tests/integration/behaviour.rs``, no wake, from the settled state)
 and on the controller (``tests/test_training.py``): a positive pitch command (both horizontal
@@ -19,11 +20,13 @@ a small roll command spins it up to several rad/s, which is why roll is actively
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
-from typing import Any, Callable, Optional
+from pathlib import Path
+from typing import Any, Mapping, Optional
 
 import numpy as np
 
 from accd_gym.errors import ConfigError
+from accd_gym.files import read_user_json
 from accd_gym.envs.task import ACT_DIM, OBSERVATION_SCALE, check_observations, observation_indices
 
 #: Observation scales, from the core's observation table.
@@ -48,6 +51,13 @@ class ZeroPolicy:
 
     def reset(self, mask: Optional[np.ndarray] = None) -> None:
         """Stateless: nothing to reset."""
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        """Stateless: no per-env state."""
+        return {}
+
+    def set_state(self, state: Mapping[str, np.ndarray]) -> None:
+        """Stateless: nothing to restore."""
 
 
 class RandomPolicy:
@@ -75,6 +85,13 @@ class RandomPolicy:
 
     def reset(self, mask: Optional[np.ndarray] = None) -> None:
         """Stateless apart from the generators, which keep running."""
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        """No per-env state arrays (the generators travel in the policy's pickle)."""
+        return {}
+
+    def set_state(self, state: Mapping[str, np.ndarray]) -> None:
+        """Nothing to restore (see :meth:`get_state`)."""
 
     def start_episodes(self, rows: np.ndarray, episodes: np.ndarray) -> None:
         """Gives each env ``rows`` selects the generator of episode ``episodes[i]``: ``(seed, k)``."""
@@ -207,35 +224,13 @@ class GuidancePolicy:
         """The integrators per env (a copy; empty before the first :meth:`predict`)."""
         return {} if self._integral is None else {"integral": self._integral.copy()}
 
-    def set_state(self, state: dict[str, np.ndarray]) -> None:
+    def set_state(self, state: Mapping[str, np.ndarray]) -> None:
         """Restores a state of :meth:`get_state`."""
         self._integral = np.array(state["integral"], dtype=np.float64) if state else None
 
 
-def _lqr(config: Any) -> Any:
-    """The LQR baseline designed for ``config`` (:meth:`accd_gym.control.lqr.LqrPolicy.for_config`)."""
-    from accd_gym.control.lqr import LqrPolicy
-
-    return LqrPolicy.for_config(config)
-
-
-#: Built-in baselines by name: factories taking a seed and the env configuration (overrides,
-#: an ``accd_gym._core.EnvConfig`` or None for the defaults) the policy will run on.
-BASELINES: dict[str, Callable[[int, Any], Any]] = {
-    "zero": lambda seed, config: ZeroPolicy(),
-    "random": lambda seed, config: RandomPolicy(seed),
-    "guidance": lambda seed, config: GuidancePolicy(),
-    "lqr": lambda seed, config: _lqr(config),
-}
-
-
 def guidance_from_tuning(path: str) -> GuidancePolicy:
     """The guidance controller with the winning gains of a ``scripts/tune_guidance.py`` result file."""
-    import json
-    from pathlib import Path
-
-    from accd_gym.files import read_user_json
-
     doc = read_user_json(path, "guidance tuning file")
     try:
         best = doc["best"]["gains"]
@@ -246,22 +241,11 @@ def guidance_from_tuning(path: str) -> GuidancePolicy:
     return policy
 
 
-def make_baseline(name: str, seed: int = 0, config: Any = None) -> Any:
-    """The built-in baseline ``name`` (one of :data:`BASELINES`) for the env configuration
-    ``config`` (only ``lqr`` depends on it: it is designed for that configuration's physics);
-    ConfigError for other names."""
-    if name not in BASELINES:
-        raise ConfigError(f"invalid config: policy {name!r} is neither a built-in baseline {sorted(BASELINES)} nor a model path")
-    return BASELINES[name](seed, config)
-
-
 __all__ = [
-    "BASELINES",
     "GuidanceGains",
     "GuidancePolicy",
     "RandomPolicy",
     "ZeroPolicy",
     "guidance_from_tuning",
-    "make_baseline",
     "quaternion_to_euler",
 ]

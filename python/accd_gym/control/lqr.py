@@ -69,7 +69,9 @@ import numpy as np
 
 from accd_gym import _core
 from accd_gym.errors import ConfigError
-from accd_gym.envs.task import ACT_DIM, OBS_DIM, OBSERVATION_SCALE, check_observations, observation_indices
+from accd_gym.envs.task import ACT_DIM, OBS_DIM, OBSERVATION_SCALE, check_observations, observation_indices, OBSERVATION_TABLE
+from accd_gym.envs.config import valid_config
+from accd_gym.files import read_user_json
 
 
 def linearize(config: Optional[Mapping[str, Any]] = None, **overrides: Any) -> "_core.Linearization":
@@ -86,8 +88,6 @@ def linearize(config: Optional[Mapping[str, Any]] = None, **overrides: Any) -> "
     step it came from (``step(dx, u, wind)``, ``observe(dx)``). Raises
     :class:`~accd_gym.ConfigError` for a bad configuration.
     """
-    from accd_gym.envs.config import valid_config
-
     if isinstance(config, _core.EnvConfig) and not overrides:
         cfg = config
     else:
@@ -251,7 +251,6 @@ def _design(lin: Any, tuning: LqrTuning) -> LqrDesign:
     qn[n:n + 2, n:n + 2] = t.wind_walk**2 * np.eye(2)
     qn[n + 2:n + 5, n + 2:n + 5] = 1e-6 * np.eye(3)
     qn[n + 5:, n + 5:] = t.boom_accel**2 * np.eye(3)
-    from accd_gym.envs.task import OBSERVATION_TABLE
 
     sigma = np.array([_MEAS_SIGMA[OBSERVATION_TABLE[i][0]] * OBSERVATION_TABLE[i][2] for i in _MEASURED])
     rn = np.diag((t.meas_noise * sigma) ** 2)
@@ -326,8 +325,6 @@ class LqrPolicy:
         ``accd_gym._core.EnvConfig`` or None for the defaults, plus keyword overrides) with
         ``tuning`` (default :func:`default_tuning`). Raises ConfigError for a bad configuration
         or one with no stabilizing design."""
-        from accd_gym.envs.config import valid_config
-
         if isinstance(config, _core.EnvConfig):
             cfg = config if not overrides else valid_config(json.loads(config.to_json()), **overrides)
         else:
@@ -419,8 +416,6 @@ def is_lqr_tuning(path: str) -> bool:
     """Whether the JSON file ``path`` is an LQR tuning result (``"policy": "lqr"``)."""
     from pathlib import Path
 
-    from accd_gym.files import read_user_json
-
     if not Path(path).exists():
         return False
     try:
@@ -434,8 +429,6 @@ def lqr_from_tuning(path: str, config: Any = None) -> LqrPolicy:
     """The LQR designed for ``config`` with the winning tuning of a ``scripts/tune_lqr.py``
     result file (ConfigError if it is not one)."""
     from pathlib import Path
-
-    from accd_gym.files import read_user_json
 
     doc = read_user_json(path, "LQR tuning file")
     try:

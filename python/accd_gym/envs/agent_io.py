@@ -33,7 +33,7 @@ from gymnasium import spaces
 from accd_gym.errors import ConfigError, StateError
 from accd_gym.envs.history import HISTORY_MAX, HistoryBuffer, parse_history
 from accd_gym.envs.residual import SCALE_MAX, BaseController, ResidualOptions
-from accd_gym.envs.task import ACT_DIM, OBS_BOUND, OBS_DIM, OBSERVATION_TABLE
+from accd_gym.envs.task import ACT_DIM, OBS_BOUND, OBS_DIM, OBSERVATION_TABLE, check_actions
 
 #: The env arguments of this module (never configuration keys).
 AGENT_KEYS = ("residual", "history")
@@ -298,8 +298,6 @@ class AgentInterface(gym.Wrapper):
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """One step with the command :meth:`AgentIO.command` makes of ``action``."""
-        from accd_gym.envs.task import check_actions
-
         sent = self._io.command(check_actions(action, 1, single=True))
         obs, reward, terminated, truncated, info = self.env.step(sent[0])
         out, _ = self._io.advance(np.asarray(obs, dtype=np.float32)[None])

@@ -23,6 +23,7 @@ import numpy as np
 from accd_gym import _core
 from accd_gym.envs.overrides import EXACT_AIR_SCHEME, SENSORS_TIER, merge, tier
 from accd_gym.errors import ConfigError
+from accd_gym.files import read_user_json
 
 
 def _plain(value: Any) -> Any:
@@ -100,8 +101,6 @@ def self_contained(config: Mapping[str, Any]) -> dict[str, Any]:
     accd = out.get("accd")
     table = accd.get("aero_table") if isinstance(accd, dict) else None
     if isinstance(table, str) and not table.lstrip().startswith("{"):
-        from accd_gym.files import read_user_json
-
         out["accd"]["aero_table"] = json.dumps(read_user_json(table, "`accd.aero_table`"))
     return out
 
@@ -164,8 +163,6 @@ def read_json_object(path: "str | Path", what: str) -> dict[str, Any]:
     file of at most 64 MiB (:func:`accd_gym.files.read_user_file`), is not JSON or holds
     something other than an object."""
     from pathlib import Path
-
-    from accd_gym.files import read_user_json
 
     if not Path(path).exists():
         raise ConfigError(f"invalid config: {what} file {str(path)!r} does not exist")

@@ -65,6 +65,20 @@ class CoreEnvMixin:
         ``boom_nominal`` (the boom tip's nominal formation position: ``boom.placement``)."""
         return self._core.episode_setup(self._env_index(i))
 
+    def record_data(self, i: int = 0) -> dict[str, Any]:
+        """Everything a recording keeps of env ``i``'s current state (TA frame, SI units; the
+        sample fields of :data:`accd_gym.replays.recording.SAMPLE_FIELDS` and the ACCD's
+        ``equilibrium``); reading it leaves the episode unchanged."""
+        return self._core.record_data(self._env_index(i))
+
+    def episode_seeds(self, i: int = 0) -> dict[str, int]:
+        """The seeds of env ``i``'s current episode by stream (initial conditions, RLV motion, wake)."""
+        return {name: int(v) for name, v in self._core.episode_seeds(self._env_index(i)).items()}
+
+    def divergence(self, i: int = 0) -> Optional[str]:
+        """Why env ``i``'s episode diverged (None when it did not)."""
+        return self._core.divergence(self._env_index(i))
+
     def _env_index(self, i: Any) -> int:
         """``i`` checked as an env index: an integer in [0, num_envs - 1] (ConfigError naming it)."""
         return check_count(i, "i", 0, self._core.num_envs - 1, noun="env index")

@@ -21,6 +21,9 @@ from accd_gym.envs.task import (
     observation_space,
     random_seed,
 )
+from accd_gym.envs.agent_io import AgentIO, split_agent_options
+from accd_gym.errors import ConfigError
+from accd_gym.envs.render import HumanViewer, render_frame
 
 
 class InAirCaptureEnv(CoreEnvMixin, gym.Env):
@@ -142,15 +145,12 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
 
     def __init__(self, render_mode: Optional[str] = None, **config: Any) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            from accd_gym.errors import ConfigError
-
             raise ConfigError(
                 f"invalid config: `render_mode` = {render_mode!r} is outside the allowed range {self.metadata['render_modes']} or None"
             )
         self.render_mode = render_mode
         # Validated once; a user aerodynamic table is kept as its contents: pickles and saved
         # states need no file.
-        from accd_gym.envs.agent_io import AgentIO, split_agent_options
 
         self.agent_options, config = split_agent_options(config)
         valid = valid_config(config)
@@ -210,7 +210,6 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
             return None
-        from accd_gym.envs.render import HumanViewer, render_frame
 
         frame = render_frame(self._core.render_data(0))
         if self.render_mode == "rgb_array":

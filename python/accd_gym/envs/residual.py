@@ -6,7 +6,8 @@ An env option of every env class (``residual={"base": "lqr", "scale": 0.3}``; se
     u_sent = clip(u_base(obs history) + scale * clip(a, -1, 1), -1, 1)
 
 ``a`` is the agent's action (the env's action space is unchanged, [-1, 1]^4), ``u_base`` the
-command of the base controller (:data:`BASES`: ``"lqr"``, :class:`accd_gym.control.lqr.LqrPolicy`
+command of the base controller (a registered controller that may serve as a base,
+:func:`accd_gym.control.registry.residual_bases`: ``"lqr"``, :class:`accd_gym.control.lqr.LqrPolicy`
 designed for the env's configuration, or ``"guidance"``, :class:`accd_gym.control.baselines.GuidancePolicy`
 with its tuned gains) computed from the observations the agent gets (with sensors, the sensed
 ones: the base controllers read nothing else). The base controller's state (the LQR's Kalman
@@ -21,29 +22,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping
+from typing import Any, Mapping
 
 import numpy as np
 
+from accd_gym.control.registry import make_controller, residual_bases
 from accd_gym.errors import ConfigError
-
-#: Base controllers by name: factories taking the env's full configuration (a dict).
-BASES: dict[str, Callable[[Mapping[str, Any]], Any]] = {}
-
-
-def _lqr(config: Mapping[str, Any]) -> Any:
-    from accd_gym.control.lqr import LqrPolicy
-
-    return LqrPolicy.for_config(dict(config))
-
-
-def _guidance(config: Mapping[str, Any]) -> Any:
-    from accd_gym.control.baselines import GuidancePolicy
-
-    return GuidancePolicy()
-
-
-BASES.update(lqr=_lqr, guidance=_guidance)
 
 #: The allowed range of ``residual.scale`` (flap-limit units): (0, SCALE_MAX]; 2 lets a
 #: correction reach any command from any base command.
@@ -52,7 +36,7 @@ SCALE_MAX = 2.0
 
 @dataclass(frozen=True)
 class ResidualOptions:
-    """The ``residual`` env option, validated: ``base`` (a name of :data:`BASES`), ``scale``
+    """The ``residual`` env option, validated: ``base`` (a name of :func:`accd_gym.control.registry.residual_bases`), ``scale``
     (the bound of the correction, flap-limit units, in (0, 2]) and ``observe_base`` (whether the
     base command is appended to the observation)."""
 
@@ -73,15 +57,15 @@ class ResidualOptions:
             value = {"base": value}
         if not isinstance(value, Mapping):
             raise ConfigError(f"invalid config: `residual` = {value!r} is outside the allowed range: None, a base name "
-                              f"({', '.join(map(repr, BASES))}) or a dict with keys 'base', 'scale', 'observe_base'")
+                              f"({', '.join(map(repr, residual_bases()))}) or a dict with keys 'base', 'scale', 'observe_base'")
         unknown = set(value) - {"base", "scale", "observe_base"}
         if unknown:
             raise ConfigError(f"invalid config: `residual` key(s) {sorted(unknown)} outside the allowed set "
                               "['base', 'observe_base', 'scale']")
         base = value.get("base", cls.base)
-        if base not in BASES:
+        if base not in residual_bases():
             raise ConfigError(f"invalid config: `residual.base` = {base!r} is outside the allowed range: one of "
-                              f"{', '.join(map(repr, BASES))}")
+                              f"{', '.join(map(repr, residual_bases()))}")
         scale = value.get("scale", cls.scale)
         if (isinstance(scale, bool) or not isinstance(scale, (int, float, np.integer, np.floating))
                 or not math.isfinite(float(scale)) or not 0.0 < float(scale) <= SCALE_MAX):
@@ -142,12 +126,13 @@ def one_blas_thread() -> Any:
 
 
 class BaseController:
-    """A base controller of a batch of ``num_envs`` envs: the policy of :data:`BASES` with the
+    """A base controller of a batch of ``num_envs`` envs: a registered controller
+    (:data:`accd_gym.control.registry.CONTROLLERS`, one with ``residual_base``) with the
     row bookkeeping residual control needs (restart rows, partial starts, state snapshots)."""
 
     def __init__(self, options: ResidualOptions, config: Mapping[str, Any]) -> None:
         self.options = options
-        self.policy = BASES[options.base](config)
+        self.policy = make_controller(options.base, 0, dict(config))
 
     def restart(self, rows: "np.ndarray | None") -> None:
         """Rows (a bool mask; None: all) whose next observation starts an episode."""
@@ -197,4 +182,4 @@ class BaseController:
         self.policy.set_state(dict(state))
 
 
-__all__ = ["BASES", "SCALE_MAX", "BaseController", "ResidualOptions", "one_blas_thread"]
+__all__ = ["SCALE_MAX", "BaseController", "ResidualOptions", "one_blas_thread"]

@@ -27,6 +27,7 @@ from accd_gym.envs.task import (
     observation_space,
     random_seed,
 )
+from accd_gym.envs.render import render_frame
 
 
 class AccdVecEnv(CoreEnvMixin, VecEnv):
@@ -117,6 +118,11 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         self._base_seed = random_seed(self.num_envs) if seed is None else check_base_seed(seed, self.num_envs)
         return [self._base_seed + i for i in range(self.num_envs)]
 
+    def drop_pending_seed(self) -> None:
+        """Makes the next ``reset()`` continue each env's episode sequence instead of reseeding it
+        with the constructor's or :meth:`seed`'s seed (e.g. after :meth:`set_state` restored a run)."""
+        self._base_seed = None
+
     def set_options(self, options: Optional[Union[list[dict], dict]] = None) -> None:
         """Wake options (``wake_seed``, ``wake_seeds``) applied at the next ``reset()``."""
         if isinstance(options, list):
@@ -190,7 +196,6 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         """An RGB picture of every env (``render_mode="rgb_array"``)."""
         if self.render_mode != "rgb_array":
             return [None for _ in range(self.num_envs)]
-        from accd_gym.envs.render import render_frame
 
         return [render_frame(self._core.render_data(i)) for i in range(self.num_envs)]
 

@@ -11,6 +11,8 @@ import numpy as np
 from gymnasium import spaces
 
 from accd_gym import _core
+from accd_gym.errors import ConfigError, StateError
+from accd_gym.envs.config import config_json
 
 #: Number of observation values.
 OBS_DIM: int = _core.OBS_DIM
@@ -91,8 +93,6 @@ def check_actions(actions: Any, num_envs: int, *, single: bool = False) -> np.nd
     numbers (bool, complex, str, objects), finite values outside float32's range and a wrong
     shape. Non-finite values are refused by the Rust core, with the env index named.
     """
-    from accd_gym.errors import StateError
-
     expected = (ACT_DIM,) if single else (num_envs, ACT_DIM)
     try:
         raw = np.asarray(actions)
@@ -130,8 +130,6 @@ def check_seed(seed: Any, what: str = "seed", bound: int = 2**64) -> int:
     Raises :class:`~accd_gym.ConfigError` naming ``what`` for anything else (floats, strings,
     bools, negative or too large values).
     """
-    from accd_gym.errors import ConfigError
-
     if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
         raise ConfigError(
             f"invalid config: `{what}` = {seed!r} is outside the allowed range: an int in [0, {bound:#x})"
@@ -148,8 +146,6 @@ def check_count(value: Any, what: str, low: int, high: int | None = None, noun: 
     :class:`~accd_gym.ConfigError` naming ``what`` (after ``noun``, e.g. "env index"), the value
     and the range; nothing is truncated or parsed (``2.7`` is not 2, ``"3"`` is not 3, ``True``
     is not 1)."""
-    from accd_gym.errors import ConfigError
-
     allowed = f"an integer in [{low}, {high}]" if high is not None else f"an integer >= {low}"
     name = f"{noun} `{what}`" if noun else f"`{what}`"
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
@@ -165,8 +161,6 @@ def check_base_seed(seed: Any, num_envs: int) -> int:
     numpy integer in [0, 2^64 - num_envs], so that every env's seed is a 64-bit seed (none wraps
     around to 0). Raises :class:`~accd_gym.ConfigError` naming ``seed`` and the range otherwise
     (a ``SyncVectorEnv`` of single envs raises it from the env whose seed is out of range)."""
-    from accd_gym.errors import ConfigError
-
     value = check_seed(seed)
     if value + num_envs - 1 >= 2**64:
         raise ConfigError(
@@ -179,8 +173,6 @@ def check_base_seed(seed: Any, num_envs: int) -> int:
 def check_flag(value: Any, what: str) -> bool:
     """``value`` as a bool: True or False (Python or numpy bools only; ``1``, ``"yes"`` and None
     raise :class:`~accd_gym.ConfigError` naming ``what``)."""
-    from accd_gym.errors import ConfigError
-
     if not isinstance(value, (bool, np.bool_)):
         raise ConfigError(f"invalid config: `{what}` = {value!r} is outside the allowed range: True or False")
     return bool(value)
@@ -199,7 +191,6 @@ def wake_options(core: Any, options: dict[str, Any] | None) -> None:
     """
     if not options:
         return
-    from accd_gym.errors import ConfigError
 
     unknown = set(options) - {"wake_seed", "wake_seeds"}
     if unknown:
@@ -221,8 +212,6 @@ def wake_options(core: Any, options: dict[str, Any] | None) -> None:
 
 def episode_steps(config: dict[str, Any]) -> int:
     """Agent steps of one episode under a full configuration (``capture_window / agent_step``)."""
-    from accd_gym.envs.config import config_json
-
     return int(_core.episode_steps(config_json(config)))
 
 
@@ -232,7 +221,6 @@ def check_max_episode_steps(max_episode_steps: Any, config: dict[str, Any]) -> N
     episodes, and a time limit inside it would change nothing but the truncation step."""
     if max_episode_steps is None:
         return
-    from accd_gym.errors import ConfigError
 
     steps = episode_steps(config)
     limit = check_seed(max_episode_steps, "max_episode_steps")

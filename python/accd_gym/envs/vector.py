@@ -31,6 +31,8 @@ from accd_gym.envs.task import (
     observation_space,
     random_seed,
 )
+from accd_gym.envs.task import WAKE_SEED_BOUND
+from accd_gym.envs.render import render_frame
 
 #: Per info column (``INFO_NAMES``): whether it is an event (reported as bool) or the step count
 #: (int64); the others are float64.
@@ -222,7 +224,6 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         ``k`` this way, which makes it independent of the batch size and of its place in a batch.
         """
         i = self._env_index(i)
-        from accd_gym.envs.task import WAKE_SEED_BOUND
 
         seed = check_seed(seed)
         wake = None if wake_seed is None else check_seed(wake_seed, "wake_seed", WAKE_SEED_BOUND)
@@ -368,7 +369,6 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
             return None
-        from accd_gym.envs.render import render_frame
 
         return tuple(render_frame(self._core.render_data(i)) for i in range(self.num_envs))
 

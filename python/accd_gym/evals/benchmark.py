@@ -72,7 +72,20 @@ from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 
+from accd_gym.control.registry import CONTROLLERS
 from accd_gym.errors import ConfigError
+from accd_gym.evals.policies import load_policy
+from accd_gym.envs.tiers import merge, tier as _tier, TIERS
+from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS
+from accd_gym.envs.config import read_json_object
+from accd_gym.evals.episodes import run_episodes
+from accd_gym import _core, files
+from accd_gym.learning import training
+from accd_gym.evals import distributed
+from accd_gym.evals.sweep import iqm as _iqm
+from accd_gym.evals.evaluation import mcnemar_exact, wilson_interval
+from accd_gym.files import save_figure
+from accd_gym.control.lqr import blas_kernels
 
 #: Defaults of a benchmark config.
 DEFAULTS: dict[str, Any] = {
@@ -89,8 +102,6 @@ DEFAULTS: dict[str, Any] = {
 #: Bootstrap resamples and the seed of their generator.
 BOOTSTRAP_RESAMPLES = 10_000
 BOOTSTRAP_SEED = 0
-#: Baselines that exist whatever is installed, and the optional ones.
-_BASELINES = ("zero", "random", "guidance", "lqr")
 _LEARNER_KEYS = ("train_config", "seeds", "timesteps", "tiers")
 
 
@@ -99,8 +110,6 @@ def validate_config(raw: Any, *, quick: bool = False, root: Optional[Path] = Non
     ``quick`` overrides on top), every key checked; ConfigError naming the key otherwise.
     Relative ``train_config`` paths are resolved against ``root`` (the config file's folder's
     parent, the repository, by default the working directory)."""
-    from accd_gym.envs.tiers import TIERS, merge
-
     if not isinstance(raw, dict):
         raise ConfigError(f"invalid config: a benchmark config must be a JSON object, not {type(raw).__name__}")
     unknown = sorted(set(raw) - set(DEFAULTS) - {"description", "source"})
@@ -157,13 +166,12 @@ def validate_config(raw: Any, *, quick: bool = False, root: Optional[Path] = Non
                 raise ConfigError(f"invalid config: `learners.{algo}.train_config` = {recipe!r} is not a file")
             resolved[tier_name] = str(path)
         spec["train_config"] = resolved if isinstance(recipes, dict) else resolved[None]
-    if not isinstance(cfg["baselines"], list) or [b for b in cfg["baselines"] if b not in _BASELINES]:
-        raise ConfigError(f"invalid config: `baselines` = {cfg['baselines']!r} is outside the allowed values: a list of {list(_BASELINES)}")
+    if not isinstance(cfg["baselines"], list) or [b for b in cfg["baselines"] if b not in CONTROLLERS]:
+        raise ConfigError(f"invalid config: `baselines` = {cfg['baselines']!r} is outside the allowed values: a list of {list(CONTROLLERS)}")
     for key, lo in (("episodes", 1), ("num_envs", 1), ("cpus_per_job", 1)):
         v = cfg[key]
         if not isinstance(v, int) or isinstance(v, bool) or v < lo:
             raise ConfigError(f"invalid config: `{key}` = {v!r} is outside the allowed range >= {lo}")
-    from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS
 
     if cfg["episodes"] > len(HELD_OUT_WAKE_SEEDS):
         raise ConfigError(f"invalid config: `episodes` = {cfg['episodes']} is outside the allowed range [1, {len(HELD_OUT_WAKE_SEEDS)}] (the held-out wake seeds)")
@@ -173,8 +181,6 @@ def validate_config(raw: Any, *, quick: bool = False, root: Optional[Path] = Non
 def load_config(path: str | Path, *, quick: bool = False) -> dict[str, Any]:
     """A validated benchmark config from a JSON file (paths in it relative to the repository,
     the file's folder's parent)."""
-    from accd_gym.envs.config import read_json_object
-
     p = Path(path).resolve()
     cfg = validate_config(read_json_object(p, "benchmark config"), quick=quick, root=p.parent.parent)
     cfg["source"] = str(p)
@@ -266,8 +272,6 @@ def failures(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
 
 def evaluate_policy(policy: Any, tier: str, episodes: int, num_envs: int, num_threads: int = 0) -> dict[str, Any]:
     """``policy`` on the tier's first ``episodes`` held-out episodes: the per-episode record."""
-    from accd_gym.evals.episodes import run_episodes
-    from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS
 
     eps = run_episodes(policy, episodes, wake_seeds=list(HELD_OUT_WAKE_SEEDS[:episodes]), num_envs=num_envs,
                        num_threads=num_threads, config={"tier": tier})
@@ -283,8 +287,6 @@ RESULT_FILE = "result.json"
 def digest_sources() -> list[Path]:
     """The files :func:`build_digest` hashes: the native extension and every Python source of the
     package (envs, control, learning, evals, ...), in a fixed order."""
-    from accd_gym import _core
-
     package = Path(_core.__file__).parent
     return [Path(_core.__file__), *sorted(package.rglob("*.py"))]
 
@@ -307,8 +309,6 @@ def job_key(job: Job, episodes: int, num_envs: int) -> dict[str, Any]:
     """What a job's result depends on: the job, the training config's bytes (SHA-256), the tier's
     configuration, the code (:func:`build_digest`), the evaluation's episodes and batch size. A
     stored result with another key is not reused."""
-    from accd_gym.envs.tiers import tier as _tier
-
     # The recipe by its name and bytes, not its path: a benchmark folder stays valid for a moved
     # or freshly cloned checkout.
     return {"job": {**job.__dict__, "train_config": Path(job.train_config).name},
@@ -358,9 +358,6 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
     another key (the code or the episodes changed) is evaluated again without retraining; a run interrupted while training (Ctrl+C, a killed process) continues
     from its latest checkpoint (:func:`accd_gym.learning.training.resume`) to the same total; anything
     else starts the run afresh."""
-    from accd_gym.learning import training
-    from accd_gym.envs.config import read_json_object
-    from accd_gym.evals.policies import load_policy
 
     run = Path(out) / "runs" / job.name
     key = job_key(job, episodes, num_envs)
@@ -396,8 +393,6 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
               "eval_wall_s": round(time.perf_counter() - t1, 2),
               "steps_per_s": meta.get("steps_per_s"), "run": str(run), "episodes": record}
     if meta["status"] == "done":
-        from accd_gym import files
-
         files.write_text(run / RESULT_FILE, json.dumps({"key": key, "result": result}))
     return result | {"reused": False}
 
@@ -416,8 +411,6 @@ def _continues(run: Path, cfg: dict[str, Any]) -> bool:
     """``run`` holds an unfinished run of the training config ``cfg`` with a checkpoint, which
     :func:`accd_gym.learning.training.resume` continues (it refuses finished runs and runs without a
     checkpoint; the config check is the benchmark's: another recipe starts afresh)."""
-    from accd_gym.learning import training
-
     try:
         meta = json.loads((run / "run.json").read_text())
     except (OSError, ValueError):
@@ -451,7 +444,6 @@ def _run_jobs(todo: list[Job], cfg: dict[str, Any], out: Path, ray_address: Opti
             except KeyboardInterrupt as e:
                 raise _Interrupted(results, str(e) or "SIGINT") from None
         return results
-    from accd_gym.evals import distributed
 
     ray = distributed.connect(ray_address)
     task = ray.remote(num_cpus=cfg["cpus_per_job"], max_retries=1)(run_job)
@@ -479,8 +471,6 @@ def _claim(out: Path, config: dict[str, Any]) -> None:
     ConfigError naming the folder and the keys that differ. Recipes count by their name and
     bytes (:func:`_portable`): the same recipes from another checkout are the same config, an
     edited recipe is another."""
-    from accd_gym import files
-
     mine = _portable(config)
     path = out / CONFIG_FILE
     try:
@@ -521,8 +511,6 @@ def _baseline_record(name: str, tier: str, config: dict[str, Any], out: Path,
                      progress: Callable[[str], None]) -> dict[str, Any]:
     """Baseline ``name``'s episode record on the tier, stored once in ``out/baselines`` and reused
     while its key (baseline, tier configuration, code, episodes, batch) is unchanged."""
-    from accd_gym import files
-    from accd_gym.envs.tiers import tier as _tier
 
     key = json.loads(json.dumps({"baseline": name, "tier_config": _tier(tier).config(), "build": build_digest(),
                                  "episodes": config["episodes"], "num_envs": config["num_envs"]}))
@@ -540,17 +528,13 @@ def _baseline_record(name: str, tier: str, config: dict[str, Any], out: Path,
 
 
 def _baseline_policy(name: str, tier: str) -> Any:
-    """The baseline ``name`` built for the tier's configuration (the LQR is designed on the
-    tier's physics: its base configuration, the nominal draw of a randomized tier)."""
-    from accd_gym.control.baselines import make_baseline
-
-    return make_baseline(name, 0, {"tier": tier})
+    """The registered controller ``name`` built for the tier's configuration (the LQR is designed
+    on the tier's physics: its base configuration, the nominal draw of a randomized tier)."""
+    return load_policy(name, 0, config={"tier": tier})
 
 
 def iqm(values: Sequence[float]) -> float:
     """Interquartile mean (rliable's: ``scipy.stats.trim_mean(values, 0.25)``)."""
-    from accd_gym.evals.sweep import iqm as _iqm
-
     return _iqm(values)
 
 
@@ -600,8 +584,6 @@ def target(tiers: dict[str, Any], episodes: dict[str, dict[str, Any]]) -> Option
     none of them is there). ``met``: every scored tier at least the LQR, one of them significantly
     better, and no tier's spread too large (None without such a tier). ``episodes``: per tier,
     ``{"lqr": captured, run name: captured}``."""
-    from accd_gym.evals.evaluation import mcnemar_exact
-
     out: dict[str, Any] = {}
     for tier, t in tiers.items():
         rows = t["policies"]
@@ -643,8 +625,6 @@ def _medians(record: dict[str, Any]) -> tuple[float, Optional[float]]:
 def summarize(cfg: dict[str, Any], results: list[dict[str, Any]], baselines: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """The report's numbers per tier: learned algorithms (IQM, interval, per-seed rates),
     baselines (rate, Wilson interval), medians, and the McNemar comparison."""
-    from accd_gym.evals.evaluation import mcnemar_exact, wilson_interval
-
     tiers: dict[str, Any] = {}
     for tier in cfg["tiers"]:
         rows: dict[str, Any] = {}
@@ -724,7 +704,6 @@ def plot_profile(profile: dict[str, list[float]], taus: np.ndarray, path: Path) 
     ax.legend()
     ax.set_title("Performance profile over every tier")
     fig.tight_layout()
-    from accd_gym.files import save_figure
 
     save_figure(fig, path)
     plt.close(fig)
@@ -811,8 +790,6 @@ def _target_misses(t: dict[str, Any]) -> list[str]:
 
 def report_markdown(doc: dict[str, Any]) -> str:
     """The benchmark report (docs/benchmark.md)."""
-    from accd_gym.envs.tiers import TIERS
-
     cfg = doc["config"]
     learners = ", ".join(f"{method_label(a)} {len(s['seeds'])} seeds x {s['timesteps']:,} steps"
                          + (f" (tiers {', '.join(s['tiers'])})" if s["tiers"] else "") for a, s in cfg["learners"].items())
@@ -894,8 +871,6 @@ def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] =
     the report is written from what is finished and the document's ``interrupted`` says why."""
     import datetime
 
-    from accd_gym import files
-
     # before the jobs: a read-only folder (or --docs folder) is refused at once
     out = files.writable_folder(Path(out).resolve())
     if docs is not None:
@@ -973,7 +948,6 @@ def _machine() -> str:
             model = next((line.split(":", 1)[1].strip() for line in f if line.startswith("model name")), model)
     except OSError:
         pass
-    from accd_gym.control.lqr import blas_kernels
 
     blas = sorted({f"{api} {arch}".strip() for api, arch in blas_kernels()})
     return (f"{platform.machine()}{f' {model}' if model else ''}, {_cpus()} CPUs, Python {platform.python_version()}"

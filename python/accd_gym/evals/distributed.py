@@ -33,36 +33,11 @@ import time
 from typing import Any, Optional, Sequence
 
 from accd_gym.errors import ConfigError
+from accd_gym.learning.ray_cluster import connect
+from accd_gym.evals.episodes import run_episode_range
 
 #: Retries of a task whose worker died (Ray's ``max_retries``).
 MAX_RETRIES: int = 3
-
-
-def _ray() -> Any:
-    """The ``ray`` module, or a ModuleNotFoundError saying which extra brings it."""
-    try:
-        import ray
-    except ModuleNotFoundError as e:
-        raise ModuleNotFoundError(f"distributed runs need Ray ({e}): pip install 'accd-gym[ray]'", name="ray") from e
-    return ray
-
-
-def connect(address: Optional[str] = "local", *, num_cpus: Optional[int] = None) -> Any:
-    """Connects to Ray unless already connected; returns the ``ray`` module.
-
-    ``address``: ``"local"`` or None starts a Ray instance on this machine (``num_cpus`` of
-    its cores, default all), ``"auto"`` joins the cluster this machine is a node of, and
-    ``"HOST:PORT"`` (or ``ray://HOST:PORT``) the cluster whose head listens there.
-    """
-    ray = _ray()
-    if ray.is_initialized():
-        return ray
-    if address in (None, "", "local"):
-        # Bound to loopback: a local instance needs no other interface.
-        ray.init(num_cpus=num_cpus, include_dashboard=False, log_to_driver=False, _node_ip_address="127.0.0.1")
-    else:
-        ray.init(address=address, log_to_driver=False)
-    return ray
 
 
 class _WakeSlice(Sequence[int]):
@@ -100,8 +75,6 @@ def _run_part(
     yet, the task creates it after running its episodes and kills its own worker process, as a
     lost worker would, so Ray must retry it."""
     import ray
-
-    from accd_gym.evals.episodes import run_episode_range
 
     t0 = time.perf_counter()
     policy = copy.deepcopy(policy)  # Ray hands arguments over read-only; the policy keeps per-env state

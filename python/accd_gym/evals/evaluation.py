@@ -18,14 +18,26 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import Any, Optional, Sequence, Callable
 
 import numpy as np
 
+from accd_gym.control.registry import CONTROLLERS
 from accd_gym.envs.task import EVENT_NAMES, HELD_OUT_WAKE_SEEDS
 from accd_gym.errors import ConfigError
 from accd_gym.evals.episodes import EVAL_BASE_SEED, Episode, run_episode_range, run_episodes
 from accd_gym.evals.policies import SB3Policy, load_policy
+from accd_gym import files
+from accd_gym.envs.config import env_config
+from accd_gym.evals import distributed
+from accd_gym.control.lqr import is_lqr_tuning
+from accd_gym.files import save_figure
+
+
+#: Writes replays of one policy's evaluated episodes: ``(spec, label, episodes, context)`` -> one
+#: entry per page written; ``context`` holds the evaluation's ``folder`` (``out/replays``),
+#: ``seed``, ``wake_seeds``, ``num_envs``, ``num_threads``, ``config`` and ``allow_unnormalized``.
+ReplayWriter = Callable[[str, str, list[Episode], dict[str, Any]], list[dict[str, Any]]]
 
 
 def wilson_interval(successes: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
@@ -117,16 +129,16 @@ def evaluate(
     progress: bool = True,
     dpi: int = 90,
     allow_unnormalized: bool = False,
-    replay: int = 0,
+    replay_writer: Optional[ReplayWriter] = None,
     ray_address: Optional[str] = None,
     ray_chunk: Optional[int] = None,
 ) -> dict[str, Any]:
     """Evaluates each policy spec on the same episodes; writes results.json, summary.md and plots.
 
     ``wake_seeds`` defaults to the first ``episodes`` held-out wake seeds. Returns the results
-    document (also in ``out/results.json``). ``replay`` = K > 0 also writes replay pages and
-    recordings of K episodes per policy (best, median, worst, ...;
-    :func:`accd_gym.replays.replay.write_evaluation_replays`) under ``out/replays/``. ``ray_address``
+    document (also in ``out/results.json``). ``replay_writer`` (e.g.
+    :func:`accd_gym.replays.replay.evaluation_replays`) also writes replays of each policy's
+    episodes under ``out/replays/``; what it returns goes to the document's ``replays``. ``ray_address``
     (``"local"``, ``"auto"`` or ``HOST:PORT``) runs the episodes as Ray tasks of ``ray_chunk``
     episodes each (:mod:`accd_gym.evals.distributed`): the same results bit for bit, plus
     ``out/ray_tasks.json`` (where each task ran, timings). ``num_threads`` is then per task (0:
@@ -139,7 +151,6 @@ def evaluate(
             f"invalid config: `episodes` = {episodes} is outside the allowed range 1..{len(HELD_OUT_WAKE_SEEDS)} (held-out wake seeds)"
         )
     seeds = list(wake_seeds) if wake_seeds is not None else list(HELD_OUT_WAKE_SEEDS[:episodes])
-    from accd_gym import files
 
     out = files.writable_folder(out)  # before the episodes: a read-only folder is refused at once
     loaded = [(spec, load_policy(spec, allow_unnormalized=allow_unnormalized, config=config)) for spec in policies]  # fail early
@@ -154,8 +165,6 @@ def evaluate(
     }
     runs: dict[str, list[Episode]] = {}
     if ray_address is not None:
-        from accd_gym.evals import distributed
-
         runs, ray_info = distributed.run_policies(dict(loaded), episodes, seed=seed, wake_seeds=seeds, num_envs=num_envs,
                                                   config=config, address=ray_address, chunk=ray_chunk,
                                                   cpus_per_task=max(1, num_threads), progress=progress)
@@ -169,21 +178,15 @@ def evaluate(
         if getattr(policy, "note", None):
             results["policies"][spec]["note"] = policy.note
     results["paired"] = paired_comparisons(runs)
-    if replay:
-        from accd_gym.replays.replay import write_evaluation_replays
-
-        results["replays"] = {
-            spec: write_evaluation_replays(spec, _label(spec), eps, replay, out / "replays", seed=seed,
-                                           wake_seeds=seeds[:episodes], num_envs=num_envs, num_threads=num_threads,
-                                           config=config, allow_unnormalized=allow_unnormalized)
-            for spec, eps in runs.items()
-        }
+    if replay_writer is not None:
+        context = {"folder": out / "replays", "seed": seed, "wake_seeds": seeds[:episodes], "num_envs": num_envs,
+                   "num_threads": num_threads, "config": config, "allow_unnormalized": allow_unnormalized}
+        results["replays"] = {spec: replay_writer(spec, _label(spec), eps, context) for spec, eps in runs.items()}
     # each file atomically: a full disk leaves the previous evaluation's file, never half a file
     files.write_text(out / "results.json", json.dumps(results, indent=1))
     with files.atomic_open(out / "trajectories.npz") as f:
         np.savez_compressed(f, **{f"{_label(s)}__{e.index}": e.trajectory for s, eps in runs.items() for e in eps})
     plot_trajectories(runs, out / "trajectories.png", dpi=dpi)
-    from accd_gym.envs.config import env_config
 
     radius = env_config(config or {})["boom"]["capture_radius"]
     plot_miss_cdf(runs, out / "miss_distance_cdf.png", dpi=dpi, capture_radius=radius)
@@ -194,13 +197,9 @@ def evaluate(
 def _label(spec: str) -> str:
     """A short name for a policy spec (a path's run folder or file stem)."""
     p = Path(spec)
-    from accd_gym.control.baselines import BASELINES
-
-    if spec in BASELINES or not p.exists():
+    if spec in CONTROLLERS or not p.exists():
         return spec
     if p.suffix == ".json":
-        from accd_gym.control.lqr import is_lqr_tuning
-
         return f"{'lqr' if is_lqr_tuning(spec) else 'guidance'} ({p.stem})"
     return p.name if p.is_dir() else f"{p.parent.name}/{p.stem}"
 
@@ -271,7 +270,6 @@ def plot_trajectories(runs: dict[str, list[Episode]], path: Path, max_episodes: 
         side.set_title(f"{_label(spec)}: side view (green captured, red not)", fontsize=9)
         top.set_title(f"{_label(spec)}: top view", fontsize=9)
     fig.tight_layout()
-    from accd_gym.files import save_figure
 
     save_figure(fig, path, dpi=dpi)
     plt.close(fig)
@@ -296,7 +294,6 @@ def plot_miss_cdf(runs: dict[str, list[Episode]], path: Path, dpi: int = 90, cap
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    from accd_gym.files import save_figure
 
     save_figure(fig, path, dpi=dpi)
     plt.close(fig)

@@ -1,17 +1,27 @@
-"""Policies by name or path (:func:`load_policy`): the built-in baselines
-(:mod:`accd_gym.control`), tuning files of the guidance controller and the LQR, trained
-stable-baselines3 models (:class:`SB3Policy`) and RLlib runs
-(:class:`accd_gym.learning.rllib.RLlibPolicy`).
+"""Policies by name or path: :func:`load_policy`, the one resolver of the registered controllers
+(:mod:`accd_gym.control.registry`), the shipped trained policies (:mod:`accd_gym.evals.shipped`),
+tuning files of the guidance controller and the LQR, trained stable-baselines3 models
+(:class:`SB3Policy`) and RLlib runs (:class:`accd_gym.learning.rllib.RLlibPolicy`), each as an
+:class:`accd_gym.control.registry.Policy`.
 """
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any, Optional, Mapping
 
 import numpy as np
 
+from accd_gym.control.baselines import guidance_from_tuning
+from accd_gym.control.lqr import is_lqr_tuning, lqr_from_tuning
+from accd_gym.control.registry import CONTROLLERS, Policy, make_controller
+from accd_gym.envs.agent_io import AgentIO, AgentOptions, physics_config, split_agent_options
 from accd_gym.errors import ConfigError
+from accd_gym.evals.shipped import available, is_trained, policy_dir
+from accd_gym.files import read_user_json
+from accd_gym.learning.rllib import RLlibPolicy, is_rllib_run
+from accd_gym.learning.training import latest_checkpoint, load_model, load_statistics, model_algo
 
 class SB3Policy:
     """A trained stable-baselines3 model (PPO or SAC) with its VecNormalize statistics, deterministic.
@@ -35,16 +45,12 @@ class SB3Policy:
 
     def __init__(self, path: str | Path, device: str = "cpu", *, allow_unnormalized: bool = False,
                  config: Optional[Any] = None) -> None:
-        import warnings
-
         p = Path(path)
         #: How the model was found, e.g. that a run's latest checkpoint stands in for its final model.
         self.note: Optional[str] = None
         if p.is_dir():
             model_path, stats_path = p / "final_model.zip", p / "vecnormalize.pkl"
             if not model_path.is_file():
-                from accd_gym.learning.training import latest_checkpoint
-
                 ckpt = latest_checkpoint(p)
                 status = _run_status(p)
                 if ckpt is None:
@@ -73,18 +79,15 @@ class SB3Policy:
             )
         self.name = str(path)
         try:
+            # The optional dependency, imported here so that the package imports without it.
             from stable_baselines3 import PPO, SAC  # noqa: F401
         except ModuleNotFoundError as e:
             raise ModuleNotFoundError(
                 f"loading the trained model {str(path)!r} needs stable-baselines3 ({e}): pip install 'accd-gym[sb3]'",
                 name=e.name,
             ) from e
-        from accd_gym.learning.training import model_algo
-
         self._device = device
         self.agent_options = _agent_options_of(model_path)
-        from accd_gym.envs.agent_io import physics_config
-
         self._config = physics_config(config)
         self._io: Any = None
         self._started: Optional[np.ndarray] = None
@@ -110,8 +113,6 @@ class SB3Policy:
     def _load(self) -> None:
         """Builds the model and the normalizer from the files' bytes (kept for pickling);
         ConfigError naming the file that is damaged or of another env or algorithm."""
-        from accd_gym.learning.training import load_model, load_statistics
-
         obs_dim = self.agent_options.observation_space().shape[0]
         self.model = load_model(self._model_bytes, self._model_path, self._run_algo, obs_dim, device=self._device)
         self.normalizer = None
@@ -143,8 +144,6 @@ class SB3Policy:
     def _agent_observation(self, obs: np.ndarray) -> np.ndarray:
         """The observations the model was trained on, advancing the per-env agent state (a new
         batch size starts every env afresh)."""
-        from accd_gym.envs.agent_io import AgentIO
-
         if obs.ndim != 2:
             raise ValueError(f"observations have shape {obs.shape}, expected (N, 25)")
         if self._io is None or self._io.num_envs != obs.shape[0]:
@@ -165,10 +164,26 @@ class SB3Policy:
             return
         self._started = rows if self._started is None else (self._started | rows)
 
+    def get_state(self) -> dict[str, np.ndarray]:
+        """The per-env agent state of a model trained with env options (the base controller, the
+        history; :meth:`accd_gym.envs.agent_io.AgentIO.get_state`), empty without them or before
+        the first :meth:`predict`."""
+        return {} if self._io is None else self._io.get_state()
+
+    def set_state(self, state: Mapping[str, np.ndarray]) -> None:
+        """Restores a state of :meth:`get_state` (of a batch of the same size)."""
+        if not state:
+            self._io = None
+            self._started = None
+            return
+        n = int(np.shape(state["cur"])[0])
+        if self._io is None or self._io.num_envs != n:
+            self._io = AgentIO(self.agent_options, self._config, n)
+        self._io.set_state(state)
+        self._started = None
+
 def _run_status(run: Path) -> str:
     """The ``status`` of a run folder's run.json ("unknown" without one or with a damaged one)."""
-    from accd_gym.files import read_user_json
-
     if not (run / "run.json").exists():
         return "unknown"
     try:
@@ -180,8 +195,6 @@ def _run_status(run: Path) -> str:
 def _run_algo(model_path: Path) -> Optional[str]:
     """'ppo' or 'sac' as the run.json beside or above a saved model says, None without one;
     ConfigError naming the run.json when it is damaged or names another algorithm."""
-    from accd_gym.files import read_user_json
-
     for folder in (model_path.parent, model_path.parent.parent):
         meta = folder / "run.json"
         if meta.exists():
@@ -197,9 +210,6 @@ def _run_algo(model_path: Path) -> Optional[str]:
 
 def _agent_options_of(model_path: Path) -> Any:
     """The env options (residual, history) the model was trained with, from its run.json."""
-    from accd_gym.envs.agent_io import AgentOptions, split_agent_options
-    from accd_gym.files import read_user_json
-
     for folder in (model_path.parent, model_path.parent.parent):
         meta = folder / "run.json"
         if meta.exists():
@@ -209,34 +219,40 @@ def _agent_options_of(model_path: Path) -> Any:
     return AgentOptions()
 
 
-def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False, config: Optional[Any] = None) -> Any:
-    """A policy from a baseline name (``zero``, ``random``, ``guidance``, ``lqr``), a tuning file
-    (``training/guidance_tuning*.json``: the guidance controller with its winning gains;
-    ``training/lqr_tuning.json``: the LQR with its winning tuning), a shipped trained policy's name
-    (:mod:`accd_gym.trained`) or a model path (see
-    :class:`SB3Policy` for ``allow_unnormalized``; an RLlib run or checkpoint folder gives an
-    :class:`accd_gym.learning.rllib.RLlibPolicy`). ``config``: the env configuration (overrides) the
-    policy will run on; the LQR is designed for it."""
-    from accd_gym.control.baselines import BASELINES, guidance_from_tuning, make_baseline
+def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False, config: Optional[Any] = None) -> Policy:
+    """The one resolver of policy specs: every policy the package runs comes from here.
 
-    from accd_gym.envs.agent_io import physics_config
-    from accd_gym.trained.catalog import is_trained, policy_dir
+    ``spec``, tried in this order:
 
+    1. the name of a shipped trained policy (:mod:`accd_gym.trained`; a file or folder of that
+       name in the working folder wins): its :class:`SB3Policy`;
+    2. the name of a registered controller (:data:`accd_gym.control.registry.CONTROLLERS`:
+       ``zero``, ``random``, ``guidance``, ``lqr``, ...): the controller built for ``config``
+       with ``seed``;
+    3. a tuning file (``training/guidance_tuning*.json``: the guidance controller with its
+       winning gains; ``training/lqr_tuning.json``: the LQR with its winning tuning);
+    4. a model path: an RLlib run or checkpoint folder (:class:`accd_gym.learning.rllib.RLlibPolicy`)
+       or a stable-baselines3 run folder or model zip (:class:`SB3Policy`; see it for
+       ``allow_unnormalized``).
+
+    ``config``: the env configuration (overrides) the policy will run on; a model-based
+    controller (the LQR, a residual base) is designed for it. Anything else is a ConfigError
+    naming the registered controllers."""
     config = physics_config(config)
     if is_trained(spec):
         return SB3Policy(policy_dir(spec), config=config)
-    if spec in BASELINES:
-        return make_baseline(spec, seed, config)
+    if spec in CONTROLLERS:
+        return make_controller(spec, seed, config)
     if spec.endswith(".json") and Path(spec).is_file():
-        from accd_gym.control.lqr import is_lqr_tuning, lqr_from_tuning
-
         if is_lqr_tuning(spec):
             return lqr_from_tuning(spec, config)
         return guidance_from_tuning(spec)
     if Path(spec).exists():
-        from accd_gym.learning.rllib import RLlibPolicy, is_rllib_run
-
         if is_rllib_run(spec):
             return RLlibPolicy(spec)
         return SB3Policy(spec, allow_unnormalized=allow_unnormalized, config=config)
-    return make_baseline(spec, seed, config)  # raises ConfigError naming the allowed names
+    raise ConfigError(f"invalid config: policy {spec!r} is neither a registered controller {list(CONTROLLERS)}, "
+                      f"a shipped policy {available()} nor a model path")
+
+
+__all__ = ["SB3Policy", "load_policy"]

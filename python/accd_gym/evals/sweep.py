@@ -58,8 +58,17 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 
-from accd_gym.errors import ConfigError
 from accd_gym import files as _files
+from accd_gym.control.registry import CONTROLLERS
+from accd_gym.errors import ConfigError
+from accd_gym.evals.policies import load_policy
+from accd_gym.envs.config import read_json_object
+from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, VALIDATION_WAKE_SEEDS
+from accd_gym.evals.episodes import EVAL_BASE_SEED, run_episodes, VALIDATION_BASE_SEED
+from accd_gym.learning import rllib, training
+from accd_gym.evals.evaluation import summarize, wilson_interval
+from accd_gym.envs.agent_io import AGENT_KEYS
+from accd_gym.evals import distributed
 
 #: Defaults of a sweep config.
 DEFAULTS: dict[str, Any] = {
@@ -105,8 +114,6 @@ def bootstrap_interval(values: Sequence[float], stat: Any = iqm, *, resamples: i
 
 def load_config(path: str | Path) -> dict[str, Any]:
     """A complete, validated sweep config from a JSON file."""
-    from accd_gym.envs.config import read_json_object
-
     return validate_config(read_json_object(path, "sweep config"))
 
 
@@ -141,11 +148,9 @@ def validate_config(raw: Any) -> dict[str, Any]:
         raise ConfigError(f"invalid config: `timesteps` = {t!r} is outside the allowed range: null or an integer >= 1")
     if cfg["eval_env"] is not None and not isinstance(cfg["eval_env"], dict):
         raise ConfigError(f"invalid config: `eval_env` = {cfg['eval_env']!r} is outside the allowed range: null or a JSON object")
-    from accd_gym.control.baselines import BASELINES
-
-    if not isinstance(cfg["baselines"], list) or [b for b in cfg["baselines"] if b not in BASELINES]:
+    if not isinstance(cfg["baselines"], list) or [b for b in cfg["baselines"] if b not in CONTROLLERS]:
         raise ConfigError(f"invalid config: `baselines` = {cfg['baselines']!r} is outside the allowed values: a list of "
-                          f"{sorted(BASELINES)}")
+                          f"{sorted(CONTROLLERS)}")
     grid = cfg["grid"]
     if not isinstance(grid, dict) or any(not isinstance(v, list) or not v for v in grid.values()):
         raise ConfigError(f"invalid config: `grid` = {grid!r} is outside the allowed range: an object of non-empty lists")
@@ -163,8 +168,6 @@ EVAL_SPLITS = ("held_out", "validation")
 def eval_episodes(split: str) -> tuple[range, int]:
     """(wake seeds, base seed) of the evaluation episodes of ``split`` (one of :data:`EVAL_SPLITS`):
     episode k has wake seed ``wake_seeds[k]`` and seed ``base + k``."""
-    from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, VALIDATION_WAKE_SEEDS
-    from accd_gym.evals.episodes import EVAL_BASE_SEED, VALIDATION_BASE_SEED
 
     if split == "held_out":
         return HELD_OUT_WAKE_SEEDS, EVAL_BASE_SEED
@@ -194,10 +197,6 @@ def _set_dotted(cfg: dict[str, Any], key: str, value: Any) -> None:
 def train_config(sweep: dict[str, Any], point: dict[str, Any], seed: int) -> dict[str, Any]:
     """The validated training config of one trial: the sweep's ``train_config`` with the grid
     point, the seed and ``timesteps`` applied (RLlib trials sample in-process)."""
-    from accd_gym.learning import rllib, training
-
-    from accd_gym.envs.config import read_json_object
-
     raw = read_json_object(sweep["train_config"], "`train_config` (training config)")
     for key, value in point.items():
         _set_dotted(raw, key, value)
@@ -222,10 +221,6 @@ def _trial(params: dict[str, Any]) -> None:
     (``eval_split``), reports."""
     from ray import tune
 
-    from accd_gym.learning import rllib, training
-    from accd_gym.evals.episodes import run_episodes
-    from accd_gym.evals.evaluation import summarize
-    from accd_gym.evals.policies import load_policy
 
     sweep, point, seed = params["sweep"], params["point"], params["seed"]
     cfg = train_config(sweep, point, seed)
@@ -277,11 +272,6 @@ def baseline_rates(sweep: dict[str, Any]) -> dict[str, dict[str, Any]]:
     """The sweep's ``baselines`` on its evaluation episodes (``eval_split``, ``episodes``), each on
     the evaluation env without the agent's options: {name: captures, episodes, capture_rate, its
     Wilson 95 % interval, miss median}."""
-    from accd_gym.control.baselines import make_baseline
-    from accd_gym.envs.agent_io import AGENT_KEYS
-    from accd_gym.evals.episodes import run_episodes
-    from accd_gym.evals.evaluation import summarize
-    from accd_gym.envs.config import read_json_object
 
     env = sweep["eval_env"]
     if env is None:
@@ -290,7 +280,7 @@ def baseline_rates(sweep: dict[str, Any]) -> dict[str, dict[str, Any]]:
     wake_seeds, base_seed = eval_episodes(sweep["eval_split"])
     out = {}
     for name in sweep["baselines"]:
-        eps = run_episodes(make_baseline(name, 0, env), sweep["episodes"], seed=base_seed,
+        eps = run_episodes(load_policy(name, 0, config=env), sweep["episodes"], seed=base_seed,
                            wake_seeds=list(wake_seeds[:sweep["episodes"]]), num_envs=sweep["num_envs"], config=env)
         s = summarize(eps)
         out[name] = {"captures": s["captures"], "episodes": sweep["episodes"], "capture_rate": s["capture_rate"],
@@ -357,8 +347,6 @@ def _restore_signal_handlers(kept: dict[int, Any]) -> None:
 def run(config: dict[str, Any] | str | Path, out: str | Path, *, progress: bool = True) -> dict[str, Any]:
     """Runs a sweep (a validated config or its file) into ``out``; returns the sweep document
     (also ``out/sweep.json``; the table in ``out/summary.md``)."""
-    from accd_gym.evals import distributed
-    from accd_gym.evals.evaluation import wilson_interval
 
     cfg = config if isinstance(config, dict) else load_config(config)
     cfg = validate_config(cfg)

@@ -57,11 +57,16 @@ import tarfile
 import tempfile
 import time
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any, Optional, Mapping
 
 import numpy as np
 
 from accd_gym.errors import ConfigError
+from accd_gym.learning import ray_cluster
+from accd_gym.envs.config import read_json_object
+from accd_gym.learning.training import check_training_env
+from accd_gym.envs.vector import InAirCaptureVectorEnv
+from accd_gym.files import read_user_json
 
 #: Defaults of an RLlib training config.
 DEFAULTS: dict[str, Any] = {
@@ -94,8 +99,6 @@ def is_rllib_config(raw: Any) -> bool:
 
 def load_config(path: str | Path, **overrides: Any) -> dict[str, Any]:
     """A complete, validated RLlib training config from a JSON file plus overrides (None ignored)."""
-    from accd_gym.envs.config import read_json_object
-
     raw = read_json_object(path, "training config")
     raw.update({k: v for k, v in overrides.items() if v is not None})
     return validate_config(raw)
@@ -131,7 +134,6 @@ def validate_config(raw: dict[str, Any]) -> dict[str, Any]:
     if not isinstance(cfg["ray_address"], str):
         raise ConfigError(f"invalid config: `ray_address` = {cfg['ray_address']!r} is outside the allowed range: 'local', 'auto' or 'HOST:PORT'")
     _check_algo_kwargs(cfg["algo_kwargs"])
-    from accd_gym.learning.training import check_training_env
 
     check_training_env(cfg["env"])
     return cfg
@@ -160,8 +162,6 @@ def runner_seed_base(seed: int, worker_index: int, num_envs: int) -> int:
 def _runner_env_class() -> type:
     """The vector env RLlib's runners build: an :class:`InAirCaptureVectorEnv` whose int-seeded
     reset uses the runner's own seeds (``runner_base + i``) once its worker index is known."""
-    from accd_gym.envs.vector import InAirCaptureVectorEnv
-
     class RunnerVectorEnv(InAirCaptureVectorEnv):
         """InAirCaptureVectorEnv of one RLlib env runner (see the module docstring for its seeds)."""
 
@@ -264,15 +264,13 @@ def train(cfg: dict[str, Any], out: str | Path, *, timesteps: Optional[int] = No
     (inside a Tune trial)."""
     import torch
 
-    from accd_gym.evals import distributed
-
     if timesteps is not None:
         cfg = dict(cfg, total_timesteps=int(timesteps))
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "checkpoints").mkdir(exist_ok=True)
     if connect:
-        distributed.connect(cfg["ray_address"])
+        ray_cluster.connect(cfg["ray_address"])
     torch.set_num_threads(cfg["torch_threads"])
     meta: dict[str, Any] = {"trainer": "rllib", "algo": "ppo", "config": cfg, "status": "running", "timesteps": 0,
                             "versions": _versions()}
@@ -346,7 +344,6 @@ def is_rllib_run(path: str | Path) -> bool:
     p = Path(path)
     if (p / "rllib_checkpoint.json").is_file():
         return True
-    from accd_gym.files import read_user_json
 
     if not (p / "run.json").exists():
         return False
@@ -426,6 +423,13 @@ class RLlibPolicy:
 
     def reset(self, mask: Optional[np.ndarray] = None) -> None:
         """Feed-forward policies keep no state."""
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        """Feed-forward: no per-env state."""
+        return {}
+
+    def set_state(self, state: Mapping[str, np.ndarray]) -> None:
+        """Feed-forward: nothing to restore."""
 
 
 __all__ = ["DEFAULTS", "ENV_NAME", "RLlibPolicy", "build_config", "is_rllib_config", "is_rllib_run", "latest_checkpoint",

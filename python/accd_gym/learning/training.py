@@ -67,6 +67,9 @@ import numpy as np
 
 from accd_gym import files
 from accd_gym.errors import ConfigError, OutputError, StateError
+from accd_gym.envs.config import env_config, read_json_object
+from accd_gym.envs.agent_io import split_agent_options
+from accd_gym.envs.task import ACT_DIM, HELD_OUT_WAKE_SEEDS, OBS_DIM
 
 #: Defaults of a training config (``algo_kwargs`` are per algorithm).
 DEFAULTS: dict[str, Any] = {
@@ -91,8 +94,6 @@ _ACTIVATIONS = ("tanh", "relu", "elu")
 
 def load_config(path: str | Path, **overrides: Any) -> dict[str, Any]:
     """A complete, validated training config from a JSON file plus overrides (None values ignored)."""
-    from accd_gym.envs.config import read_json_object
-
     raw = read_json_object(path, "training config")
     raw.update({k: v for k, v in overrides.items() if v is not None})
     return validate_config(raw)
@@ -167,12 +168,9 @@ def check_training_env(env: dict[str, Any]) -> None:
     """ConfigError for a bad env override (or env option, :mod:`accd_gym.envs.agent_io`) or one that
     fixes a held-out wake seed (training may only draw training wake seeds); shared by every
     trainer."""
-    from accd_gym.envs.agent_io import split_agent_options
-    from accd_gym.envs.config import env_config
 
     _, physics = split_agent_options(env)  # raises ConfigError naming a bad residual/history option
     full = env_config(physics)  # raises ConfigError naming the bad env field
-    from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS
 
     fixed = ([full["wake_seed"]] if full["wake_seed"] is not None else []) + list(full["wake_seeds"] or [])
     leaked = sorted({s for s in fixed if s in HELD_OUT_WAKE_SEEDS})
@@ -217,6 +215,7 @@ def make_training_env(cfg: dict[str, Any]):
     """The AccdVecEnv (training wake seeds) wrapped in VecMonitor and VecNormalize per the config."""
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
+    # deferred: stable-baselines3, an optional dependency (accd_gym.envs.sb3 imports it)
     from accd_gym.envs.sb3 import AccdVecEnv
 
     env = AccdVecEnv(num_envs=cfg["num_envs"], seed=cfg["seed"], num_threads=cfg["num_threads"], **cfg["env"])
@@ -429,8 +428,6 @@ def load_model(data: bytes, name: str, algo: Optional[str], obs_dim: Optional[in
     by default; more with the env options ``residual`` and ``history``)."""
     from stable_baselines3 import PPO, SAC
 
-    from accd_gym.envs.task import ACT_DIM, OBS_DIM
-
     stored = model_algo(data, name)
     if algo is not None and stored is not None and algo != stored:
         raise ConfigError(f"invalid config: {name!r} holds a {stored.upper()} model, but its run.json says "
@@ -463,8 +460,6 @@ def load_statistics(data: bytes, name: str, venv: Any = None, obs_dim: Optional[
     import pickle
 
     from stable_baselines3.common.vec_env import VecNormalize
-
-    from accd_gym.envs.task import OBS_DIM
 
     if not data:
         raise ConfigError(f"invalid config: VecNormalize statistics {name!r} are an empty file")
@@ -632,6 +627,7 @@ def _zero_action_init(cfg: dict[str, Any]):
     """The callback zeroing the last action layer at the start (``zero_action_init``), or None."""
     if not cfg["zero_action_init"]:
         return None
+    # deferred: stable-baselines3 and torch, optional dependencies (accd_gym.learning.callbacks imports them)
     from accd_gym.learning.callbacks import ZeroActionInit
 
     return ZeroActionInit()
@@ -695,6 +691,7 @@ def _load_checkpoint(ckpt: dict[str, Any], cfg: dict[str, Any], out: Path) -> tu
     checkpoint; ConfigError or StateError naming the file that does not load."""
     from stable_baselines3.common.vec_env import VecMonitor
 
+    # deferred: stable-baselines3, an optional dependency (accd_gym.envs.sb3 imports it)
     from accd_gym.envs.sb3 import AccdVecEnv
 
     if ckpt["vecnormalize"] is None:
@@ -719,7 +716,7 @@ def _load_checkpoint(ckpt: dict[str, Any], cfg: dict[str, Any], out: Path) -> tu
                 base.set_state(ckpt["env_state"].read_bytes())
             except StateError as e:
                 raise StateError(f"env state {str(ckpt['env_state'])!r} cannot be restored: {e}") from None
-            base._base_seed = None  # continue the saved episode sequence instead of reseeding
+            base.drop_pending_seed()  # continue the saved episode sequence instead of reseeding
     except BaseException:
         base.close()
         raise

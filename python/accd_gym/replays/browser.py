@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 from accd_gym.errors import AccdError
+from accd_gym import files
 
 #: Where a browser is looked for, in order (after ``ACCD_CHROMIUM``).
 CANDIDATES = ("/usr/lib/chromium/chromium", "chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
@@ -276,7 +277,6 @@ def screenshot(html: str | Path, png: str | Path, *, setup: Optional[str] = None
         if setup:
             page.evaluate(f"Promise.resolve({setup}).then(() => window.accdReplay ? accdReplay.idle() : null)")
         page.evaluate("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))")
-        from accd_gym import files
 
         files.write_bytes(png, page.screenshot())
         return page.errors()

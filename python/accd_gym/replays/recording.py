@@ -14,9 +14,9 @@ in the TA frame and SI units; reading it leaves the episode unchanged.
 The file format (``Recording.save``) is a plain numpy ``.npz`` that loads without accd-gym:
 ``docs/recording-format.md`` lists every array with its shape and unit.
 
-:func:`record_episodes` makes exactly the policy calls of
-:func:`accd_gym.evals.evaluation.run_episodes` (same batch, seeds, episode order and same-step
-resets), so with the same arguments its episode ``k`` is the evaluation's episode ``k``, for
+:func:`record_episodes` runs on the evaluation's episode scheduler
+(:func:`accd_gym.evals.episodes.schedule_episodes`: same batch, seeds, episode order and policy
+calls), so with the same arguments its episode ``k`` is the evaluation's episode ``k``, for
 stateful and random policies too (``tests/test_recording.py``).
 """
 
@@ -29,7 +29,14 @@ from typing import Any, Iterable, Iterator, Optional, Sequence
 import gymnasium as gym
 import numpy as np
 
+from accd_gym import files
+from accd_gym._core import __version__
+from accd_gym.control.registry import Policy
+from accd_gym.envs.env import InAirCaptureEnv
+from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, INFO_NAMES, MAX_ENVS, check_count, check_seed
 from accd_gym.errors import ConfigError
+from accd_gym.evals.episodes import EVAL_BASE_SEED, schedule_episodes
+from accd_gym.evals.policies import load_policy
 
 #: Name and version written into every file (``format``, ``version``).
 FORMAT_NAME = "accd-gym-recording"
@@ -141,8 +148,6 @@ class Recording:
     def save(self, path: str | Path) -> Path:
         """Writes the recording as a compressed ``.npz`` (``docs/recording-format.md``); returns
         the path. Strings are stored as numpy unicode scalars, so ``numpy.load`` needs no pickle."""
-        from accd_gym import files
-
         p = Path(path)
         extra = {
             "format": np.array(FORMAT_NAME),
@@ -157,9 +162,7 @@ class Recording:
     def load(cls, path: str | Path) -> "Recording":
         """Reads a file written by :meth:`save`; raises ConfigError for another file (also one
         that is not a regular file, or is truncated)."""
-        from accd_gym.files import check_regular_file
-
-        check_regular_file(path, "recording")
+        files.check_regular_file(path, "recording")
         try:
             return cls._from_npz(path, path)
         except ConfigError:
@@ -260,8 +263,62 @@ def _policy_label(policy: Any) -> str:
     return str(getattr(policy, "name", type(policy).__name__))
 
 
+class _Recorder:
+    """The recording's observer of :func:`accd_gym.evals.episodes.schedule_episodes`: a
+    :class:`_Builder` per kept episode, finished into a :class:`Recording` when it ends."""
+
+    def __init__(self, label: str, base: int, batch: int) -> None:
+        self.label = label
+        self.base = base
+        self.batch = batch
+        self.config: Optional[dict[str, Any]] = None  # the env's full configuration, read at the first start
+        self.geometry: dict[str, float] = {}
+        self.builders: dict[int, _Builder] = {}
+        self.metas: dict[int, dict[str, Any]] = {}
+
+    def started(self, env: Any, rows: np.ndarray, episodes: np.ndarray, obs: np.ndarray) -> None:
+        """Starts a builder for each row that runs a kept episode (a repeat records nothing)."""
+        if self.config is None:
+            self.config = env.config
+            self.geometry = accd_geometry(self.config)
+        for i, k in zip(rows, episodes):
+            i = int(i)
+            if k < 0:
+                self.builders.pop(i, None)
+                continue
+            self.builders[i] = _Builder(env.record_data(i), obs[i])
+            self.metas[i] = {
+                "policy": self.label,
+                "episode": int(k),
+                "env_index": i,
+                "num_envs": self.batch,
+                "base_seed": self.base,
+                "seeds": env.episode_seeds(i),
+                "config": self.config,
+                "accd_geometry": self.geometry,
+                "agent_step": float(self.config["agent_step"]),
+                "accd_gym_version": __version__,
+                "divergence": None,
+            }
+
+    def stepped(self, env: Any, actions: np.ndarray, obs: np.ndarray, reward: np.ndarray, terminated: np.ndarray,
+                truncated: np.ndarray, infos: dict[str, Any]) -> None:
+        """Adds the step to every recorded row."""
+        for i, builder in self.builders.items():
+            row = {name: infos[name][i] for name in INFO_NAMES}
+            builder.add(env.record_data(i), obs[i], np.clip(actions[i], -1.0, 1.0), float(reward[i]),
+                        bool(terminated[i]), bool(truncated[i]), row)
+
+    def ended(self, env: Any, row: int, episode: int, infos: dict[str, Any]) -> Recording:
+        """The ended episode's recording (with the reason of a divergence)."""
+        meta = self.metas.pop(row)
+        if self.builders[row].steps["info_diverged"][-1]:
+            meta["divergence"] = env.divergence(row)
+        return self.builders.pop(row).finish(meta)
+
+
 def iter_recordings(
-    policy: Any,
+    policy: Policy | str,
     episodes: Optional[int] = None,
     *,
     config: Optional[dict[str, Any]] = None,
@@ -275,11 +332,6 @@ def iter_recordings(
     """Like :func:`record_episodes`, yielding each recording as its episode ends (in the order
     the episodes end; ``rec.meta["episode"]`` is its index), so that callers can write and drop
     them one at a time."""
-    from accd_gym import _core
-    from accd_gym.evals.episodes import EVAL_BASE_SEED
-    from accd_gym.evals.policies import load_policy
-    from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, INFO_NAMES, MAX_ENVS, check_actions, check_count, check_seed
-
     if episodes is None:
         episodes = len(wake_seeds) if wake_seeds is not None else 1
     if isinstance(episodes, bool) or not isinstance(episodes, (int, np.integer)) or episodes < 1:
@@ -302,93 +354,15 @@ def iter_recordings(
     label = _policy_label(policy)
     if isinstance(policy, str):
         policy = load_policy(policy, seed=policy_seed, config=config)
-    from accd_gym.evals.episodes import start_policy_episodes
-    from accd_gym.envs.vector import InAirCaptureVectorEnv
-
     batch = min(check_count(num_envs, "num_envs", 1, MAX_ENVS), episodes)  # the evaluation's batch: the policy sees the same rows
-    env = InAirCaptureVectorEnv(batch, autoreset_mode="disabled", num_threads=num_threads, **(config or {}))
-    core = env._core
-    cfg = env._config
-    geometry = accd_geometry(cfg)
-
-    def meta_of(i: int, k: int) -> dict[str, Any]:
-        seeds = core.episode_seeds(i)
-        return {
-            "policy": label,
-            "episode": k,
-            "env_index": i,
-            "num_envs": batch,
-            "base_seed": base,
-            "seeds": {name: int(v) for name, v in seeds.items()},
-            "config": cfg,
-            "accd_geometry": geometry,
-            "agent_step": float(cfg["agent_step"]),
-            "accd_gym_version": _core.__version__,
-            "divergence": None,
-        }
-
-    # Episode k is the first episode of seed base + k with wake_seeds[k], whatever else runs beside
-    # it (evaluation.run_episode_range): only the kept episodes run; idle rows repeat their last.
-    if not wanted:
-        env.close()
-        return  # keep=[]: nothing to record (as before: no episode is run)
-    pending = iter(sorted(wanted))
-    first = min(wanted)
-    ep_of = np.full(batch, -1)
-    last = np.full(batch, first, dtype=np.int64)
-    builders: dict[int, _Builder] = {}
-    metas: dict[int, dict[str, Any]] = {}
-    env.reset(seed=[base + first] * batch)
-    obs: np.ndarray = np.zeros(0)
-
-    def start(i: int) -> np.ndarray:
-        k = next(pending, None)
-        ep_of[i] = -1 if k is None else k
-        if k is not None:
-            last[i] = k
-        o = env.start_episode(i, base + int(last[i]), int(wake_seeds[int(last[i])]))
-        if k is not None:
-            builders[i] = _Builder(core.record_data(i), o[i])
-            metas[i] = meta_of(i, k)
-        else:
-            builders.pop(i, None)
-        return o
-
-    try:
-        for i in range(batch):
-            obs = start(i)
-        start_policy_episodes(policy, np.ones(batch, dtype=bool), ep_of, last)
-        remaining = set(wanted)
-        while remaining:
-            actions = check_actions(np.asarray(policy.predict(obs), dtype=np.float32), batch)
-            obs, reward, terminated, truncated, info = env.step(actions)
-            dones = terminated | truncated
-            for i in builders:
-                row = {name: info[name][i] for name in INFO_NAMES}
-                builders[i].add(core.record_data(i), obs[i], np.clip(actions[i], -1.0, 1.0), float(reward[i]),
-                                bool(terminated[i]), bool(truncated[i]), row)
-            if not dones.any():
-                continue
-            for i in np.flatnonzero(dones):
-                i = int(i)
-                if i in builders:
-                    meta = metas.pop(i)
-                    if builders[i].steps["info_diverged"][-1]:
-                        meta["divergence"] = core.divergence(i)
-                    rec = builders.pop(i).finish(meta)
-                    remaining.discard(int(ep_of[i]))
-                    yield rec
-            if not remaining:
-                break
-            for i in np.flatnonzero(dones):
-                obs = start(int(i))
-            start_policy_episodes(policy, dones, ep_of, last)
-    finally:
-        env.close()
+    recorder = _Recorder(label, base, batch)
+    for _, rec in schedule_episodes(policy, wanted, recorder, seed=base, wake_seeds=wake_seeds, batch=batch,
+                                    num_threads=num_threads, config=config):
+        yield rec
 
 
 def record_episodes(
-    policy: Any,
+    policy: Policy | str,
     episodes: Optional[int] = None,
     *,
     config: Optional[dict[str, Any]] = None,
@@ -401,10 +375,11 @@ def record_episodes(
 ) -> list[Recording]:
     """Runs ``policy`` for ``episodes`` episodes and returns their recordings in index order.
 
-    ``policy``: an object with ``predict(obs_batch) -> actions`` (and optionally
-    ``reset(mask)``), or a spec for :func:`accd_gym.evals.evaluation.load_policy` (a baseline name, a
-    guidance tuning file or a trained model; ``policy_seed`` seeds the random baseline).
-    ``config``: env config overrides. ``seed``: the base seed of initial conditions and RLV
+    ``policy``: an :class:`accd_gym.control.registry.Policy`, or a spec for
+    :func:`accd_gym.evals.policies.load_policy` (a controller's name, a tuning file, a shipped
+    policy or a trained model; ``policy_seed`` seeds the random baseline). ``config``: env config
+    overrides; the episodes run its physics, as the evaluation's do, and its env options
+    (``residual``, ``history``) are the policy's (a trained model's own run options apply). ``seed``: the base seed of initial conditions and RLV
     motion (default the evaluation's, 20240607); ``wake_seeds``: episode ``k`` uses
     ``wake_seeds[k]`` (default the first ``episodes`` held-out wake seeds). ``num_envs``
     episodes run side by side on ``num_threads`` threads, as in
@@ -428,8 +403,7 @@ class RecordEpisode(gym.Wrapper):
 
     def __init__(self, env: gym.Env, folder: Optional[str | Path] = None, keep_last: Optional[int] = 10) -> None:
         super().__init__(env)
-        core = getattr(env.unwrapped, "_core", None)
-        if core is None or not hasattr(core, "record_data"):
+        if not isinstance(env.unwrapped, InAirCaptureEnv):
             raise ConfigError(
                 f"invalid config: RecordEpisode wraps an accd_gym InAirCaptureEnv, got {type(env.unwrapped).__name__}"
             )
@@ -445,23 +419,20 @@ class RecordEpisode(gym.Wrapper):
 
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
         """Resets the env and starts recording the new episode."""
-        from accd_gym import _core
-
         obs, info = self.env.reset(**kwargs)
-        core = self._core_env._core
         cfg = self._core_env.config
-        self.current = _Builder(core.record_data(0), obs)
+        self.current = _Builder(self._core_env.record_data(0), obs)
         self._meta = {
             "policy": "RecordEpisode",
             "episode": self._count,
             "env_index": 0,
             "num_envs": 1,
             "base_seed": None,
-            "seeds": {k: int(v) for k, v in core.episode_seeds(0).items()},
+            "seeds": {k: int(v) for k, v in self._core_env.episode_seeds().items()},
             "config": cfg,
             "accd_geometry": accd_geometry(cfg),
             "agent_step": float(cfg["agent_step"]),
-            "accd_gym_version": _core.__version__,
+            "accd_gym_version": __version__,
             "divergence": None,
         }
         return obs, info
@@ -471,7 +442,7 @@ class RecordEpisode(gym.Wrapper):
         obs, reward, terminated, truncated, info = self.env.step(action)
         if self.current is not None:
             a = np.clip(np.asarray(action, dtype=np.float32).reshape(4), -1.0, 1.0)
-            self.current.add(self._core_env._core.record_data(0), obs, a, float(reward), bool(terminated),
+            self.current.add(self._core_env.record_data(0), obs, a, float(reward), bool(terminated),
                              bool(truncated), info)
             if terminated or truncated:
                 meta = dict(self._meta, divergence=info.get("divergence"))

@@ -38,7 +38,14 @@ from typing import Any, Optional
 
 import numpy as np
 
-from accd_gym.replays.recording import Recording
+from accd_gym import files
+from accd_gym.envs.render import render_frame
+from accd_gym.errors import ConfigError
+from accd_gym.evals.episodes import Episode
+from accd_gym.evals.evaluation import ReplayWriter
+from accd_gym.evals.policies import load_policy
+from accd_gym.replays.browser import screenshot
+from accd_gym.replays.recording import Recording, iter_recordings, record_episodes
 
 #: Largest number of 3D frames a page holds (more samples are decimated).
 MAX_FRAMES = 1000
@@ -152,8 +159,6 @@ def _escape(text: str) -> str:
 
 def write_replay(rec: Recording, path: str | Path, **kwargs: Any) -> Path:
     """Writes :func:`replay_html` of ``rec`` to ``path`` (UTF-8, atomically); returns the path."""
-    from accd_gym import files
-
     return files.write_text(path, replay_html(rec, **kwargs))
 
 
@@ -165,10 +170,6 @@ def write_video(rec: Recording, path: str | Path, *, fps: Optional[float] = None
         import imageio_ffmpeg
     except ModuleNotFoundError as e:
         raise ModuleNotFoundError(f"videos need imageio-ffmpeg ({e}): pip install 'accd-gym[replay]'", name=e.name) from e
-    from accd_gym.envs.render import render_frame
-
-    from accd_gym import files
-
     p = Path(path)
     rate = float(fps) if fps is not None else 1.0 / float(rec.meta["agent_step"])
     with files.atomic_path(p) as tmp:  # a failed encoding leaves the previous video, never half of one
@@ -188,8 +189,6 @@ def screenshot_replay(html: str | Path, png: str | Path, time: Optional[float] =
     """A screenshot of a replay page at ``time`` (s; default the capture, or for an episode
     without one the closest approach) taken with headless Chromium (:mod:`accd_gym.replays.browser`);
     returns the page's JavaScript errors."""
-    from accd_gym.replays.browser import screenshot
-
     default = "accdReplay.meta.captured_at !== null ? accdReplay.meta.captured_at : accdReplay.meta.time_of_min_distance"
     setup = f"accdReplay.setTime({default})" if time is None else f"accdReplay.setTime({float(time)!r})"
     return screenshot(html, png, setup=setup, width=width, height=height)
@@ -480,8 +479,6 @@ def pick_episodes(episodes: Any, count: int) -> list[tuple[str, int]]:
     (``rank<r>``, 1 = best). ``episodes`` are :class:`accd_gym.evals.evaluation.Episode` objects.
     """
     if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
-        from accd_gym.errors import ConfigError
-
         raise ConfigError(f"invalid config: `replay` = {count!r} is outside the allowed range: an int >= 1")
     ranked = sorted(episodes, key=lambda e: (0, e.capture_time, e.index) if e.captured else (1, e.min_distance, e.index))
     m = len(ranked)
@@ -497,6 +494,18 @@ def pick_episodes(episodes: Any, count: int) -> list[tuple[str, int]]:
     return out
 
 
+def evaluation_replays(count: int) -> ReplayWriter:
+    """The ``replay_writer`` of :func:`accd_gym.evals.evaluation.evaluate` for ``accd-gym evaluate
+    --replay K``: :func:`write_evaluation_replays` of ``count`` episodes per policy."""
+
+    def write(spec: str, label: str, episodes: list[Episode], context: dict[str, Any]) -> list[dict[str, Any]]:
+        ctx = dict(context)
+        folder = ctx.pop("folder")
+        return write_evaluation_replays(spec, label, episodes, count, folder, **ctx)
+
+    return write
+
+
 def write_evaluation_replays(spec: str, label: str, episodes: Any, count: int, out: str | Path, *, seed: int,
                              wake_seeds: Any, num_envs: int, num_threads: int, config: Optional[dict[str, Any]],
                              allow_unnormalized: bool = False) -> list[dict[str, Any]]:
@@ -505,8 +514,6 @@ def write_evaluation_replays(spec: str, label: str, episodes: Any, count: int, o
     records the :func:`pick_episodes` ones and writes ``out/<label>/<pick>_ep<k>.html`` and
     ``.npz``. Checks that each recording reproduces the evaluation's outcome and steps. Returns
     one entry per page (pick, episode, outcome, miss distance, files)."""
-    from accd_gym.evals.policies import load_policy
-    from accd_gym.replays.recording import record_episodes
 
     picks = pick_episodes(episodes, count)
     policy = load_policy(spec, allow_unnormalized=allow_unnormalized, config=config)
@@ -539,16 +546,12 @@ def run_replay(policy: str, episodes: int, out: str | Path, *, seed: Optional[in
     run unrecorded) and writes per episode ``episode_<k>.npz``,
     ``episode_<k>.html`` and, on request, ``episode_<k>.mp4`` and ``episode_<k>.png`` (a screenshot
     of the page at the capture or the closest approach, by headless Chromium). Returns one entry per episode."""
-    from accd_gym.evals.policies import load_policy
-    from accd_gym.replays.recording import iter_recordings
 
     loaded = load_policy(policy, seed=0, allow_unnormalized=allow_unnormalized, config=config)
     if getattr(loaded, "note", None):
         import sys
 
         print(f"note: {loaded.note}", file=sys.stderr)
-    from accd_gym import files
-
     folder = files.writable_folder(out)  # before the episodes: a read-only folder is refused at once
     bar = None
     if progress:

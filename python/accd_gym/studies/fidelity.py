@@ -42,8 +42,10 @@ from typing import Any, Optional
 
 import numpy as np
 
-import accd_gym
+from accd_gym import _core
 from accd_gym import files as _files
+from accd_gym.control.baselines import GuidancePolicy
+from accd_gym.studies import study
 
 #: Simulated time of each Fig. 9 run, s (about two swings of case (b), four cycles of its elongation).
 FIG9_DURATION_S = 10.0
@@ -109,12 +111,12 @@ def check_scheme(scheme: str) -> str:
 
 def fig9_tether(
     model: Fig9Model, case: str, time_step: float = FIG9_TIME_STEP_S, scheme: str = "explicit"
-) -> accd_gym.Tether:
+) -> _core.Tether:
     """Table 1's chain under ``model`` in the start state of ``case`` (``vertical`` or ``swing``),
     at rest and unstretched, in vacuum, integrated by ``scheme`` (one of :data:`SCHEMES`)."""
-    table1 = accd_gym.tether_config("table1")
+    table1 = _core.tether_config("table1")
     overrides = {"time_step": time_step, "scheme": check_scheme(scheme), **model.overrides(table1)}
-    tether = accd_gym.Tether(overrides, preset="table1")
+    tether = _core.Tether(overrides, preset="table1")
     n = tether.segments
     if case == "vertical":
         tether.set_state(np.tile([0.0, 0.0, 1.0], (n, 1)))
@@ -206,7 +208,7 @@ def fig9_closed_forms() -> dict[str, float]:
     ``M g / k`` and axial ring ``sqrt(k / M) / 2 pi`` (the element carries the whole chain; damped
     by ``zeta = c_s / 2 sqrt(k M)``), and the full model's (elements ``n k``) hanging stretch
     ``(n + 1) / (2 n) M g / k`` (rods lumped: docs/decisions.md, "The distributed elasticity: an option, not the default")."""
-    c = accd_gym.tether_config("table1")
+    c = _core.tether_config("table1")
     n, k, mass, g = c["segments"], c["axial_stiffness"], c["mass_per_length"] * c["length"], c["gravity"]
     zeta = c["axial_damping_per_mass"] * mass / (2.0 * math.sqrt(k * mass))
     return {
@@ -269,7 +271,7 @@ def run_fig9(
             "scheme": scheme,
             "time_step": time_step,
             "duration_s": duration_s,
-            "models": {m.key: {"label": m.label, "overrides": m.overrides(accd_gym.tether_config("table1"))} for m in FIG9_MODELS},
+            "models": {m.key: {"label": m.label, "overrides": m.overrides(_core.tether_config("table1"))} for m in FIG9_MODELS},
         },
         "cases": results,
         "closed_forms": closed,
@@ -428,9 +430,7 @@ def guidance_episode(seed: int = CAPTURE_SEED) -> dict[str, Any]:
     attachment tension per agent step (N) and whether it captured."""
     import gymnasium as gym
 
-    from accd_gym.control.baselines import GuidancePolicy
-
-    env = gym.make(accd_gym.ENV_ID)
+    env = gym.make(TIERS["nominal"].id)
     policy = GuidancePolicy()
     obs, info = env.reset(seed=seed)
     wake_seed, actions, peaks, done = info["wake_seed"], [], [], False
@@ -459,7 +459,7 @@ def replay_capture(
     wake seed, wake and turbulence on) under ``run``'s tether, after ``settle_s`` of settling
     with neutral flaps. Returns (time from the first command in s, attachment tension in N),
     every physics step."""
-    sim = accd_gym.CaptureSim({"tether": run.overrides()}, seed=0, wake_seed=episode["wake_seed"])
+    sim = _core.CaptureSim({"tether": run.overrides()}, seed=0, wake_seed=episode["wake_seed"])
     sim.settle(settle_s)
     start = sim.time
     per_command = round(episode["agent_step"] / sim.time_step)
@@ -522,8 +522,6 @@ def run_tension(
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from accd_gym.studies import study
 
     implicit = check_scheme(scheme) == "implicit_axial"
     tension_runs = IMPLICIT_TENSION_RUNS if implicit else TENSION_RUNS
@@ -593,7 +591,7 @@ def run_tension(
     plt.close(fig)
 
     ratios = tension_ratios(max_runs, cap_runs)
-    breaking = accd_gym.tether_config("table3")["breaking_tension"]
+    breaking = _core.tether_config("table3")["breaking_tension"]
     simplified = [r for r in max_runs.values() if r["elasticity"] == "attachment"]
     peak = max(simplified, key=lambda r: r["segments"])["peak_tension_N"]
     doc = {
@@ -671,11 +669,9 @@ class TensionReading:
 
     def case(self) -> Any:
         """The :class:`accd_gym.studies.study.MaxTensionCase` of this reading."""
-        from accd_gym.studies import study
-
         base = study.MaxTensionCase()
-        sigma = accd_gym.isa(base.altitude)["density"] / accd_gym.isa(0.0)["density"]
-        g = accd_gym.tether_config(base.preset)["gravity"]
+        sigma = _core.isa(base.altitude)["density"] / _core.isa(0.0)["density"]
+        g = _core.tether_config(base.preset)["gravity"]
         return dataclasses.replace(
             base,
             thrust_N=base.thrust_N * (sigma if self.lapsed else 1.0),
@@ -699,11 +695,9 @@ def implied_ta_mass() -> float:
     125 kN mean: ``m = (F sigma - D_RLV - a* m_RLV) / (a* + g / (L/D))`` with
     ``a* = (125 kN - D_RLV) / m_RLV``. The one unknown fitted from the paper's mean; the peak is
     then a prediction."""
-    from accd_gym.studies import study
-
     base = study.MaxTensionCase()
-    sigma = accd_gym.isa(base.altitude)["density"] / accd_gym.isa(0.0)["density"]
-    g = accd_gym.tether_config(base.preset)["gravity"]
+    sigma = _core.isa(base.altitude)["density"] / _core.isa(0.0)["density"]
+    g = _core.tether_config(base.preset)["gravity"]
     a = (study.PAPER_MAX_TENSION_MEAN_N - base.rlv_drag_N) / base.rlv_mass_kg
     return (base.thrust_N * sigma - base.rlv_drag_N - a * base.rlv_mass_kg) / (a + g / TA_LIFT_TO_DRAG)
 
@@ -711,8 +705,6 @@ def implied_ta_mass() -> float:
 def tension_readings() -> list[TensionReading]:
     """The grid of :class:`TensionReading` (24): thrust x TA mass (MLW, :func:`implied_ta_mass`,
     MTOW) x TA drag x start."""
-    from accd_gym.studies import study
-
     return [
         TensionReading(lapsed, mass, drag, pre)
         for lapsed in (False, True)
@@ -726,8 +718,6 @@ def sweep_max_tension() -> list[dict[str, Any]]:
     """Runs every :func:`tension_readings` case (attachment model, n = 30, the study's step) and
     returns per reading its inputs, mean and peak tension (N) and whether both are within
     :data:`PAPER_TOLERANCE` of the paper's."""
-    from accd_gym.studies import study
-
     rows = []
     for reading in tension_readings():
         case = reading.case()
@@ -774,7 +764,7 @@ class SettlingReading:
     def tether(self, length_m: float) -> dict[str, Any]:
         """Tether config overrides of this reading for a 24 mm UHMWPE tether of ``length_m``."""
         n = 30 if self.segments == "30" else max(1, round(30 * length_m / 250.0))
-        c1 = accd_gym.tether_config("table3")["joint_damping_per_mass"]
+        c1 = _core.tether_config("table3")["joint_damping_per_mass"]
         out: dict[str, Any] = {
             "segments": n,
             "normal_drag_coefficient": self.normal_drag_coefficient,
@@ -810,8 +800,6 @@ def sweep_settling(progress: bool = False) -> list[dict[str, Any]]:
     release and after the pitch and yaw commands, s), first swing and settled depth (m), and
     whether 300 m settles slower than 150 m after release and after the pitch command (the claim
     of ``test_length_300_m_settles_slower_than_150_m``). A run that diverges is reported as such."""
-    from accd_gym.studies import study
-
     cases = {c.key: c for c in study.study_cases("length")["length"]}
     rows = []
     for reading in settling_readings():
@@ -820,7 +808,7 @@ def sweep_settling(progress: bool = False) -> list[dict[str, Any]]:
             case = dataclasses.replace(cases[key], tether=reading.tether(length))
             try:
                 m = study.case_metrics(study.simulate_case(case))
-            except accd_gym.SimulationError as e:
+            except SimulationError as e:
                 message = str(e).splitlines()[0]
                 at = re.search(r"at t = ([0-9.]+) s", message)
                 row[key] = {"diverged": message, "diverged_at_s": float(at.group(1)) if at else None}
@@ -865,8 +853,6 @@ def run_sweep(out_dir: Path, dpi: int = 90, progress: bool = True) -> tuple[dict
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from accd_gym.studies import study
 
     settling = sweep_settling(progress=progress)
     tension = sweep_max_tension()

@@ -70,7 +70,7 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 
-import accd_gym
+from accd_gym import _core
 from accd_gym import files as _files
 
 #: Flap deflection of the reconstructed Fig. 12 pitch and yaw commands, deg (paper 2.1: RANS data
@@ -232,7 +232,7 @@ def simulate_case(case: Case, sample_interval: float = SAMPLE_INTERVAL_S, bar: A
         The sampled history.
     """
     config = {"tether": dict(case.tether)} if case.tether else None
-    sim = accd_gym.CaptureSim(config, tether_preset=case.preset, calm=not case.wake, seed=0, wake_seed=WAKE_SEED)
+    sim = _core.CaptureSim(config, tether_preset=case.preset, calm=not case.wake, seed=0, wake_seed=WAKE_SEED)
     steps = max(1, round(sample_interval / sim.time_step))
     samples = round(case.duration_s / (steps * sim.time_step))
     state = sim.state()
@@ -244,7 +244,7 @@ def simulate_case(case: Case, sample_interval: float = SAMPLE_INTERVAL_S, bar: A
     )
     for _ in range(samples):
         pitch, yaw = command_at(case.commands, sim.time)
-        state = sim.step(accd_gym.mix_flaps(pitch, yaw, 0.0), steps=steps)
+        state = sim.step(_core.mix_flaps(pitch, yaw, 0.0), steps=steps)
         times.append(state["time"])
         positions.append(state["position"])
         tensions.append(state["attachment_tension"])
@@ -403,7 +403,7 @@ def simulate_max_tension(
             "segments": 10}``); with the distributed elasticity every element starts stretched by
             the cruise tension.
     """
-    tether = accd_gym.Tether(
+    tether = _core.Tether(
         {"tip_mass": case.rlv_mass_kg, "time_step": case.time_step, **(overrides or {})}, preset=case.preset
     )
     tether.tow(airspeed=case.airspeed, altitude=case.altitude)
@@ -454,8 +454,8 @@ def max_tension_metrics(result: MaxTensionResult) -> dict[str, Any]:
         "peak_tension_N": float(np.max(T[loaded])),
         "min_tension_N": float(np.min(T[loaded])),
         "oscillation_period_s": period,
-        "axial_period_s": 2 * math.pi / math.sqrt(accd_gym.tether_config(c.preset)["axial_stiffness"] / c.rlv_mass_kg),
-        "breaking_tension_N": accd_gym.tether_config(c.preset)["breaking_tension"],
+        "axial_period_s": 2 * math.pi / math.sqrt(_core.tether_config(c.preset)["axial_stiffness"] / c.rlv_mass_kg),
+        "breaking_tension_N": _core.tether_config(c.preset)["breaking_tension"],
         "paper_mean_tension_N": PAPER_MAX_TENSION_MEAN_N,
         "paper_peak_tension_N": PAPER_MAX_TENSION_PEAK_N,
     }
@@ -464,7 +464,7 @@ def max_tension_metrics(result: MaxTensionResult) -> dict[str, Any]:
 def max_tension_readings(case: MaxTensionCase = MaxTensionCase()) -> list[dict[str, Any]]:
     """Quasi-static tension (N) under other readings of the paper's case, and what its 125 kN
     mean would require; each entry has ``reading``, ``quasi_static_tension_N`` or a requirement."""
-    sigma = accd_gym.isa(case.altitude)["density"] / accd_gym.isa(0.0)["density"]
+    sigma = _core.isa(case.altitude)["density"] / _core.isa(0.0)["density"]
     lapsed = MaxTensionCase(
         thrust_N=case.thrust_N * sigma,
         rlv_drag_N=case.rlv_drag_N,
@@ -769,7 +769,7 @@ def plot_max_tension(result: MaxTensionResult, metrics: dict[str, Any], path: Pa
     import matplotlib.pyplot as plt
 
     c = result.case
-    length = accd_gym.tether_config(c.preset)["length"]
+    length = _core.tether_config(c.preset)["length"]
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.6), constrained_layout=True)
     ax = axes[0]
     ax.plot(result.time, result.tension / 1e3, lw=1.0, label="model")

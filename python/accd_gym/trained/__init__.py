@@ -12,16 +12,21 @@ trained with (residual control, observation history), copied from a training run
 
 On the command line: ``accd-gym evaluate --policy residual_sac_hard`` (its tier unless
 ``--tier`` says otherwise); ``rollout`` and ``replay`` take the name too. Loading needs
-stable-baselines3 (``pip install 'accd-gym[sb3]'``).
+stable-baselines3 (``pip install 'accd-gym[sb3]'``). The catalog itself is
+:mod:`accd_gym.evals.shipped`, which the policy resolver (:func:`accd_gym.evals.policies.load_policy`)
+reads too.
 """
 
 from __future__ import annotations
 
 from typing import Any, Optional
 
-from accd_gym.trained.catalog import TRAINED_DIR, available, info, policy_dir
+from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, check_count
+from accd_gym.evals.episodes import Episode, run_episodes
+from accd_gym.evals.policies import SB3Policy
+from accd_gym.evals.shipped import TRAINED_DIR, available, info, is_trained, policy_dir
 
-__all__ = ["TRAINED_DIR", "available", "info", "load_policy", "held_out_episodes", "policy_dir"]
+__all__ = ["TRAINED_DIR", "available", "info", "is_trained", "load_policy", "held_out_episodes", "policy_dir"]
 
 
 def _tier_config(name: str, config: Optional[dict[str, Any]]) -> dict[str, Any]:
@@ -29,22 +34,17 @@ def _tier_config(name: str, config: Optional[dict[str, Any]]) -> dict[str, Any]:
     return {"tier": info(name)["tier"], **(config or {})}
 
 
-def load_policy(name: str, config: Optional[dict[str, Any]] = None, device: str = "cpu") -> Any:
+def load_policy(name: str, config: Optional[dict[str, Any]] = None, device: str = "cpu") -> SB3Policy:
     """Shipped policy ``name`` as an :class:`accd_gym.evals.policies.SB3Policy` (deterministic,
     ``predict(obs) -> flap commands``) for the env configuration ``config`` (overrides over the
     policy's tier; its base controller is designed for it)."""
-    from accd_gym.evals.policies import SB3Policy
-
     return SB3Policy(policy_dir(name), device=device, config=_tier_config(name, config))
 
 
-def held_out_episodes(name: str, n: int, num_envs: int = 50, num_threads: int = 0) -> list[Any]:
+def held_out_episodes(name: str, n: int, num_envs: int = 50, num_threads: int = 0) -> list[Episode]:
     """The first ``n`` of the benchmark's held-out episodes of shipped policy ``name`` on its
     tier (episode k: seed ``EVAL_BASE_SEED + k``, held-out wake seed k, as ``accd-gym evaluate``),
     as :class:`accd_gym.evals.episodes.Episode` s in index order."""
-    from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, check_count
-    from accd_gym.evals.episodes import run_episodes
-
     n = check_count(n, "n", 1, len(HELD_OUT_WAKE_SEEDS))
     config = _tier_config(name, None)
     policy = load_policy(name, config)

@@ -1,7 +1,8 @@
 """The catalog of the trained policies shipped with the package: one folder per policy under
-this package's folder (``final_model.zip``, ``vecnormalize.pkl``, the training run's ``run.json``
+``accd_gym/trained/`` (``final_model.zip``, ``vecnormalize.pkl``, the training run's ``run.json``
 and ``policy.json``, what :func:`info` returns). Needs neither stable-baselines3 nor the env, so
-the policy loaders (:func:`accd_gym.evals.policies.load_policy`) can resolve names through it."""
+the policy resolver (:func:`accd_gym.evals.policies.load_policy`) resolves names through it;
+:mod:`accd_gym.trained` is the users' interface to the same catalog."""
 
 from __future__ import annotations
 
@@ -9,9 +10,10 @@ from pathlib import Path
 from typing import Any
 
 from accd_gym.errors import ConfigError
+from accd_gym.files import read_user_json
 
-#: The folder holding one subfolder per shipped policy.
-TRAINED_DIR: Path = Path(__file__).resolve().parent
+#: The folder holding one subfolder per shipped policy (the package data of :mod:`accd_gym.trained`).
+TRAINED_DIR: Path = Path(__file__).resolve().parent.parent / "trained"
 
 #: The files every shipped policy's folder holds.
 POLICY_FILES: tuple[str, ...] = ("final_model.zip", "vecnormalize.pkl", "run.json", "policy.json")
@@ -33,8 +35,6 @@ def policy_dir(name: str) -> Path:
 def info(name: str) -> dict[str, Any]:
     """What shipped policy ``name`` is: tier, algorithm, seed, steps, source run, env options and
     its recorded held-out result (``policy.json``)."""
-    from accd_gym.files import read_user_json
-
     doc = read_user_json(policy_dir(name) / "policy.json", "trained policy metadata")
     if not isinstance(doc, dict):
         raise ConfigError(f"invalid config: {str(policy_dir(name) / 'policy.json')!r} is not a JSON object")
