@@ -1,5 +1,6 @@
 """Policies by name or path (:func:`load_policy`): the built-in baselines
-(:mod:`accd_gym.control`), tuning files of the guidance controller and the LQR, trained
+(:mod:`accd_gym.control`), tuning files of the guidance controller and the LQR, the shipped
+policies' exported networks (:class:`accd_gym.trained.network.NetworkPolicy`), trained
 stable-baselines3 models (:class:`SB3Policy`) and RLlib runs
 (:class:`accd_gym.learning.rllib.RLlibPolicy`).
 """
@@ -213,7 +214,8 @@ def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False, c
     """A policy from a baseline name (``zero``, ``random``, ``guidance``, ``lqr``), a tuning file
     (``training/guidance_tuning*.json``: the guidance controller with its winning gains;
     ``training/lqr_tuning.json``: the LQR with its winning tuning), a shipped trained policy's name
-    (:mod:`accd_gym.trained`) or a model path (see
+    (:mod:`accd_gym.trained`: its exported network, :class:`accd_gym.trained.network.NetworkPolicy`,
+    needing neither PyTorch nor stable-baselines3) or a model path (see
     :class:`SB3Policy` for ``allow_unnormalized``; an RLlib run or checkpoint folder gives an
     :class:`accd_gym.learning.rllib.RLlibPolicy`). ``config``: the env configuration (overrides) the
     policy will run on; the LQR is designed for it."""
@@ -221,10 +223,11 @@ def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False, c
 
     from accd_gym.envs.agent_io import physics_config
     from accd_gym.trained.catalog import is_trained, policy_dir
+    from accd_gym.trained.network import NetworkPolicy
 
     config = physics_config(config)
     if is_trained(spec):
-        return SB3Policy(policy_dir(spec), config=config)
+        return NetworkPolicy(policy_dir(spec), config=config)
     if spec in BASELINES:
         return make_baseline(spec, seed, config)
     if spec.endswith(".json") and Path(spec).is_file():

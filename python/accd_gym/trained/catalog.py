@@ -1,6 +1,6 @@
 """The catalog of the trained policies shipped with the package: one folder per policy under
-this package's folder (``final_model.zip``, ``vecnormalize.pkl``, the training run's ``run.json``
-and ``policy.json``, what :func:`info` returns). Needs neither stable-baselines3 nor the env, so
+this package's folder (``final_model.zip``, ``vecnormalize.pkl``, the training run's ``run.json``,
+``policy.json``, what :func:`info` returns, and ``network.npz``, the exported actor network). Needs neither stable-baselines3 nor the env, so
 the policy loaders (:func:`accd_gym.evals.policies.load_policy`) can resolve names through it."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from accd_gym.errors import ConfigError
 TRAINED_DIR: Path = Path(__file__).resolve().parent
 
 #: The files every shipped policy's folder holds.
-POLICY_FILES: tuple[str, ...] = ("final_model.zip", "vecnormalize.pkl", "run.json", "policy.json")
+POLICY_FILES: tuple[str, ...] = ("final_model.zip", "vecnormalize.pkl", "run.json", "policy.json", "network.npz")
 
 
 def available() -> list[str]:
