@@ -1,8 +1,9 @@
 """Copies a training run's checkpoint into the package as a shipped trained policy
 (python/accd_gym/trained/NAME/, see docs/trained-policies.md): the model without its optimizer
 state (the weights are unchanged; the file is about a third of the checkpoint's size), the
-VecNormalize statistics, the run's run.json (env options: residual control, history) and
-policy.json with its metadata (tier, algorithm, seed, steps, source run) and the recorded held-out
+VecNormalize statistics, the run's run.json (env options: residual control, history), the actor
+network exported as plain arrays (network.npz, scripts/export_networks.py) and policy.json with
+its metadata (tier, algorithm, seed, steps, source run) and the recorded held-out
 result (per-episode capture outcomes, from a benchmark folder or a results JSON).
 
     python scripts/ship_policies.py --name residual_sac_hard --run bench/runs/hard_residual_sac_seed3 \
@@ -145,6 +146,10 @@ def main(argv: list[str] | None = None) -> int:
     write_bytes(out / "final_model.zip", stripped_model(model_path.read_bytes(), meta["algo"]))
     write_bytes(out / "vecnormalize.pkl", stats_path.read_bytes())
     write_bytes(out / "run.json", (run / "run.json").read_bytes())
+    # The actor as plain arrays: what evaluates the shipped policy (no PyTorch needed).
+    from export_networks import export  # scripts/ is the script's folder, on sys.path
+
+    export(out)
     import json
 
     write_text(out / "policy.json", json.dumps(doc, indent=1) + "\n")

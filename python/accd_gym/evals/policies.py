@@ -1,5 +1,6 @@
 """Policies by name or path: :func:`load_policy`, the one resolver of the registered controllers
-(:mod:`accd_gym.control.registry`), the shipped trained policies (:mod:`accd_gym.evals.shipped`),
+(:mod:`accd_gym.control.registry`), the shipped trained policies (:mod:`accd_gym.evals.shipped`; their exported networks,
+:class:`accd_gym.evals.network.NetworkPolicy`),
 tuning files of the guidance controller and the LQR, trained stable-baselines3 models
 (:class:`SB3Policy`) and RLlib runs (:class:`accd_gym.learning.rllib.RLlibPolicy`), each as an
 :class:`accd_gym.control.registry.Policy`.
@@ -18,6 +19,7 @@ from accd_gym.control.lqr import is_lqr_tuning, lqr_from_tuning
 from accd_gym.control.registry import CONTROLLERS, Policy, make_controller
 from accd_gym.envs.agent_io import AgentIO, AgentOptions, physics_config, split_agent_options
 from accd_gym.errors import ConfigError
+from accd_gym.evals.network import NetworkPolicy
 from accd_gym.evals.shipped import available, is_trained, policy_dir
 from accd_gym.files import read_user_json
 from accd_gym.learning.rllib import RLlibPolicy, is_rllib_run
@@ -240,7 +242,7 @@ def load_policy(spec: str, seed: int = 0, *, allow_unnormalized: bool = False, c
     naming the registered controllers."""
     config = physics_config(config)
     if is_trained(spec):
-        return SB3Policy(policy_dir(spec), config=config)
+        return NetworkPolicy(policy_dir(spec), config=config)
     if spec in CONTROLLERS:
         return make_controller(spec, seed, config)
     if spec.endswith(".json") and Path(spec).is_file():

@@ -1,8 +1,9 @@
 """The catalog of the trained policies shipped with the package: one folder per policy under
-``accd_gym/trained/`` (``final_model.zip``, ``vecnormalize.pkl``, the training run's ``run.json``
-and ``policy.json``, what :func:`info` returns). Needs neither stable-baselines3 nor the env, so
-the policy resolver (:func:`accd_gym.evals.policies.load_policy`) resolves names through it;
-:mod:`accd_gym.trained` is the users' interface to the same catalog."""
+``accd_gym/trained/`` (``final_model.zip``, ``vecnormalize.pkl``, the training run's ``run.json``,
+``policy.json``, what :func:`info` returns, and ``network.npz``, the exported actor network). Needs
+neither stable-baselines3 nor the env, so the policy resolver
+(:func:`accd_gym.evals.policies.load_policy`) resolves names through it; :mod:`accd_gym.trained` is
+the users' interface to the same catalog."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from accd_gym.files import read_user_json
 TRAINED_DIR: Path = Path(__file__).resolve().parent.parent / "trained"
 
 #: The files every shipped policy's folder holds.
-POLICY_FILES: tuple[str, ...] = ("final_model.zip", "vecnormalize.pkl", "run.json", "policy.json")
+POLICY_FILES: tuple[str, ...] = ("final_model.zip", "vecnormalize.pkl", "run.json", "policy.json", "network.npz")
 
 
 def available() -> list[str]:
