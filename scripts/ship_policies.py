@@ -22,23 +22,12 @@ existing policy of that name is replaced only with ``--replace``.
 
 from __future__ import annotations
 
-import os
+import argparse
+import io
+import sys
+from pathlib import Path
 
-#: The OpenBLAS kernels the check episodes run with (set before numpy loads its OpenBLAS). The
-#: LQR's design and Kalman filter run on numpy's and SciPy's OpenBLAS, whose kernels are chosen
-#: per CPU and round differently, and a residual policy's closed loop can turn those last bits
-#: into other episode lengths; the AVX2 kernels are on every x86-64 CPU with AVX2, so the check
-#: can be rerun there. policy.json records the kernels that ran (``check_blas_kernels``).
-CHECK_OPENBLAS_CORETYPE = "Haswell"
-if __name__ == "__main__":
-    os.environ["OPENBLAS_CORETYPE"] = CHECK_OPENBLAS_CORETYPE
-
-import argparse  # noqa: E402
-import io  # noqa: E402
-import sys  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-from accd_gym.errors import ConfigError  # noqa: E402
+from accd_gym.errors import ConfigError
 from accd_gym.files import read_user_json, write_bytes, write_text
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -159,9 +148,6 @@ def main(argv: list[str] | None = None) -> int:
         eps = trained.held_out_episodes(args.name, args.check)
         doc["check_episodes"] = [{"index": e.index, "outcome": e.outcome, "steps": e.steps,
                                   "min_distance": round(float(e.min_distance), 6)} for e in eps]
-        from accd_gym.control.lqr import blas_kernels
-
-        doc["check_blas_kernels"] = "/".join(sorted({arch for api, arch in blas_kernels() if api == "openblas"}))
         got = "".join("1" if e.outcome == "captured" else "0" for e in eps)
         if got != captured[: args.check]:
             print(f"warning: {args.name}: first {args.check} held-out outcomes {got} differ from the recorded "

@@ -92,7 +92,8 @@ impl ToPy for SimError {
             SimError::Tether(e) => e.kind(),
             SimError::InvalidConfig { .. }
             | SimError::InvalidTable { .. }
-            | SimError::Io { .. } => Some(Kind::Config),
+            | SimError::Io { .. }
+            | SimError::Design { .. } => Some(Kind::Config),
             SimError::Diverged { .. } | SimError::Interrupted { .. } => Some(Kind::Simulation),
             SimError::State(e) => e.kind(),
         }

@@ -26,6 +26,7 @@ mod config;
 mod errors;
 mod infos;
 mod linearize;
+mod lqr;
 mod signals;
 mod tether;
 
@@ -44,6 +45,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(infos::info_dicts, m)?)?;
     m.add_class::<linearize::PyLinearization>()?;
     m.add_function(wrap_pyfunction!(linearize::linearize, m)?)?;
+    m.add_class::<lqr::PyLqrDesign>()?;
+    m.add_class::<lqr::PyLqrFilter>()?;
+    m.add_function(wrap_pyfunction!(lqr::lqr_design, m)?)?;
     m.add_function(wrap_pyfunction!(capture::mix_flaps, m)?)?;
     m.add_function(wrap_pyfunction!(capture::default_aero_table_json, m)?)?;
     m.add_function(wrap_pyfunction!(tether::tether_config, m)?)?;

@@ -16,7 +16,7 @@ use crate::signals::SignalCheck;
 /// step about the trim (see ``accd_gym.linearize``), with the nonlinear step it was taken from.
 #[pyclass(name = "Linearization", module = "accd_gym._core", frozen)]
 pub struct PyLinearization {
-    inner: Linearized,
+    pub(crate) inner: Linearized,
 }
 
 fn matrix<'py>(py: Python<'py>, m: &DMatrix<f64>) -> Bound<'py, PyArray2<f64>> {

@@ -47,6 +47,15 @@ pub enum SimError {
         /// What was running.
         what: String,
     },
+    /// A controller design found no acceptable solution (a Riccati equation without a
+    /// stabilizing solution, a singular reference problem).
+    #[error("invalid config: no stabilizing {what} for this configuration ({reason})")]
+    Design {
+        /// What was designed (the LQR, the Kalman filter, the reference).
+        what: String,
+        /// Why it failed, with the values that show it.
+        reason: String,
+    },
     /// The tether model reported an error.
     #[error(transparent)]
     Tether(#[from] accd_tether::TetherError),

@@ -21,6 +21,10 @@
 //!   the observation), [`task::randomization`] (domain randomization), [`task::episode`] (one RL
 //!   episode: reset, step, reward, episode end), [`task::linearize`] (the plant linearized about
 //!   the equilibrium, for controller design).
+//! * [`control`]: classical controllers on the linearized plant: [`control::matrix`]
+//!   (fixed-order dense arithmetic), [`control::riccati`] (the discrete Riccati equation),
+//!   [`control::lqr`] (the LQR baseline's design), [`control::filter`] (its Kalman filter and
+//!   control law per step).
 //! * Shared by both: [`config`] (the physics' [`CaptureConfig`], its cross-field rules, reading
 //!   JSON documents), [`valid`] (a validated configuration, what the constructors take),
 //!   [`error`], [`table_file`] (reading a user's table file: regular files of bounded size only),
@@ -30,6 +34,7 @@
 #![warn(missing_docs)]
 
 pub mod config;
+pub mod control;
 pub mod error;
 pub mod physics;
 pub mod rng;

@@ -26,8 +26,8 @@ Design (per configuration; ``T`` = ``agent_step``)
   relative to the trim capture point ``r`` and its velocity ``r'`` (constant velocity driven by
   white acceleration: the boom drifts, and approaches along track). Observations: all but
   ``time_left`` (24); ``boom_rel`` rows read ``r - (capture point - trim capture point)``.
-* **Kalman filter**: steady-state gain from ``scipy.linalg.solve_discrete_are`` on the augmented
-  model with process noise ``wind_white^2 E E^T`` (turbulence as white wind at the ACCD) plus
+* **Kalman filter**: steady-state gain from the filter's discrete Riccati equation on the
+  augmented model with process noise ``wind_white^2 E E^T`` (turbulence as white wind at the ACCD) plus
   ``(model_noise * 1000 h_i)^2`` on each plant state (``h_i`` its finite-difference step: 1 mm of
   the elongation, 1 mrad of each angle, 0.01 rad/s of each rate, per step), ``wind_walk^2`` on
   ``w``, ``boom_accel^2`` on ``r'``; measurement noise ``meas_noise`` times 1 cm (positions),
@@ -43,6 +43,13 @@ Design (per configuration; ``T`` = ``agent_step``)
   + q_rate (body rates) + 1e-9 I`` (``P_yz``: the capture point's y, z per state; ``V``: its
   velocity, all three axes, since the closing speed counts) and ``R = r_flap I``.
 * **Start**: an episode's first observation sets the estimate by one filter update from zero.
+
+Both Riccati equations are solved by the Rust core (``accd_sim::control``) with a structured
+doubling algorithm, the reference by a Householder factorization, and the filter and control law
+are stepped there too: every operation in one fixed order, with no BLAS, so the design and every
+command are the same bits on every CPU, with any batch size and any number of threads
+(docs/decisions.md, "The LQR in fixed-order Rust"). ``tests/test_lqr_design.py`` checks the
+Riccati solutions against SciPy's ``solve_discrete_are``.
 
 Limits: a linear model of one trim. Large excursions (several metres, tens of degrees of roll)
 leave its validity; the filter knows no clipping of the observation (at +-10: 200 m, 100 m/s);
@@ -62,14 +69,14 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass, fields
 from typing import Any, Mapping, Optional
 
 import numpy as np
 
 from accd_gym import _core
 from accd_gym.errors import ConfigError
-from accd_gym.envs.task import ACT_DIM, OBS_DIM, OBSERVATION_SCALE, check_observations, observation_indices, OBSERVATION_TABLE
+from accd_gym.envs.task import ACT_DIM, check_observations
 from accd_gym.envs.config import valid_config
 from accd_gym.files import read_user_json
 
@@ -137,30 +144,14 @@ class LqrTuning:
         return cls(**out)
 
 
-#: Rows of the observation the filter reads (all but ``time_left``).
-_MEASURED = np.array([i for i in range(OBS_DIM) if i != int(observation_indices("time_left")[0])])
-_BOOM_POS = observation_indices("boom_rel_x", "boom_rel_y", "boom_rel_z")
-_BOOM_VEL = observation_indices("boom_rel_vx", "boom_rel_vy", "boom_rel_vz")
-
-#: Measurement noise of each observation entry in its physical unit (times ``meas_noise``).
-_MEAS_SIGMA = {
-    "boom_rel_x": 0.01, "boom_rel_y": 0.01, "boom_rel_z": 0.01,
-    "boom_rel_vx": 0.01, "boom_rel_vy": 0.01, "boom_rel_vz": 0.01,
-    "accd_dx": 0.01, "accd_dy": 0.01, "accd_dz": 0.01,
-    "accd_vx": 0.01, "accd_vy": 0.01, "accd_vz": 0.01,
-    "quat_w": 1e-4, "quat_x": 1e-4, "quat_y": 1e-4, "quat_z": 1e-4,
-    "rate_p": 1e-3, "rate_q": 1e-3, "rate_r": 1e-3,
-    "flap_right": 1e-4, "flap_left": 1e-4, "flap_top": 1e-4, "flap_bottom": 1e-4,
-    "tension": 100.0,
-}
-
-
 @dataclass
 class LqrDesign:
     """The matrices of one design (see the module docstring): the observer ``z+ = F z + G u``,
     ``z = z- + L (y_m - y*_m - H z-)`` over ``z = (dx, w, r, r')``, and the control law
     ``u = clip(-K dx + K_ff (w, r_y, r_z))``. ``closed_loop_radius``: the spectral radius of
-    ``A - B K``; ``observer_radius``: of ``(I - L H) F``."""
+    ``A - B K``; ``observer_radius``: of ``(I - L H) F``; ``residuals``: the relative residuals
+    of the LQR's and the filter's Riccati equations; ``doublings``: the doubling steps their
+    solves took."""
 
     tuning: LqrTuning
     f: np.ndarray
@@ -173,95 +164,25 @@ class LqrDesign:
     n: int
     closed_loop_radius: float
     observer_radius: float
+    residuals: tuple[float, float] = (0.0, 0.0)
+    doublings: tuple[int, int] = (0, 0)
 
-
-def _dare(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """The stabilizing solution of the discrete algebraic Riccati equation (ConfigError if none)."""
-    import scipy.linalg
-
-    try:
-        p = scipy.linalg.solve_discrete_are(a, b, q, r)
-    except (np.linalg.LinAlgError, ValueError) as e:
-        raise ConfigError(f"invalid config: no stabilizing LQR/Kalman design for this configuration ({e})") from None
-    return 0.5 * (p + p.T)
+    def filter(self) -> "_core.LqrFilter":
+        """A new Rust stepper of this design (its Kalman filter and control law, no env state yet)."""
+        return _core.LqrFilter(self.n, self.f, self.g, self.h, self.l, self.k, self.k_ff, self.y_trim)
 
 
 def design(lin: Any, tuning: LqrTuning) -> LqrDesign:
     """The LQR and Kalman gains for a linearization ``lin`` (:func:`linearize`) and ``tuning``,
-    computed with every BLAS library (numpy's and SciPy's) on one thread. The Riccati solvers'
-    last bits depend on the BLAS thread count, and the gains' last bits decide episodes near the
-    capture boundary: one thread gives every process the same design (a training process, a Ray
-    worker and a command-line evaluation on a machine of any size)."""
-    import scipy.linalg  # noqa: F401  (loaded first: threadpoolctl limits the libraries loaded when it is entered)
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(limits=1, user_api="blas"):
-        return _design(lin, tuning)
-
-
-def _design(lin: Any, tuning: LqrTuning) -> LqrDesign:
-    t = tuning
-    a, b, e, c = lin.a, lin.b, lin.e, lin.c
-    n = a.shape[0]
-    names = lin.state_names
-    steps = np.asarray(lin.steps)
-    dt = lin.dt
-    sp = OBSERVATION_SCALE["boom_rel_x"]
-    sv = OBSERVATION_SCALE["boom_rel_vx"]
-    cp = -c[_BOOM_POS] / sp  # capture point (m) per state
-    cpv = -c[_BOOM_VEL] / sv  # its velocity (m/s) per state
-
-    # LQR on the plant.
-    att = np.array([names.index(k) for k in ("att_x", "att_y", "att_z")])
-    rates = np.array([names.index(k) for k in ("p", "q", "r")])
-    q = t.q_position * cp[1:].T @ cp[1:] + t.q_velocity * cpv.T @ cpv + 1e-9 * np.eye(n)
-    q[att, att] += t.q_attitude
-    q[rates, rates] += t.q_rate
-    r = t.r_flap * np.eye(ACT_DIM)
-    p = _dare(a, b, q, r)
-    k = np.linalg.solve(r + b.T @ p @ b, b.T @ p @ a)
-
-    # Offset-free target: (A - I) dx + B u = -E w, cp_yz dx = r_yz, minimum norm in scaled units.
-    m = np.block([[a - np.eye(n), b], [cp[1:], np.zeros((2, ACT_DIM))]])
-    d = np.concatenate([steps * 1e3, np.ones(ACT_DIM)])
-    rhs = np.block([[-e, np.zeros((n, 2))], [np.zeros((2, 2)), np.eye(2)]])  # per (w_y, w_z, r_y, r_z)
-    sol = d[:, None] * (np.linalg.pinv(m * d[None, :], rcond=1e-10) @ rhs)
-    x_ss, u_ss = sol[:n], sol[n:]
-    k_ff = u_ss + k @ x_ss  # u = u_ss - K (dx - x_ss) = -K dx + k_ff (w, r_yz)
-
-    # Observer on z = (dx, w, r, r').
-    nz = n + 2 + 3 + 3
-    f = np.zeros((nz, nz))
-    f[:n, :n] = a
-    f[:n, n:n + 2] = e
-    f[n:n + 2, n:n + 2] = np.eye(2)
-    f[n + 2:n + 5, n + 2:n + 5] = np.eye(3)
-    f[n + 2:n + 5, n + 5:] = dt * np.eye(3)
-    f[n + 5:, n + 5:] = np.eye(3)
-    g = np.zeros((nz, ACT_DIM))
-    g[:n] = b
-    h = np.zeros((len(_MEASURED), nz))
-    h[:, :n] = c[_MEASURED]
-    rows = list(_MEASURED)
-    for j in range(3):
-        h[rows.index(_BOOM_POS[j]), n + 2 + j] = sp
-        h[rows.index(_BOOM_VEL[j]), n + 5 + j] = sv
-    qn = np.zeros((nz, nz))
-    qn[:n, :n] = t.wind_white**2 * e @ e.T + np.diag((t.model_noise * 1e3 * steps) ** 2)
-    qn[n:n + 2, n:n + 2] = t.wind_walk**2 * np.eye(2)
-    qn[n + 2:n + 5, n + 2:n + 5] = 1e-6 * np.eye(3)
-    qn[n + 5:, n + 5:] = t.boom_accel**2 * np.eye(3)
-
-    sigma = np.array([_MEAS_SIGMA[OBSERVATION_TABLE[i][0]] * OBSERVATION_TABLE[i][2] for i in _MEASURED])
-    rn = np.diag((t.meas_noise * sigma) ** 2)
-    pz = _dare(f.T, h.T, qn, rn)
-    l_gain = pz @ h.T @ np.linalg.inv(h @ pz @ h.T + rn)
-
-    closed = float(np.max(np.abs(np.linalg.eigvals(a - b @ k))))
-    observer = float(np.max(np.abs(np.linalg.eigvals((np.eye(nz) - l_gain @ h) @ f))))
-    return LqrDesign(tuning=t, f=f, g=g, h=h, l=l_gain, k=k, k_ff=k_ff,
-                     y_trim=np.asarray(lin.trim_observation)[_MEASURED], n=n,
-                     closed_loop_radius=closed, observer_radius=observer)
+    computed by the Rust core (``accd_sim::control::lqr``): both Riccati equations by the
+    structured doubling algorithm and the reference by a Householder factorization, every
+    operation in one fixed order with no BLAS, so every machine and thread count gives the
+    same bits. ConfigError when either Riccati equation has no stabilizing solution (or its
+    residual is too large) or the reference problem is rank deficient."""
+    d = _core.lqr_design(lin, [float(getattr(tuning, f.name)) for f in fields(LqrTuning)])
+    return LqrDesign(tuning=tuning, f=d.f, g=d.g, h=d.h, l=d.l, k=d.k, k_ff=d.k_ff, y_trim=d.y_trim, n=d.n,
+                     closed_loop_radius=d.closed_loop_radius, observer_radius=d.observer_radius,
+                     residuals=d.residuals, doublings=d.doublings)
 
 
 #: Designs by (configuration JSON without its seeds, tuning): the look-up that skips the
@@ -314,9 +235,15 @@ class LqrPolicy:
 
     def __init__(self, design: LqrDesign) -> None:
         self.design = design
-        self._z: Optional[np.ndarray] = None
-        self._u: Optional[np.ndarray] = None
-        self._fresh: Optional[np.ndarray] = None
+        self._filter = design.filter()
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {"design": self.design, "name": self.name, "state": self.get_state()}
+
+    def __setstate__(self, state: Mapping[str, Any]) -> None:
+        self.__init__(state["design"])
+        self.name = state["name"]
+        self.set_state(state["state"])
 
     @classmethod
     def for_config(cls, config: Any = None, tuning: Optional[LqrTuning | Mapping[str, Any]] = None,
@@ -341,71 +268,73 @@ class LqrPolicy:
 
     def reset(self, mask: Optional[np.ndarray] = None) -> None:
         """Restarts the estimates of the envs in ``mask`` (all when None)."""
-        if self._fresh is None:
+        if self._filter.num_envs == 0:
             return
         if mask is None:
-            self._fresh[:] = True
+            self._filter.restart()
             return
         mask = np.asarray(mask, dtype=bool)
-        if mask.shape != self._fresh.shape:
-            self._z = None  # another batch: every estimate starts afresh at the next predict
+        if mask.shape != (self._filter.num_envs,):
+            self._filter.clear()  # another batch: every estimate starts afresh at the next predict
         else:
-            self._fresh[mask] = True
+            self._filter.restart(mask)
 
     def predict(self, obs: Any) -> np.ndarray:
-        """Flap commands (N, 4) in [-1, 1] for observations (N, 25); advances the estimates."""
+        """Flap commands (N, 4) in [-1, 1] for observations (N, 25); advances the estimates. The
+        filter step runs in Rust with the GIL released, the rows on several threads, each row in
+        fixed-order arithmetic (the same bits for any batch size, thread count or CPU)."""
         o = check_observations(obs)
-        d = self.design
-        n_env = o.shape[0]
-        if self._z is None or self._z.shape[0] != n_env:
-            self._z = np.zeros((n_env, d.f.shape[0]))
-            self._u = np.zeros((n_env, ACT_DIM))
-            self._fresh = np.ones(n_env, dtype=bool)
-        y = o[:, _MEASURED] - d.y_trim
-        prior = self._z @ d.f.T + self._u @ d.g.T
-        prior[self._fresh] = 0.0
-        z = prior + (y - prior @ d.h.T) @ d.l.T
-        self._fresh[:] = False
-        n = d.n
-        reference = np.concatenate([z[:, n:n + 2], z[:, n + 3:n + 5]], axis=1)  # w_y, w_z, r_y, r_z
-        u = np.clip(-z[:, :n] @ d.k.T + reference @ d.k_ff.T, -1.0, 1.0)
-        self._z = z
-        self._u = u
-        return u.astype(np.float32)
+        return self._filter.step(np.ascontiguousarray(o, dtype=np.float64))
+
+    def predict_rows(self, obs: Any, rows: np.ndarray) -> np.ndarray:
+        """:meth:`predict` advancing only the envs in the bool mask ``rows`` (the others keep
+        their estimates; their commands in the result are zero). A row's command has the bits
+        :meth:`predict` would give it."""
+        o = np.ascontiguousarray(check_observations(obs), dtype=np.float64)
+        if self._filter.num_envs != o.shape[0]:  # no estimates of this batch yet: every row starts
+            return self._filter.step(o)
+        return self._filter.step(o, np.ascontiguousarray(rows, dtype=bool))
+
+    def peek(self, obs: Any) -> np.ndarray:
+        """The commands :meth:`predict` would give for ``obs``, advancing no estimate."""
+        o = check_observations(obs)
+        return self._filter.step(np.ascontiguousarray(o, dtype=np.float64), None, False)
 
     def sent(self, offset: np.ndarray) -> None:
         """Tells the filter that the command actually sent differs from the last :meth:`predict`'s
         by ``offset`` ((N, 4), flap-limit units; residual control adds a correction): its next
         prediction uses the command sent. A zero offset changes nothing, bit for bit."""
-        if self._u is not None:
-            self._u = self._u + np.asarray(offset, dtype=np.float64)
+        if self._filter.num_envs:
+            self._filter.sent(np.ascontiguousarray(offset, dtype=np.float64))
 
     def get_state(self) -> dict[str, np.ndarray]:
-        """The filter's state per env (copies; empty before the first :meth:`predict`): with
-        :meth:`set_state` on a policy of the same design it continues bit for bit."""
-        if self._z is None:
+        """The filter's state per env (copies; empty before the first :meth:`predict`): ``z``
+        (N, nz), ``u`` (N, 4), ``fresh`` (N,); with :meth:`set_state` on a policy of the same
+        design it continues bit for bit."""
+        if self._filter.num_envs == 0:
             return {}
-        return {"z": self._z.copy(), "u": self._u.copy(), "fresh": self._fresh.copy()}
+        z, u, fresh = self._filter.get_state()
+        return {"z": z, "u": u, "fresh": fresh}
 
     def set_state(self, state: Mapping[str, np.ndarray]) -> None:
         """Restores a state of :meth:`get_state` (an empty one: every estimate starts afresh)."""
         if not state:
-            self._z = self._u = self._fresh = None
+            self._filter.clear()
             return
         z, u, fresh = (np.array(state[k]) for k in ("z", "u", "fresh"))
         nz = self.design.f.shape[0]
         if z.ndim != 2 or z.shape[1] != nz or u.shape != (z.shape[0], ACT_DIM) or fresh.shape != (z.shape[0],):
             raise ConfigError(f"invalid config: LQR filter state of shapes {z.shape}, {u.shape}, {fresh.shape} does "
                               f"not fit this design (N x {nz}, N x {ACT_DIM}, N)")
-        self._z, self._u, self._fresh = z.astype(np.float64), u.astype(np.float64), fresh.astype(bool)
+        self._filter.set_state(np.ascontiguousarray(z, dtype=np.float64), np.ascontiguousarray(u, dtype=np.float64),
+                               np.ascontiguousarray(fresh, dtype=bool))
 
 
 def blas_kernels() -> list[tuple[str, str]]:
-    """The BLAS libraries that numpy and SciPy loaded and the kernels each chose for this CPU,
-    ``[(internal_api, architecture), ...]`` sorted (e.g. ``[("openblas", "SkylakeX")]``). The
-    LQR's design and Kalman filter run on them and their last bits follow the kernels
-    (docs/decisions.md, "Known limitations")."""
-    import scipy.linalg  # noqa: F401  (loaded first: threadpoolctl reports the libraries loaded)
+    """The BLAS libraries loaded in this process (numpy's, and SciPy's or PyTorch's where they
+    are loaded) and the kernels each chose for this CPU, ``[(internal_api, architecture), ...]``
+    sorted (e.g. ``[("openblas", "SkylakeX")]``): for the record of a machine. The LQR does not
+    run on them (its design and filter are fixed-order Rust)."""
     from threadpoolctl import threadpool_info
 
     return sorted({(i["internal_api"], i.get("architecture") or "") for i in threadpool_info()

@@ -82,49 +82,6 @@ class ResidualOptions:
         return {"base": self.base, "scale": self.scale, "observe_base": self.observe_base}
 
 
-class _OneBlasThread:
-    """The context of :func:`one_blas_thread`: numpy's BLAS set to one thread inside, its thread
-    count restored on exit (through threadpoolctl's controller of it; nothing without one)."""
-
-    def __init__(self) -> None:
-        self._libs: list[Any] = []
-        try:
-            from threadpoolctl import ThreadpoolController
-        except ImportError:
-            return
-        self._libs = [c for c in ThreadpoolController().lib_controllers
-                      if c.user_api == "blas" and "numpy" in str(getattr(c, "filepath", ""))]
-        self._saved: list[int] = []
-
-    def __enter__(self) -> "_OneBlasThread":
-        self._saved = [c.get_num_threads() for c in self._libs]
-        for c, n in zip(self._libs, self._saved):
-            if n != 1:
-                c.set_num_threads(1)
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        for c, n in zip(self._libs, self._saved):
-            if n != 1:
-                c.set_num_threads(n)
-
-
-_BLAS: "_OneBlasThread | None" = None
-
-
-def one_blas_thread() -> Any:
-    """A context in which numpy's BLAS runs on the calling thread alone (threadpoolctl; a no-op
-    without it, or when BLAS has one thread already, as in ``accd-gym train``). The base
-    controller's small matrix products gain nothing from BLAS threads, whose spinning workers
-    would take the cores from the env's stepping threads (an LQR step of 64 envs: about 1 ms on
-    one thread, 10-25 ms with OpenBLAS's threads beside the physics on a busy machine). Per-row
-    results do not depend on it (OpenBLAS splits rows and columns, not the sums)."""
-    global _BLAS
-    if _BLAS is None:
-        _BLAS = _OneBlasThread()
-    return _BLAS
-
-
 class BaseController:
     """A base controller of a batch of ``num_envs`` envs: a registered controller
     (:data:`accd_gym.control.registry.CONTROLLERS`, one with ``residual_base``) with the
@@ -139,15 +96,18 @@ class BaseController:
         self.policy.reset(rows)
 
     def command(self, obs: np.ndarray) -> np.ndarray:
-        """The base commands (N, 4) float32 for the batch's observations; advances every row."""
-        with one_blas_thread():
-            return self.policy.predict(obs)
+        """The base commands (N, 4) float32 for the batch's observations; advances every row
+        (the LQR's filter steps in Rust with the GIL released; the guidance is element-wise
+        numpy: neither calls BLAS)."""
+        return self.policy.predict(obs)
 
     def command_rows(self, obs: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """The base commands of the batch with only the rows ``rows`` selects advanced (the
         others keep their state; their commands in the result are meaningless). Computed on the
         whole batch, as :meth:`command` does, so that a row's command has the bits it would have
         there."""
+        if hasattr(self.policy, "predict_rows"):  # the LQR: rows are independent in its Rust filter
+            return self.policy.predict_rows(obs, rows)
         before = self.policy.get_state()
         u = self.command(obs)
         if before and not rows.all():
@@ -163,6 +123,8 @@ class BaseController:
     def peek(self, obs: np.ndarray) -> np.ndarray:
         """The base commands for ``obs`` without advancing any row (e.g. for an ended episode's
         last observation)."""
+        if hasattr(self.policy, "peek"):
+            return self.policy.peek(obs)
         before = self.policy.get_state()
         u = self.command(obs)
         self.policy.set_state(before)
@@ -182,4 +144,4 @@ class BaseController:
         self.policy.set_state(dict(state))
 
 
-__all__ = ["SCALE_MAX", "BaseController", "ResidualOptions", "one_blas_thread"]
+__all__ = ["SCALE_MAX", "BaseController", "ResidualOptions"]

@@ -614,8 +614,8 @@ def train(
 
 def _one_blas_thread() -> None:
     """numpy's BLAS on one thread for the training process (threadpoolctl, when installed): its
-    only users are small products (the LQR base controller of residual control, VecNormalize),
-    and its idle threads spin beside the env's stepping threads."""
+    only users are small products (VecNormalize, the algorithms' buffers), and its idle threads
+    spin beside the env's stepping threads."""
     try:
         from threadpoolctl import threadpool_limits
     except ImportError:
