@@ -29,14 +29,15 @@ rust_checks() {
   echo "== Rust checks done [$SECONDS s]"
 }
 
-# The replay pages are tested in a real browser (tests/test_replay.py): Debian's chromium, installed
-# here under CI (about 30 s); locally those tests are skipped, saying so, when it is missing.
+# The replay pages are tested in a real browser (tests/test_replay.py): Debian's chromium and its
+# chromium-driver (Selenium drives it), installed here under CI (about 30 s); locally those tests are
+# skipped, saying so, when they are missing.
 install_chromium() {
-  if [ "${CI:-}" = "true" ] && ! command -v chromium >/dev/null && [ ! -x /usr/lib/chromium/chromium ]; then
-    echo "== installing chromium (Debian) for the browser tests [$SECONDS s]"
+  if [ "${CI:-}" = "true" ] && ! { command -v chromium >/dev/null && command -v chromedriver >/dev/null; }; then
+    echo "== installing chromium and chromium-driver (Debian) for the browser tests [$SECONDS s]"
     SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo"
     $SUDO apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends chromium >/dev/null
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends chromium chromium-driver >/dev/null
     echo "== chromium installed [$SECONDS s]"
   fi
 }

@@ -32,7 +32,8 @@ from pathlib import Path
 
 import pytest
 
-from accd_gym import files, training
+from accd_gym import files
+from accd_gym.learning import training
 from accd_gym.cli import main
 
 SHORT = {"capture_window": 5.0}

@@ -1,11 +1,12 @@
 """Replay pages, videos and the replay commands.
 
-The browser tests open a page in Debian's headless ``chromium`` from a ``file://`` URL with the
+The browser tests open a page in Debian's headless ``chromium`` (driven by Selenium through
+Debian's ``chromium-driver``) from a ``file://`` URL with the
 network offline, and check: no JavaScript error, no request beyond the file itself, the 3D views
 drawn (not blank, and the data traces visible in them), the slider moving the scene (a second
 screenshot differs), play advancing time, and the page's body transform agreeing with the
-recording. ``scripts/test.sh`` installs chromium when it is missing under ``CI=true``; without
-it, locally, they are skipped with the reason.
+recording. ``scripts/test.sh`` installs chromium and chromium-driver when they are missing under
+``CI=true``; without them, locally, they are skipped with the reason.
 """
 
 import io
@@ -136,12 +137,13 @@ def test_replay_and_evaluate_replay_commands(tmp_path):
 
 @pytest.fixture(scope="module")
 def browser():
-    from accd_gym.replays.browser import Browser, find_chromium
+    from accd_gym.replays.browser import Browser, available
 
-    if find_chromium() is None:
+    why = available()
+    if why is not None:
         if os.environ.get("CI") == "true":
-            pytest.fail("CI=true but no chromium: scripts/test.sh installs Debian's chromium with apt-get")
-        pytest.skip("no chromium here (apt-get install chromium; scripts/test.sh does so under CI=true)")
+            pytest.fail(f"CI=true but no browser ({why}): scripts/test.sh installs Debian's chromium and chromium-driver")
+        pytest.skip(f"{why}; scripts/test.sh installs them under CI=true")
     with Browser(1400, 900) as b:
         yield b
 
