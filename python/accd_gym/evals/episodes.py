@@ -15,7 +15,7 @@ from typing import Any, Optional, Sequence
 
 import numpy as np
 
-from accd_gym.envs.task import EVENT_NAMES, INFO_NAMES, MAX_ENVS, check_count
+from accd_gym.envs.task import EVENT_NAMES, INFO_NAMES, MAX_ENVS, check_base_seed, check_count
 from accd_gym.errors import ConfigError
 
 #: Base seed of evaluation episodes (initial conditions and RLV motion); fixed so runs compare.
@@ -112,6 +112,7 @@ def run_episode_range(
     batch = check_count(batch, "batch", 1, MAX_ENVS)
     if not 0 <= start < stop:
         raise ConfigError(f"invalid config: episode range {start}..{stop} is empty or negative; need 0 <= start < stop")
+    seed = check_base_seed(seed, stop, count="episodes")  # episode k is seeded seed + k
     if wake_seeds is not None and len(wake_seeds) < stop:
         raise ConfigError(f"invalid config: {len(wake_seeds)} wake seeds for episodes up to {stop - 1}; need at least {stop}")
     # The env options (residual control, history) are the policy's (SB3Policy applies those of its

@@ -278,7 +278,7 @@ def iter_recordings(
     from accd_gym import _core
     from accd_gym.evals.episodes import EVAL_BASE_SEED
     from accd_gym.evals.policies import load_policy
-    from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, INFO_NAMES, MAX_ENVS, check_actions, check_count, check_seed
+    from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, INFO_NAMES, MAX_ENVS, check_actions, check_base_seed, check_count
 
     if episodes is None:
         episodes = len(wake_seeds) if wake_seeds is not None else 1
@@ -294,7 +294,7 @@ def iter_recordings(
         wake_seeds = list(HELD_OUT_WAKE_SEEDS[:episodes])
     if len(wake_seeds) < episodes:
         raise ConfigError(f"invalid config: {len(wake_seeds)} wake seeds for {episodes} episodes; need at least as many")
-    base = EVAL_BASE_SEED if seed is None else check_seed(seed)
+    base = EVAL_BASE_SEED if seed is None else check_base_seed(seed, episodes, count="episodes")
     wanted = set(range(episodes)) if keep is None else {int(k) for k in keep}
     bad = sorted(k for k in wanted if not 0 <= k < episodes)
     if bad:
