@@ -91,6 +91,7 @@ impl ToPy for SimError {
         match self {
             SimError::Tether(e) => e.kind(),
             SimError::InvalidConfig { .. }
+            | SimError::Unsettled { .. }
             | SimError::InvalidTable { .. }
             | SimError::Io { .. } => Some(Kind::Config),
             SimError::Diverged { .. } | SimError::Interrupted { .. } => Some(Kind::Simulation),
