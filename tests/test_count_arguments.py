@@ -1,7 +1,8 @@
 """Counts (``num_envs``, ``num_threads``, ``steps``, env indices, episode counts) are Python or
 numpy integers in their range, never truncated or parsed, with a ``ConfigError`` naming the
-argument, the value and the range; 64-bit seeds never wrap: a vector env's int seed ``s`` gives
-env ``i`` the seed ``s + i``, and an ``s`` for which that passes 2^64 - 1 is refused, as a
+argument, the value and the range; seeds never leave the one seed range [0, 2^63): a vector
+env's int seed ``s`` gives env ``i`` the seed ``s + i``, and an ``s`` for which that passes
+2^63 - 1 is refused, as a
 ``SyncVectorEnv`` of single envs refuses it."""
 
 from __future__ import annotations
@@ -116,7 +117,7 @@ def test_evaluation_counts_are_integers(bad):
         accd_gym.record_episodes(GuidancePolicy(), episodes=1, num_envs=bad, config=QUICK)
 
 
-TOP = 2**64 - 1
+TOP = 2**63 - 1
 
 
 def test_a_vector_int_seed_near_the_top_seeds_env_i_with_s_plus_i_as_sync_vector_env():
@@ -129,7 +130,7 @@ def test_a_vector_int_seed_near_the_top_seeds_env_i_with_s_plus_i_as_sync_vector
     assert native.np_random_seed == reference.np_random_seed == (TOP - 1, TOP)
 
 
-@pytest.mark.parametrize("n, seed", [(2, TOP), (3, TOP - 1), (2, 2**64 + 5)])
+@pytest.mark.parametrize("n, seed", [(2, TOP), (3, TOP - 1), (2, 2**63 + 5)])
 def test_a_vector_int_seed_that_would_wrap_is_refused_and_changes_nothing(n, seed):
     native = accd_gym.InAirCaptureVectorEnv(n, **QUICK)
     reference = gym.make_vec(ENV_ID, num_envs=n, vectorization_mode="sync", **QUICK)
@@ -138,28 +139,28 @@ def test_a_vector_int_seed_that_would_wrap_is_refused_and_changes_nothing(n, see
     with pytest.raises(ConfigError, match=r"`seed` = \d+ is outside the allowed range"):
         native.reset(seed=seed)
     assert (native.get_state(), native.np_random_seed) == before
-    # The reference raises the same error class from the single env whose seed passes 2^64 - 1.
+    # The reference raises the same error class from the single env whose seed passes 2^63 - 1.
     with pytest.raises(ConfigError, match="`seed`"):
         reference.reset(seed=seed)
 
 
 def test_the_refusal_names_the_range_for_the_batch_size():
     env = accd_gym.InAirCaptureVectorEnv(4, **QUICK)
-    with pytest.raises(ConfigError, match=rf"\[0, 2\^64 - num_envs\] = \[0, {2**64 - 4}\] for num_envs = 4"):
-        env.reset(seed=2**64 - 3)
-    env.reset(seed=2**64 - 4)
+    with pytest.raises(ConfigError, match=rf"\[0, 2\^63 - num_envs\] = \[0, {2**63 - 4}\] for num_envs = 4"):
+        env.reset(seed=2**63 - 3)
+    env.reset(seed=2**63 - 4)
     assert env.np_random_seed[-1] == TOP
-    # Per-env seeds are each a 64-bit seed: the top one is fine.
+    # Per-env seeds are each in the seed range: the top one is fine.
     env.reset(seed=[TOP, 0, 1, TOP])
     with pytest.raises(ConfigError, match="`seed`"):
-        env.reset(seed=[2**64, 0, 1, 2])
+        env.reset(seed=[2**63, 0, 1, 2])
 
 
 def test_accd_vec_env_seeds_never_wrap():
     env = accd_gym.AccdVecEnv(2, **QUICK)
     assert env.seed(TOP - 1) == [TOP - 1, TOP]
     env.reset()
-    for bad in (TOP, 2**64):
+    for bad in (TOP, 2**63):
         with pytest.raises(ConfigError, match="`seed`"):
             env.seed(bad)
         with pytest.raises(ConfigError, match="`seed`"):
@@ -170,7 +171,7 @@ def test_accd_vec_env_seeds_never_wrap():
 def test_the_native_batch_refuses_a_wrapping_base_seed():
     core = _core.BatchEnv(valid_config(dict(QUICK)), 2, TOP - 1)
     core.reset(TOP - 1)
-    with pytest.raises(ConfigError, match="`seed` = 18446744073709551615"):
+    with pytest.raises(ConfigError, match="`seed` = 9223372036854775807"):
         core.reset(TOP)
     with pytest.raises(ConfigError, match="`seed`"):
         _core.BatchEnv(valid_config(dict(QUICK)), 2, TOP)

@@ -8,7 +8,9 @@ message naming the file and what is wrong, and that the files saved before are i
   skipped) and to ``evaluate``; a model of another environment;
 * special files as tables and configs: ``/dev/zero``, ``/dev/urandom``, a FIFO (each in a child
   process with a time and memory limit, since the failure is a hang or a memory blow-up);
-* a full disk (a small tmpfs filled up) during Ctrl+C of a training and during an evaluation;
+* a full disk (a small tmpfs filled up) during Ctrl+C of a training, during a training without
+  one, and during an evaluation: a training loses at most one checkpoint interval, run.json says
+  "interrupted" and names the last checkpoint written, and ``--resume`` continues from it;
 * a read-only output folder (a read-only tmpfs as root, which ignores file permissions;
   ``chmod 0o500`` otherwise), refused before any episode runs.
 
@@ -338,8 +340,10 @@ def test_ctrl_c_on_a_full_disk_keeps_the_checkpoints_and_resumes_after_space_is_
                 assert child.poll() is None, child.stderr.read()
                 time.sleep(0.1)
             child.send_signal(signal.SIGSTOP)  # hold it while the disk fills up
-            # the files in place (a checkpoint being written when the child stopped is a temporary file)
-            saved = {k: v for k, v in _digests(run).items() if not Path(k).name.startswith(files.TEMP_PREFIX)}
+            # the files in place (a checkpoint being written when the child stopped is a temporary
+            # file; the run folder's reserve is freed for run.json)
+            saved = {k: v for k, v in _digests(run).items()
+                     if not Path(k).name.startswith(files.TEMP_PREFIX) and k != files.RESERVE_NAME}
             filler = _fill(disk)
             child.send_signal(signal.SIGCONT)
             child.send_signal(signal.SIGINT)
@@ -355,17 +359,97 @@ def test_ctrl_c_on_a_full_disk_keeps_the_checkpoints_and_resumes_after_space_is_
         assert all(now.get(k) == v for k, v in saved.items() if k != "run.json"), "a saved file changed"
         assert all((run / k).stat().st_size > 0 for k in now)
         _no_temp_files(run)
-        meta = json.loads((run / "run.json").read_text())  # still whole JSON
-        assert meta["status"] in ("training", "interrupted")
+        # (the signal, or the write the stopped child was in the middle of, stops it first)
+        _names_its_last_checkpoint(run, ("SIGINT", "a failed write"))
+        _resumes_from_its_last_checkpoint(run, filler)
 
-        # space freed: --resume continues from the newest checkpoint
-        filler.unlink()
-        newest = training.latest_checkpoint(run)
-        meta["config"]["total_timesteps"] = newest["steps"] + 128
-        (run / "run.json").write_text(json.dumps(meta))
-        assert main(["train", "--resume", str(run), "--quiet"]) == 0
-        done = json.loads((run / "run.json").read_text())
-        assert done["status"] == "done" and done["resumed"][-1]["from_steps"] == newest["steps"]
+
+def _names_its_last_checkpoint(run: Path, interrupted_by: tuple[str, ...]) -> None:
+    """run.json of a run stopped by a full disk: interrupted, naming its newest checkpoint (the
+    one ``--resume`` takes), its reserve freed."""
+    meta = json.loads((run / "run.json").read_text())  # whole JSON
+    newest = training.latest_checkpoint(run)
+    assert newest is not None
+    assert meta["status"] == "interrupted" and any(w in meta["interrupted_by"] for w in interrupted_by), meta
+    assert meta["checkpoint"] == str(newest["model"]) and meta["checkpoint_steps"] == newest["steps"]
+    assert meta["timesteps"] == newest["steps"]
+    assert not (run / files.RESERVE_NAME).exists()
+
+
+def _resumes_from_its_last_checkpoint(run: Path, filler: Path) -> None:
+    """Space freed: ``--resume`` continues from the checkpoint run.json names (the total cut to
+    128 steps beyond it, to keep the test short)."""
+    filler.unlink()
+    meta = json.loads((run / "run.json").read_text())
+    meta["config"]["total_timesteps"] = meta["checkpoint_steps"] + 128
+    (run / "run.json").write_text(json.dumps(meta))
+    assert main(["train", "--resume", str(run), "--quiet"]) == 0
+    done = json.loads((run / "run.json").read_text())
+    assert done["status"] == "done" and done["resumed"][-1]["from_steps"] == meta["checkpoint_steps"]
+    assert done["resumed"][-1]["checkpoint"] == meta["checkpoint"]
+
+
+def test_a_disk_that_fills_up_while_training_costs_at_most_one_checkpoint_interval(tmp_path, capsys):
+    with _tmpfs(tmp_path / "disk", "64m") as disk:
+        run = disk / "run"
+        cfg = tmp_path / "cfg.json"
+        cfg.write_text(json.dumps(_config(10**7)))
+        child = subprocess.Popen([sys.executable, "-m", "accd_gym", "train", "--config", str(cfg), "--out", str(run),
+                                  "--quiet"], stderr=subprocess.PIPE, text=True)
+        try:
+            deadline = time.monotonic() + 300
+            while len(_checkpoints(run)) < 2 and time.monotonic() < deadline:
+                assert child.poll() is None, child.stderr.read()
+                time.sleep(0.1)
+            filler = _fill(disk)  # the next checkpoint cannot be written: the training stops by itself
+            _, err = child.communicate(timeout=300)
+        finally:
+            if child.poll() is None:
+                child.kill()
+                child.wait()
+        assert child.returncode == 2, err
+        line = _error_line(err)
+        assert "No space left on device" in line and "keeps its checkpoint" in line and "--resume" in line, line
+        _no_temp_files(run)
+        _names_its_last_checkpoint(run, ("a failed write",))
+        _resumes_from_its_last_checkpoint(run, filler)
+
+
+def test_a_run_stopped_before_its_first_checkpoint_starts_over_on_resume(finished_run, tmp_path, capsys):
+    run = _copy(finished_run, tmp_path / "run")
+    shutil.rmtree(run / "checkpoints")
+    for name in ("final_model.zip", "vecnormalize.pkl"):
+        (run / name).unlink()
+    meta = json.loads((run / "run.json").read_text())
+    meta.update(status="interrupted", interrupted_by="a failed write", timesteps=0)
+    for key in ("checkpoint", "vecnormalize", "checkpoint_steps"):
+        meta.pop(key, None)
+    meta["config"]["total_timesteps"] = 128
+    (run / "run.json").write_text(json.dumps(meta))
+    assert main(["train", "--resume", str(run), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "no checkpoint" in err and "starts over from step 0" in err, err
+    done = json.loads((run / "run.json").read_text())
+    assert done["status"] == "done" and done["timesteps"] == 128 and done["resumed"][-1]["from_steps"] == 0
+    assert (run / "final_model.zip").is_file()
+
+
+def test_run_json_names_each_checkpoint_as_it_is_written(tmp_path, monkeypatch):
+    """A run killed at any moment (no handler runs) has a run.json naming its newest checkpoint:
+    run.json is written after every periodic checkpoint."""
+    written = []
+    write = training._write_meta
+
+    def spy(out, meta):
+        write(out, meta)
+        written.append((meta["status"], meta.get("checkpoint_steps"), (out / files.RESERVE_NAME).exists()))
+
+    monkeypatch.setattr(training, "_write_meta", spy)
+    run = tmp_path / "run"
+    training.train(training.validate_config(_config(256)), run, progress=False)
+    assert written == [("training", None, False), ("training", 128, True), ("training", 256, True), ("done", None, True)]
+    meta = json.loads((run / "run.json").read_text())
+    assert meta["status"] == "done" and "checkpoint" not in meta and not (run / files.RESERVE_NAME).exists()
 
 
 def test_evaluate_on_a_full_disk_keeps_the_previous_results(tmp_path, capsys, monkeypatch):

@@ -20,6 +20,7 @@ __all__ = [
     "OBS_BOUND",
     "MAX_ENVS",
     "MAX_THREADS",
+    "SEED_END",
     "INFO_NAMES",
     "PARAMETER_NAMES",
     "TRAINING_WAKE_SEEDS",
@@ -52,6 +53,7 @@ ACT_DIM: int
 OBS_BOUND: float
 MAX_ENVS: int
 MAX_THREADS: int
+SEED_END: int
 INFO_NAMES: list[str]
 PARAMETER_NAMES: list[str]
 TRAINING_WAKE_SEEDS: tuple[int, int]

@@ -13,6 +13,7 @@ from accd_gym import files as _files
 from accd_gym._core import default_aero_table_json
 from accd_gym.envs.tiers import TIERS
 from accd_gym.errors import AccdError, ConfigError
+from accd_gym.studies.settle import MAX_DURATION_S
 from accd_gym.files import read_user_json
 
 
@@ -20,6 +21,7 @@ def _settle(args: argparse.Namespace) -> int:
     # deferred: start-up time (a command imports only what it runs)
     from accd_gym.studies import settle
 
+    _files.writable_folder(args.out, "--out", settle.OUTPUT_FILES)
     summary = settle.run(Path(args.out), preset=args.preset, duration=args.duration, progress=not args.quiet)
     keys = ["final_depth_m", "final_trail_m", "settling_time_s", "final_attachment_tension_N"]
     print(json.dumps({k: round(summary[k], 3) for k in keys}, indent=2))
@@ -36,6 +38,7 @@ def _study(args: argparse.Namespace) -> int:
         runner.check_scheme(args.studies, args.scheme)
     except ValueError as e:
         raise _usage(f"--scheme: {e}".replace("invalid config: ", "")) from None
+    _files.writable_folder(out, "--out", runner.output_files(args.studies))
     docs = runner.run(args.studies, out, progress=not args.quiet, dpi=args.dpi, scheme=args.scheme)
     for name, doc in docs.items():
         print(f"{name}: wrote {', '.join(str(out / f) for f in doc['figures'])}, {out / (name + '.json')}, {out / (name + '.md')}")
@@ -45,8 +48,7 @@ def _study(args: argparse.Namespace) -> int:
 
 
 def _export_aero(args: argparse.Namespace) -> int:
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
+    out = _files.check_output_file(args.out, "--out")
     _files.write_text(out, default_aero_table_json())
     print(f"wrote the default ACCD aerodynamic tables to {out}")
     return 0
@@ -114,8 +116,9 @@ def _benchmark(args: argparse.Namespace) -> int:
     # deferred: start-up time (a command imports only what it runs)
     from accd_gym.evals import benchmark
 
+    seeds = _seeds(args.seeds)  # before the config is read: a bad option is named first
     cfg = benchmark.load_config(args.config, quick=args.quick)
-    chosen = benchmark.selection(cfg, tiers=_names(args.tiers), algos=_names(args.algos), seeds=_seeds(args.seeds))
+    chosen = benchmark.selection(cfg, tiers=_names(args.tiers), algos=_names(args.algos), seeds=seeds)
     docs = Path(args.docs) if args.docs else None
     command = ("accd-gym benchmark" + (f" --config {args.config}" if args.config != "training/benchmark.json" else "")
                + (" --quick" if args.quick else "") + (f" --ray {args.ray}" if args.ray else ""))
@@ -138,14 +141,14 @@ def _names(text: Optional[str]) -> Optional[list[str]]:
 
 
 def _seeds(text: Optional[str]) -> Optional[list[int]]:
-    """--seeds as integers; a usage error naming a value that is not one."""
+    """--seeds as integers in the seed range; a usage error naming a value that is not one."""
     values = _names(text)
     if values is None:
         return None
-    for v in values:
-        if not v.lstrip("-").isdigit():
-            raise _usage(f"--seeds {v!r} is not an integer")
-    return [int(v) for v in values]
+    try:
+        return [_seed_value("--seeds", v) for v in values]
+    except argparse.ArgumentTypeError as e:
+        raise _usage(str(e)) from None
 
 
 def _sweep(args: argparse.Namespace) -> int:
@@ -167,57 +170,81 @@ def _usage(message: str) -> _UsageError:
     return _UsageError(message)
 
 
-def _nonnegative(name: str):
-    """An argparse type: an integer >= 0, with an error naming the option."""
-
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} = {text!r} is not an integer") from None
-        if value < 0:
-            raise argparse.ArgumentTypeError(f"{name} = {value} is outside the allowed range >= 0")
-        return value
-
-    return parse
+#: The most digits an integer option is read with (Python refuses to convert longer ones).
+_MAX_DIGITS = 100
 
 
-def _seed(text: str) -> int:
-    """An argparse type: a seed, an integer in [0, 2^64)."""
+def _integer(name: str, text: str, low: int, high: int) -> int:
+    """``text`` as an integer in [low, high]; an ArgumentTypeError naming option ``name`` and
+    quoting the value as given otherwise."""
+    stripped = text.strip()
+    if len(stripped) > _MAX_DIGITS or not stripped.lstrip("+-").isascii():
+        raise argparse.ArgumentTypeError(f"{name} = {text[:40]!r} is not an integer in [{low}, {high}]")
     try:
-        value = int(text)
+        value = int(stripped)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"--seed = {text!r} is not an integer") from None
-    if not 0 <= value < 2**64:
-        raise argparse.ArgumentTypeError(f"--seed = {value} is outside the allowed range [0, 2^64)")
+        raise argparse.ArgumentTypeError(f"{name} = {text!r} is not an integer") from None
+    if not low <= value <= high:
+        raise argparse.ArgumentTypeError(f"{name} = {text} is outside the allowed range: an integer in [{low}, {high}]")
     return value
 
 
-def _positive(name: str):
-    """An argparse type: an integer >= 1, with an error naming the option."""
+def _count(name: str, low: int, high: int):
+    """An argparse type: an integer in [low, high], with an error naming the option."""
 
     def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} = {text!r} is not an integer") from None
-        if value < 1:
-            raise argparse.ArgumentTypeError(f"{name} = {value} is outside the allowed range >= 1")
-        return value
+        return _integer(name, text, low, high)
 
     return parse
 
 
-def _positive_seconds(name: str):
-    """An argparse type: a finite number of seconds > 0, with an error naming the option."""
+def _nonnegative(name: str, high: int = 10**6):
+    """An argparse type: an integer in [0, high], with an error naming the option."""
+    return _count(name, 0, high)
+
+
+def _positive(name: str, high: int = 10**6):
+    """An argparse type: an integer in [1, high], with an error naming the option."""
+    return _count(name, 1, high)
+
+
+def _seed_value(name: str, text: str) -> int:
+    """``text`` as a seed: an integer in the one seed range [0, 2^63)
+    (:data:`accd_gym.envs.task.SEED_END`); the error quotes the value as given."""
+    from accd_gym.envs.task import SEED_END
+
+    return _integer(name, text, 0, SEED_END - 1)
+
+
+def _seed(text: str) -> int:
+    """An argparse type: a seed, an integer in the seed range [0, 2^63)."""
+    return _seed_value("--seed", text)
+
+
+def _path(name: str):
+    """An argparse type: a file or folder path: not empty and without a NUL character (which no
+    file name holds), with an error naming the option."""
+
+    def parse(text: str) -> str:
+        if text == "":
+            raise argparse.ArgumentTypeError(f"{name} is empty; it must name a file or folder")
+        if "\0" in text:
+            raise argparse.ArgumentTypeError(f"{name} = {text!r} contains a NUL character, which no file name holds")
+        return text
+
+    return parse
+
+
+def _seconds(name: str, high: float):
+    """An argparse type: a number of seconds in (0, high], with an error naming the option."""
 
     def parse(text: str) -> float:
         try:
             value = float(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} = {text!r} is not a number") from None
-        if not (value > 0 and value < float("inf")):
-            raise argparse.ArgumentTypeError(f"{name} = {text} is outside the allowed range: a finite number of seconds > 0")
+            raise argparse.ArgumentTypeError(f"{name} = {text[:40]!r} is not a number") from None
+        if not 0 < value <= high:
+            raise argparse.ArgumentTypeError(f"{name} = {text[:40]} is outside the allowed range: (0, {high:g}] s")
         return value
 
     return parse
@@ -255,11 +282,18 @@ def _env_overrides(text: Optional[str]) -> dict:
         return {}
     try:
         value = json.loads(text)
-    except json.JSONDecodeError as e:
-        raise ConfigError(f"invalid config: --env {text!r} is not a JSON object ({e})") from None
+    except ValueError as e:  # not JSON, or an integer of more digits than Python converts
+        raise ConfigError(f"invalid config: --env {_clip(text)!r} is not a JSON object ({_clip(str(e), 200)})") from None
+    except RecursionError:
+        raise ConfigError(f"invalid config: --env {_clip(text)!r} is nested too deeply to read") from None
     if not isinstance(value, dict):
-        raise ConfigError(f"invalid config: --env {text!r} is not a JSON object")
+        raise ConfigError(f"invalid config: --env {_clip(text)!r} is not a JSON object")
     return value
+
+
+def _clip(text: str, limit: int = 80) -> str:
+    """``text`` cut to ``limit`` characters for a message (an option can be megabytes long)."""
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _evaluate(args: argparse.Namespace) -> int:
@@ -325,10 +359,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="accd-gym", description="accd-gym: In-Air Capturing simulation tools.")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("settle", help="simulate a towed tether settling behind the aircraft and plot it")
-    p.add_argument("--out", default="runs/settle", help="output folder (default: runs/settle)")
+    p.add_argument("--out", type=_path("--out"), default="runs/settle", help="output folder (default: runs/settle)")
     p.add_argument("--preset", default="table3", help="tether preset, e.g. table3 or steel-250m-24mm")
-    p.add_argument("--duration", type=_positive_seconds("--duration"), default=120.0,
-                   help="simulated time in seconds (default 120)")
+    p.add_argument("--duration", type=_seconds("--duration", MAX_DURATION_S), default=120.0,
+                   help=f"simulated time in seconds, at most {MAX_DURATION_S:g} (default 120)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_settle)
     # deferred: start-up time (a command imports only what it runs)
@@ -337,22 +371,22 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("study", help="run the paper's section-4 tether design studies: plots, JSON, markdown tables")
     p.add_argument("studies", nargs="+", choices=[*STUDIES, *EXTRA_STUDIES, "all"], metavar="STUDY",
                    help=f"one or more of: {', '.join(STUDIES)}, all (these), or the longer {', '.join(EXTRA_STUDIES)}")
-    p.add_argument("--out", default="runs/study", help="output folder (default: runs/study)")
-    p.add_argument("--dpi", type=int, default=90, help="resolution of the PNGs (default 90)")
+    p.add_argument("--out", type=_path("--out"), default="runs/study", help="output folder (default: runs/study)")
+    p.add_argument("--dpi", type=_count("--dpi", 10, 1200), default=90, help="resolution of the PNGs, 10 to 1200 (default 90)")
     p.add_argument("--scheme", choices=["explicit", "implicit_axial"], default="explicit",
                    help="the tether's integration scheme for fig9 and tension: explicit RK4 at each run's stable "
                         "step (default) or implicit_axial, every run at the default 0.01 s step")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_study)
     p = sub.add_parser("export-aero", help="write the default ACCD aerodynamic tables (JSON) to start your own")
-    p.add_argument("--out", default="accd-aero.json", help="output file (default: accd-aero.json)")
+    p.add_argument("--out", type=_path("--out"), default="accd-aero.json", help="output file (default: accd-aero.json)")
     p.set_defaults(func=_export_aero)
     p = sub.add_parser("train", help="train PPO or SAC on the capture task (stable-baselines3, or RLlib PPO for a config with \"trainer\": \"rllib\")")
-    p.add_argument("--config", help="training config, JSON (default: training/ppo.json)")
-    p.add_argument("--out", help="run folder: model, VecNormalize statistics, checkpoints, TensorBoard logs")
-    p.add_argument("--resume", metavar="RUN",
+    p.add_argument("--config", type=_path("--config"), help="training config, JSON (default: training/ppo.json)")
+    p.add_argument("--out", type=_path("--out"), help="run folder: model, VecNormalize statistics, checkpoints, TensorBoard logs")
+    p.add_argument("--resume", type=_path("--resume"), metavar="RUN",
                    help="continue the interrupted run in folder RUN from its latest checkpoint to its total")
-    p.add_argument("--timesteps", type=_positive("--timesteps"), help="override the config's total_timesteps")
+    p.add_argument("--timesteps", type=_positive("--timesteps", 10**12), help="override the config's total_timesteps")
     p.add_argument("--seed", type=_seed, help="override the config's seed")
     p.add_argument("--tier", choices=list(TIERS), help="a benchmark tier (accd_gym.envs.tiers): trained on with the config's env overrides on top")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -362,7 +396,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a baseline (zero, random, guidance, lqr), a shipped trained policy (accd_gym.trained) or a trained model "
                         "(run folder or .zip); repeatable")
     p.add_argument("--episodes", type=_positive("--episodes"), default=100, help="episodes per policy (default 100)")
-    p.add_argument("--out", default="runs/eval", help="output folder (default: runs/eval)")
+    p.add_argument("--out", type=_path("--out"), default="runs/eval", help="output folder (default: runs/eval)")
     p.add_argument("--num-envs", type=_positive("--num-envs"), default=16, help="parallel episodes (default 16)")
     p.add_argument("--num-threads", type=_nonnegative("--num-threads"), default=0,
                    help="threads stepping the envs (default 0: one per core)")
@@ -381,7 +415,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("replay", help="record episodes of a policy: .npz, a self-contained 3D replay page each, MP4")
     p.add_argument("--policy", required=True, help="a baseline (zero, random, guidance, lqr), a shipped trained policy (accd_gym.trained) or a trained model")
     p.add_argument("--episodes", type=_positive("--episodes"), default=1, help="episodes (default 1)")
-    p.add_argument("--out", default="runs/replay", help="output folder (default: runs/replay)")
+    p.add_argument("--out", type=_path("--out"), default="runs/replay", help="output folder (default: runs/replay)")
     p.add_argument("--seed", type=_seed, default=None,
                    help="base seed of initial conditions and RLV motion (default: the evaluation's, 20240607)")
     p.add_argument("--num-envs", type=_positive("--num-envs"), default=16,
@@ -402,18 +436,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_replay)
     p = sub.add_parser("sweep", help="training seeds (and a hyperparameter grid) as Ray Tune trials, each evaluated on held-out seeds")
-    p.add_argument("--config", default="training/sweep_seeds.json", help="sweep config, JSON (default: training/sweep_seeds.json)")
-    p.add_argument("--out", default="runs/sweep", help="output folder (default: runs/sweep)")
+    p.add_argument("--config", type=_path("--config"), default="training/sweep_seeds.json", help="sweep config, JSON (default: training/sweep_seeds.json)")
+    p.add_argument("--out", type=_path("--out"), default="runs/sweep", help="output folder (default: runs/sweep)")
     p.add_argument("--quiet", action="store_true", help="less output from Tune")
     p.set_defaults(func=_sweep)
     p = sub.add_parser("benchmark", help="the benchmark suite: learned policies (PPO on every tier, residual PPO and SAC on the precision and hard tiers) with several seeds, every baseline, one report")
-    p.add_argument("--config", default="training/benchmark.json", help="benchmark config, JSON (default: training/benchmark.json)")
-    p.add_argument("--out", default="runs/benchmark", help="output folder (default: runs/benchmark)")
+    p.add_argument("--config", type=_path("--config"), default="training/benchmark.json", help="benchmark config, JSON (default: training/benchmark.json)")
+    p.add_argument("--out", type=_path("--out"), default="runs/benchmark", help="output folder (default: runs/benchmark)")
     p.add_argument("--quick", action="store_true", help="the config's quick overrides: a few minutes, for CI")
     p.add_argument("--tiers", metavar="A,B", help="run only these tiers' jobs (the report covers every finished run)")
     p.add_argument("--algos", metavar="A,B", help="run only these algorithms' jobs")
     p.add_argument("--seeds", metavar="0,1", help="run only these seeds' jobs")
-    p.add_argument("--docs", metavar="FOLDER", help="also write FOLDER/benchmark.md and FOLDER/figures/benchmark_profile.png")
+    p.add_argument("--docs", type=_path("--docs"), metavar="FOLDER", help="also write FOLDER/benchmark.md and FOLDER/figures/benchmark_profile.png")
     p.add_argument("--ray", nargs="?", const="local", metavar="ADDRESS",
                    help="run the training jobs as Ray tasks: 'local' (default), 'auto' or HOST:PORT (needs the ray extra)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")

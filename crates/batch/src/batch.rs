@@ -167,11 +167,11 @@ pub enum SeedSpec {
     /// Keep each env's base seed and start its next episode.
     Next,
     /// Env `i` gets base seed `s + i`, as gymnasium's `SyncVectorEnv` and SB3's `DummyVecEnv`
-    /// seed their sub-envs; episode counters restart at 0. `s + N - 1` must fit in 64 bits
-    /// ([`check_base_seed`]): a seed never wraps.
+    /// seed their sub-envs; episode counters restart at 0. `s + N - 1` must lie in the seed
+    /// range [0, 2^63) ([`check_base_seed`]): a seed never wraps.
     Base(u64),
-    /// Env `i` gets base seed `s_i` (so it replays a single env seeded `s_i`); episode counters
-    /// restart at 0.
+    /// Env `i` gets base seed `s_i` in [0, 2^63) (so it replays a single env seeded `s_i`);
+    /// episode counters restart at 0.
     PerEnv(Vec<u64>),
 }
 
@@ -192,20 +192,32 @@ struct Slot {
     interrupted: bool,
 }
 
-/// Checks that base seed `seed` gives each of `num_envs` envs its seed `seed + i` without
-/// wrapping past 2^64 - 1 (a wrapped seed would silently repeat another env's episodes).
+/// Checks that base seed `seed` gives each of `num_envs` envs a seed `seed + i` inside the one
+/// seed range [0, 2^63) ([`accd_sim::SEED_END`]): nothing wraps, in the core or in the
+/// infos' int64 columns (a wrapped seed would silently repeat another env's episodes).
 pub fn check_base_seed(seed: u64, num_envs: usize) -> Result<()> {
     let last = (num_envs.max(1) - 1) as u64;
-    if seed.checked_add(last).is_none() {
+    if seed >= accd_sim::SEED_END - last {
         return Err(SimError::invalid_config(
             "seed",
             seed,
             &format!(
-                "[0, 2^64 - num_envs] = [0, {}] for num_envs = {num_envs} (env i is seeded seed + i)",
-                u64::MAX - last
+                "[0, 2^63 - num_envs] = [0, {}] for num_envs = {num_envs} (env i is seeded seed + i, \
+                 every seed in {})",
+                accd_sim::SEED_END - 1 - last,
+                accd_sim::SEED_RANGE
             ),
         )
         .into());
+    }
+    Ok(())
+}
+
+/// Checks one env's base seed `seed` (an entry of a per-env seed list): in [0, 2^63)
+/// ([`accd_sim::SEED_END`]).
+pub fn check_env_seed(seed: u64) -> Result<()> {
+    if seed >= accd_sim::SEED_END {
+        return Err(SimError::invalid_config("seed", seed, accd_sim::SEED_RANGE).into());
     }
     Ok(())
 }
@@ -351,12 +363,22 @@ impl BatchEnv {
 
     /// Sets the wake-seed schedule of the episodes started from now on (resets and autoresets).
     pub fn set_wake_schedule(&mut self, schedule: WakeSchedule) -> Result<()> {
-        if let WakeSchedule::List(list) = &schedule {
-            if list.is_empty() {
+        let range = accd_sim::SEED_RANGE;
+        match &schedule {
+            WakeSchedule::List(list) if list.is_empty() => {
                 return Err(
                     SimError::invalid_config("wake_seeds", "[]", "a non-empty list").into(),
                 );
             }
+            WakeSchedule::List(list) => {
+                if let Some(s) = list.iter().find(|s| **s >= accd_sim::SEED_END) {
+                    return Err(SimError::invalid_config("wake_seeds", s, range).into());
+                }
+            }
+            WakeSchedule::Fixed(s) if *s >= accd_sim::SEED_END => {
+                return Err(SimError::invalid_config("wake_seed", s, range).into());
+            }
+            _ => {}
         }
         self.schedule = schedule;
         Ok(())
@@ -408,7 +430,10 @@ impl BatchEnv {
         check_len("obs", out.obs.len(), n * OBS_DIM)?;
         check_len("wake_seed", out.wake_seed.len(), n)?;
         match &seeds {
-            SeedSpec::PerEnv(list) => check_len("seed", list.len(), n)?,
+            SeedSpec::PerEnv(list) => {
+                check_len("seed", list.len(), n)?;
+                list.iter().try_for_each(|s| check_env_seed(*s))?;
+            }
             SeedSpec::Base(s) => check_base_seed(*s, n)?,
             SeedSpec::Next => {}
         }

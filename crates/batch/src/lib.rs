@@ -16,8 +16,8 @@ pub mod seeds;
 mod shared;
 
 pub use batch::{
-    check_base_seed, info, Autoreset, BatchEnv, BatchState, ResetBuffers, SeedSpec, SlotState,
-    StepBuffers, StepOutputs, MAX_ENVS, MAX_THREADS,
+    check_base_seed, check_env_seed, info, Autoreset, BatchEnv, BatchState, ResetBuffers, SeedSpec,
+    SlotState, StepBuffers, StepOutputs, MAX_ENVS, MAX_THREADS,
 };
 pub use error::{BatchError, Result};
 pub use seeds::{episode_seeds, WakeSchedule, HELD_OUT_WAKE_SEEDS, TRAINING_WAKE_SEEDS};

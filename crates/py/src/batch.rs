@@ -156,7 +156,7 @@ fn action_rows<'a>(actions: &'a PyReadonlyArray2<'_, f32>, n: usize) -> PyResult
 impl PyBatchEnv {
     /// ``num_envs`` episodes of ``config`` (a validated ``EnvConfig``, used as it is, or an
     /// ``EnvConfig`` as JSON, validated here), env ``i`` seeded with base ``seed + i`` (``seed``
-    /// in [0, 2^64 - num_envs]: no seed wraps); autoreset ``"same_step"``, ``"next_step"`` or
+    /// in [0, 2^63 - num_envs]: no seed wraps); autoreset ``"same_step"``, ``"next_step"`` or
     /// ``"disabled"``; ``num_threads`` threads of its own (0 or None: one per core). The counts
     /// are Python or numpy integers in [1, MAX_ENVS] and [0, MAX_THREADS] (ConfigError naming
     /// the argument otherwise).
@@ -239,8 +239,8 @@ impl PyBatchEnv {
     /// returns ``(obs, wake_seed)``: every env's observation (num_envs, OBS_DIM) float32 and its
     /// episode's wake seed (num_envs,) uint64 (new episodes', and the current ones of envs the
     /// mask leaves alone). ``seed``: None (each env's next episode), an int in
-    /// [0, 2^64 - num_envs] (env ``i``: base ``seed + i``, never wrapped) or a sequence of
-    /// num_envs ints in [0, 2^64) (env ``i``: base ``seed[i]``); a single env seeded with env
+    /// [0, 2^63 - num_envs] (env ``i``: base ``seed + i``, never wrapped) or a sequence of
+    /// num_envs ints in [0, 2^63) (env ``i``: base ``seed[i]``); a single env seeded with env
     /// ``i``'s base replays it. Python and numpy integers only (ConfigError otherwise).
     #[pyo3(signature = (seed = None, mask = None))]
     fn reset<'py>(
@@ -630,6 +630,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("ACT_DIM", ACT_DIM)?;
     m.add("OBS_BOUND", OBS_BOUND)?;
     m.add("MAX_ENVS", MAX_ENVS)?;
+    m.add("SEED_END", accd_sim::SEED_END)?;
     m.add("MAX_THREADS", MAX_THREADS)?;
     m.add("INFO_NAMES", info::NAMES.to_vec())?;
     m.add("EVENT_NAMES", info::EVENTS.map(|k| info::NAMES[k]).to_vec())?;

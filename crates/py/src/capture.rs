@@ -101,15 +101,17 @@ pub fn mix_flaps(pitch: f64, yaw: f64, roll: f64) -> PyResult<[f64; 4]> {
     Ok(mix(pitch, yaw, roll))
 }
 
-/// A seed argument: a Python or numpy integer in [0, 2^64); bools, floats and strings are
-/// refused (`ConfigError` naming the argument).
+/// A seed argument: a Python or numpy integer in the one seed range [0, 2^63)
+/// ([`accd_sim::SEED_END`]); bools, floats and strings are refused (`ConfigError` naming the
+/// argument and quoting the value as given).
 pub fn seed_from_py(name: &str, value: &Bound<'_, PyAny>) -> PyResult<u64> {
     let bad = || {
         raise(
             Kind::Config,
             format!(
-                "invalid config: `{name}` = {} is outside the allowed range: an integer in [0, 2^64)",
-                value.repr().map(|r| r.to_string()).unwrap_or_default()
+                "invalid config: `{name}` = {} is outside the allowed range: an integer in {}",
+                value.repr().map(|r| r.to_string()).unwrap_or_default(),
+                accd_sim::SEED_RANGE
             ),
         )
     };
@@ -118,7 +120,11 @@ pub fn seed_from_py(name: &str, value: &Bound<'_, PyAny>) -> PyResult<u64> {
     }
     // Integers and numpy integers implement __index__; floats, strings and numpy floats do not.
     let index = value.call_method0("__index__").map_err(|_| bad())?;
-    index.extract::<u64>().map_err(|_| bad())
+    let seed = index.extract::<u64>().map_err(|_| bad())?;
+    if seed >= accd_sim::SEED_END {
+        return Err(bad());
+    }
+    Ok(seed)
 }
 
 /// A count argument (a number of envs, threads or steps): a Python or numpy integer in

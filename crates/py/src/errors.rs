@@ -91,6 +91,7 @@ impl ToPy for SimError {
         match self {
             SimError::Tether(e) => e.kind(),
             SimError::InvalidConfig { .. }
+            | SimError::Unsettled { .. }
             | SimError::InvalidTable { .. }
             | SimError::Io { .. }
             | SimError::Design { .. } => Some(Kind::Config),

@@ -111,6 +111,9 @@ pub fn check_cross_fields(config: &CaptureConfig) -> std::result::Result<(), Out
             ));
         }
     }
+    config
+        .turbulence
+        .check_history(config.aircraft.airspeed, "aircraft.airspeed")?;
     let (tension, density, airspeed) = estimated_peak_load(config);
     config
         .tether
@@ -124,13 +127,49 @@ pub fn check_cross_fields(config: &CaptureConfig) -> std::result::Result<(), Out
                 field: format!("tether.{field}"),
                 value,
                 allowed: format!(
-                    "{allowed} (the tension estimated from the weight of tether and accd.mass = {} kg \
-                     and the drag at aircraft.airspeed = {} m/s)",
-                    config.accd.mass, config.aircraft.airspeed
+                    "{} (the tension estimated from the weight of tether and accd.mass = {} kg \
+                     at tether.gravity = {} m/s^2 and the drag of tether.diameter = {} m \
+                     (tether.normal_drag_coefficient = {}, tether.tangential_drag_coefficient = \
+                     {}) at aircraft.airspeed = {} m/s)",
+                    qualify(&allowed, "tether."),
+                    config.accd.mass,
+                    config.tether.gravity,
+                    config.tether.diameter,
+                    config.tether.normal_drag_coefficient,
+                    config.tether.tangential_drag_coefficient,
+                    config.aircraft.airspeed
                 ),
             },
-            other => out_of_range("tether.time_step", config.tether.time_step, other.to_string()),
+            other => out_of_range(
+                "tether.time_step",
+                config.tether.time_step,
+                other.to_string(),
+            ),
         })
+}
+
+/// `text` (the tether crate's message, which names the tether's fields bare: `length = 250 m`)
+/// with every tether field written before ` = ` given its dotted name (`tether.length = 250 m`),
+/// so that the message names the fields as the configuration does.
+fn qualify(text: &str, prefix: &str) -> String {
+    let words: Vec<&str> = text.split(' ').collect();
+    let is_field = |w: &str| {
+        TetherConfig::FIELDS
+            .iter()
+            .any(|f| !f.name.is_empty() && f.name == w)
+    };
+    words
+        .iter()
+        .enumerate()
+        .map(|(i, w)| {
+            if is_field(w) && words.get(i + 1) == Some(&"=") {
+                format!("{prefix}{w}")
+            } else {
+                (*w).to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
 }
 
 /// A rough peak tension of the tow (N) with the air it flies in (sea-level density, an upper

@@ -15,6 +15,22 @@ pub enum SimError {
         /// The allowed range or set, in words.
         allowed: String,
     },
+    /// Every value is inside its declared range, but the simulation diverged while settling the
+    /// open-loop equilibrium ([`crate::Equilibrium::settle`]): one of the values set away from
+    /// its default, or their combination, is more than the simulation can run. The error names
+    /// those fields, since no single range says which.
+    #[error(
+        "invalid config: the open-loop equilibrium of this configuration diverged while settling \
+         ({reason}); the fields set away from their defaults, one of which or whose combination \
+         the simulation cannot run: {fields}"
+    )]
+    Unsettled {
+        /// The fields set away from their defaults, as `name = value` (or a note that there are
+        /// none).
+        fields: String,
+        /// The divergence.
+        reason: String,
+    },
     /// A data table (aerodynamic coefficients, wake) is malformed.
     #[error("invalid table `{table}`: {reason}")]
     InvalidTable {

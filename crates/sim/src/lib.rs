@@ -57,7 +57,7 @@ pub use physics::wake::{
     WakeTableFiles, WakeTables,
 };
 pub use physics::wake_field::WakeField;
-pub use rng::{NormalSampler, Seeds};
+pub use rng::{NormalSampler, Seeds, SEED_END, SEED_RANGE};
 pub use state_format::StateError;
 pub use task::config::{EnvConfig, InitialConfig, LimitsConfig, RewardConfig};
 pub use task::episode::{Episode, EpisodeState, Equilibrium, Outcome};

@@ -26,6 +26,15 @@ use rand_core::{Rng, SeedableRng};
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
+/// The end of the one range of every seed a user gives (config `wake_seed`/`wake_seeds`, a
+/// reset's seed, a batch's base seeds, `seed + i` included): [0, 2^63), the non-negative
+/// values of a signed 64-bit integer. Seeds leave the core in infos as int64 (gymnasium
+/// batches Python ints into int64 arrays), so a seed of 2^63 or more would wrap there.
+pub const SEED_END: u64 = 1 << 63;
+
+/// [`SEED_END`] in words, for the messages: `[0, 2^63)`.
+pub const SEED_RANGE: &str = "[0, 2^63)";
+
 /// ChaCha stream label of the wake turbulence lanes ("WAKELANE" in ASCII).
 pub const WAKE_LANES_STREAM: u64 = u64::from_be_bytes(*b"WAKELANE");
 /// ChaCha stream label of the ambient turbulence ("AMBIENT " in ASCII).

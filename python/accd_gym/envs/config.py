@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import re
+from pathlib import Path
 from typing import Any, Mapping, Optional
 
 import numpy as np
@@ -33,6 +34,28 @@ def _plain(value: Any) -> Any:
     if isinstance(value, np.ndarray):
         return value.tolist()
     raise TypeError(f"{type(value).__name__} is not a configuration value")
+
+
+#: The deepest nesting a configuration document may have (its deepest keys, such as
+#: ``randomization.airspeed[0]``, are 3 levels down): a deeper one is refused before anything
+#: walks it, since a walk thousands of levels deep ends in Python's RecursionError.
+MAX_CONFIG_DEPTH = 16
+
+
+def _check_depth(value: Any) -> None:
+    """ConfigError naming the path down to the first value nested deeper than
+    :data:`MAX_CONFIG_DEPTH` (walked without recursion)."""
+    stack: list[tuple[Any, str, int]] = [(value, "", 0)]
+    while stack:
+        v, path, depth = stack.pop()
+        if depth > MAX_CONFIG_DEPTH:
+            shown = path if len(path) <= 60 else path[:57] + "..."
+            raise ConfigError(f"invalid config: `{shown}` is nested {depth} levels deep; a configuration is at most "
+                              f"{MAX_CONFIG_DEPTH} levels deep")
+        if isinstance(v, Mapping):
+            stack.extend((x, f"{path}.{k}" if path else str(k), depth + 1) for k, x in v.items())
+        elif isinstance(v, (list, tuple)):
+            stack.extend((x, f"{path}[{i}]", depth + 1) for i, x in enumerate(v))
 
 
 def _check_finite(value: Any, path: str) -> None:
@@ -75,6 +98,7 @@ def valid_config(
     """
     merged: dict[str, Any] = dict(config or {})
     merged.update(overrides)
+    _check_depth(merged)
     if "tier" in merged:
         name = merged.pop("tier")
         merged = merge(tier(name).overrides, merged)

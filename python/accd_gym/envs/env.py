@@ -168,7 +168,7 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
         """Starts a new episode; returns ``(observation, info)`` (info: ``wake_seed``, and with
         randomized physics ``parameters``, the episode's drawn parameters).
 
-        ``seed``: a Python or numpy integer in [0, 2^64), or None (the next episode of the seeded
+        ``seed``: a Python or numpy integer in the seed range [0, 2^63), or None (the next episode of the seeded
         sequence); bools, floats and strings raise ConfigError.
         """
         if seed is not None:

@@ -112,8 +112,8 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
 
     def seed(self, seed: Optional[int] = None) -> Sequence[Optional[int]]:
         """Seeds the envs at the next ``reset()``: env ``i`` gets seed ``seed + i`` (as
-        ``DummyVecEnv``); returns those seeds. ``seed`` is an integer in [0, 2^64 - num_envs], so
-        that no env's seed wraps (ConfigError otherwise, here rather than at the reset where
+        ``DummyVecEnv``); returns those seeds. ``seed`` is an integer in [0, 2^63 - num_envs], so
+        that every env's seed lies in the seed range [0, 2^63) (ConfigError otherwise, here rather than at the reset where
         ``DummyVecEnv``'s single env would raise it)."""
         self._base_seed = random_seed(self.num_envs) if seed is None else check_base_seed(seed, self.num_envs)
         return [self._base_seed + i for i in range(self.num_envs)]

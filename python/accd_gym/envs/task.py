@@ -39,6 +39,13 @@ VALIDATION_WAKE_SEEDS: range = TRAINING_WAKE_SEEDS[-len(HELD_OUT_WAKE_SEEDS):]
 MAX_ENVS: int = _core.MAX_ENVS
 #: Most threads of one vector env (``num_threads``; 0: one per core).
 MAX_THREADS: int = _core.MAX_THREADS
+#: The end of the one range of every seed: config ``wake_seed``/``wake_seeds``, the reset
+#: options of the same names, a reset's ``seed``, the vector envs' base seeds (``seed + i``
+#: included) and the CLI's ``--seed`` all lie in [0, 2^63), the non-negative int64 values, so
+#: that a seed reported in an info (an int64 column, as gymnasium batches Python ints) never wraps.
+SEED_END: int = _core.SEED_END
+#: :data:`SEED_END` in words, for the messages.
+SEED_RANGE: str = "[0, 2^63)"
 #: Observation scale by name (the observation is the quantity times its scale).
 OBSERVATION_SCALE: dict[str, float] = {name: scale for name, _, scale, _ in OBSERVATION_TABLE}
 #: Observation index by name.
@@ -124,19 +131,19 @@ def check_observations(obs: Any) -> np.ndarray:
         raise ValueError(f"observations have shape {np.shape(obs)}, expected (N, {OBS_DIM})")
     return o
 
-def check_seed(seed: Any, what: str = "seed", bound: int = 2**64) -> int:
-    """``seed`` as a Python int in [0, bound): a Python or numpy integer (not a bool).
+def check_seed(seed: Any, what: str = "seed", bound: int = SEED_END) -> int:
+    """``seed`` as a Python int in [0, bound) (by default the one seed range [0, 2^63),
+    :data:`SEED_END`): a Python or numpy integer (not a bool).
 
-    Raises :class:`~accd_gym.ConfigError` naming ``what`` for anything else (floats, strings,
-    bools, negative or too large values).
+    Raises :class:`~accd_gym.ConfigError` naming ``what`` and quoting the value as given for
+    anything else (floats, strings, bools, negative or too large values).
     """
+    allowed = SEED_RANGE if bound == SEED_END else f"[0, {bound})"
     if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
-        raise ConfigError(
-            f"invalid config: `{what}` = {seed!r} is outside the allowed range: an int in [0, {bound:#x})"
-        )
+        raise ConfigError(f"invalid config: `{what}` = {seed!r} is outside the allowed range: an int in {allowed}")
     value = int(seed)
     if not 0 <= value < bound:
-        raise ConfigError(f"invalid config: `{what}` = {value} is outside the allowed range [0, {bound:#x})")
+        raise ConfigError(f"invalid config: `{what}` = {value} is outside the allowed range: an int in {allowed}")
     return value
 
 
@@ -156,16 +163,18 @@ def check_count(value: Any, what: str, low: int, high: int | None = None, noun: 
     return count
 
 
-def check_base_seed(seed: Any, num_envs: int) -> int:
-    """A vector env's int seed ``seed``, which gives env ``i`` the seed ``seed + i``: a Python or
-    numpy integer in [0, 2^64 - num_envs], so that every env's seed is a 64-bit seed (none wraps
-    around to 0). Raises :class:`~accd_gym.ConfigError` naming ``seed`` and the range otherwise
-    (a ``SyncVectorEnv`` of single envs raises it from the env whose seed is out of range)."""
-    value = check_seed(seed)
-    if value + num_envs - 1 >= 2**64:
+def check_base_seed(seed: Any, num_envs: int, count: str = "num_envs", what: str = "seed") -> int:
+    """A base seed ``seed`` that gives ``num_envs`` envs (or episodes) the seeds ``seed + i``: a
+    Python or numpy integer in [0, 2^63 - num_envs], so that every one of them lies in the seed
+    range [0, 2^63) (none wraps). Raises :class:`~accd_gym.ConfigError` naming ``what`` (default
+    ``seed``), quoting the value as given, the count (named ``count``) and the range otherwise (a
+    ``SyncVectorEnv`` of single envs raises it from the env whose seed is out of range)."""
+    value = check_seed(seed, what)
+    if value + num_envs - 1 >= SEED_END:
         raise ConfigError(
-            f"invalid config: `seed` = {value} is outside the allowed range [0, 2^64 - num_envs] = "
-            f"[0, {2**64 - num_envs}] for num_envs = {num_envs} (env i is seeded seed + i)"
+            f"invalid config: `{what}` = {value} is outside the allowed range [0, 2^63 - {count}] = "
+            f"[0, {SEED_END - num_envs}] for {count} = {num_envs} ({what} + i is the seed of the i-th, "
+            f"every seed in {SEED_RANGE})"
         )
     return value
 
@@ -178,8 +187,8 @@ def check_flag(value: Any, what: str) -> bool:
     return bool(value)
 
 
-#: Wake seeds are reported as int64 (as gymnasium batches Python ints), so they lie in [0, 2^63).
-WAKE_SEED_BOUND: int = 2**63
+#: Wake seeds lie in the one seed range (:data:`SEED_END`).
+WAKE_SEED_BOUND: int = SEED_END
 
 
 def wake_options(core: Any, options: dict[str, Any] | None) -> None:
@@ -187,7 +196,8 @@ def wake_options(core: Any, options: dict[str, Any] | None) -> None:
 
     ``{"wake_seed": int}`` fixes the wake seed, ``{"wake_seeds": [int, ...]}`` cycles through a
     list, ``{"wake_seed": None}`` returns to training draws. Seeds are Python or numpy integers
-    in [0, 2^63) (floats, strings and bools are refused). Unknown keys raise ConfigError.
+    in the one seed range [0, 2^63) (floats, strings and bools are refused). Unknown keys raise
+    ConfigError.
     """
     if not options:
         return
@@ -234,8 +244,8 @@ def check_max_episode_steps(max_episode_steps: Any, config: dict[str, Any]) -> N
 
 def random_seed(num_envs: int = 1) -> int:
     """A fresh 64-bit seed from the operating system's entropy, a valid int seed of ``num_envs``
-    envs (:func:`check_base_seed`: in [0, 2^64 - num_envs])."""
-    return int(np.random.SeedSequence().generate_state(1, dtype=np.uint64)[0]) % (2**64 - num_envs + 1)
+    envs (:func:`check_base_seed`: in [0, 2^63 - num_envs])."""
+    return int(np.random.SeedSequence().generate_state(1, dtype=np.uint64)[0]) % (SEED_END - num_envs + 1)
 
 
 def observation_table_markdown() -> str:

@@ -59,9 +59,11 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
     **Seeds**: ``reset(seed=s)`` gives env ``i`` the seed ``s + i``, ``seed=[s0, s1, ...]`` the
     seed ``s_i``: env ``i`` then replays the single env with that seed, whatever the batch size
     or thread count. Python and numpy integers are accepted; bools, floats and strings are not.
-    Seeds are 64-bit and never wrap: an int ``s`` lies in [0, 2^64 - num_envs] (a larger one
-    raises ConfigError naming the range, where ``SyncVectorEnv`` raises it from the env whose
-    seed ``s + i`` passes 2^64 - 1), list entries in [0, 2^64).
+    Every seed lies in the one seed range [0, 2^63) (:data:`accd_gym.envs.task.SEED_END`: the
+    wake seeds reported as int64 in the infos never wrap): an int ``s`` lies in
+    [0, 2^63 - num_envs] (a larger one raises ConfigError naming the range, where
+    ``SyncVectorEnv`` raises it from the env whose seed ``s + i`` passes 2^63 - 1), list entries
+    in [0, 2^63).
 
     **Autoreset** (``metadata["autoreset_mode"]``, chosen with ``autoreset_mode=``, an
     ``AutoresetMode``, its value or ``"next_step"``/``"same_step"``/``"disabled"``):
@@ -182,8 +184,9 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         """Starts new episodes in every env (or those ``options["reset_mask"]`` selects); returns
         ``(observations, infos)``.
 
-        ``seed``: an int (env ``i``: seed ``seed + i``; in [0, 2^64 - num_envs], so that no env's
-        seed wraps: ConfigError otherwise), a list of ints in [0, 2^64) (one per env) or None
+        ``seed``: an int (env ``i``: seed ``seed + i``; in [0, 2^63 - num_envs], so that every
+        env's seed is in the seed range [0, 2^63): ConfigError otherwise), a list of ints in
+        [0, 2^63) (one per env) or None
         (each env's next episode). ``options``: ``{"wake_seed": int | None}`` or
         ``{"wake_seeds": [int, ...]}`` (persist over later resets), ``{"reset_mask": mask}``
         (a (num_envs,) bool numpy array with at least one True: only those envs are reset).

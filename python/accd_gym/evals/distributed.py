@@ -32,6 +32,7 @@ import socket
 import time
 from typing import Any, Optional, Sequence
 
+from accd_gym import files
 from accd_gym.errors import ConfigError
 from accd_gym.learning.ray_cluster import connect
 from accd_gym.evals.episodes import run_episode_range
@@ -82,8 +83,7 @@ def _run_part(
     episodes = run_episode_range(policy, start, stop, seed=seed, wake_seeds=wake, batch=batch,
                                  num_threads=num_threads, config=config)
     if crash_marker is not None and not os.path.exists(crash_marker):
-        with open(crash_marker, "w") as f:
-            f.write(f"{start}..{stop}\n")
+        files.write_text(crash_marker, f"{start}..{stop}\n")
         os._exit(1)
     return {
         "start": start,

@@ -19,7 +19,7 @@ from tqdm import tqdm
 
 from accd_gym.control.registry import Policy
 from accd_gym.envs.agent_io import physics_config
-from accd_gym.envs.task import EVENT_NAMES, INFO_NAMES, MAX_ENVS, check_count, check_actions
+from accd_gym.envs.task import EVENT_NAMES, INFO_NAMES, MAX_ENVS, check_base_seed, check_count, check_actions
 from accd_gym.envs.vector import InAirCaptureVectorEnv
 from accd_gym.errors import ConfigError
 
@@ -266,6 +266,7 @@ def run_episode_range(
     batch = check_count(batch, "batch", 1, MAX_ENVS)
     if not 0 <= start < stop:
         raise ConfigError(f"invalid config: episode range {start}..{stop} is empty or negative; need 0 <= start < stop")
+    seed = check_base_seed(seed, stop, count="episodes")  # episode k is seeded seed + k
     if wake_seeds is not None and len(wake_seeds) < stop:
         raise ConfigError(f"invalid config: {len(wake_seeds)} wake seeds for episodes up to {stop - 1}; need at least {stop}")
     bar = tqdm(total=stop - start, desc=desc, unit="ep") if progress else None

@@ -40,6 +40,10 @@ from accd_gym.files import save_figure
 ReplayWriter = Callable[[str, str, list[Episode], dict[str, Any]], list[dict[str, Any]]]
 
 
+#: The files :func:`evaluate` writes into its folder (besides ``replays/`` and ``ray_tasks.json``).
+EVALUATION_FILES = ("results.json", "summary.md", "trajectories.npz", "trajectories.png", "miss_distance_cdf.png")
+
+
 def wilson_interval(successes: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
     """Wilson score interval of a binomial proportion (95 % for the default ``z``); (0, 1) for n = 0."""
     if n <= 0:
@@ -152,7 +156,8 @@ def evaluate(
         )
     seeds = list(wake_seeds) if wake_seeds is not None else list(HELD_OUT_WAKE_SEEDS[:episodes])
 
-    out = files.writable_folder(out)  # before the episodes: a read-only folder is refused at once
+    # before the episodes: a read-only folder or a special file among the outputs is refused at once
+    out = files.writable_folder(out, "--out", EVALUATION_FILES)
     loaded = [(spec, load_policy(spec, allow_unnormalized=allow_unnormalized, config=config)) for spec in policies]  # fail early
     results: dict[str, Any] = {
         "episodes": episodes,

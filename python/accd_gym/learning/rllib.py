@@ -52,7 +52,6 @@ from __future__ import annotations
 
 import io
 import json
-import os
 import tarfile
 import tempfile
 import time
@@ -61,6 +60,7 @@ from typing import Any, Optional, Mapping
 
 import numpy as np
 
+from accd_gym import files
 from accd_gym.errors import ConfigError
 from accd_gym.learning import ray_cluster
 from accd_gym.envs.config import read_json_object
@@ -250,10 +250,8 @@ def _writer(path: Path) -> Any:
 
 
 def _write_meta(out: Path, meta: dict[str, Any]) -> None:
-    """Writes run.json atomically."""
-    tmp = out / "run.json.tmp"
-    tmp.write_text(json.dumps(meta, indent=1))
-    os.replace(tmp, out / "run.json")
+    """Writes run.json atomically (:mod:`accd_gym.files`)."""
+    files.write_text(out / "run.json", json.dumps(meta, indent=1))
 
 
 def train(cfg: dict[str, Any], out: str | Path, *, timesteps: Optional[int] = None, progress: bool = True,
@@ -266,8 +264,7 @@ def train(cfg: dict[str, Any], out: str | Path, *, timesteps: Optional[int] = No
 
     if timesteps is not None:
         cfg = dict(cfg, total_timesteps=int(timesteps))
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = files.writable_folder(out, "--out", ("run.json",))  # before Ray starts
     (out / "checkpoints").mkdir(exist_ok=True)
     if connect:
         ray_cluster.connect(cfg["ray_address"])

@@ -48,12 +48,18 @@ says so.
 Nothing saved is lost: every file is written atomically (:mod:`accd_gym.files`; a checkpoint's
 model zip last, after its companions), so a crash or a full disk leaves the earlier checkpoints
 and the previous run.json intact; a write that fails stops the training with an
-:class:`~accd_gym.errors.OutputError` saying which checkpoint the run keeps.
+:class:`~accd_gym.errors.OutputError` saying which checkpoint the run keeps. A full disk costs at
+most one checkpoint interval: run.json is written after every checkpoint, naming it
+(``checkpoint``, ``checkpoint_steps``), and the run folder keeps a small reserve file
+(:func:`accd_gym.files.reserve_space`) that is freed so that run.json can still say
+``"interrupted"`` when the disk is full; ``--resume`` continues from that checkpoint (a run
+stopped before its first one starts over).
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import math
 import re
@@ -66,10 +72,14 @@ from typing import Any, Callable, Optional
 import numpy as np
 
 from accd_gym import files
+from accd_gym.envs.task import SEED_END
 from accd_gym.errors import ConfigError, OutputError, StateError
 from accd_gym.envs.config import env_config, read_json_object
 from accd_gym.envs.agent_io import split_agent_options
 from accd_gym.envs.task import ACT_DIM, HELD_OUT_WAKE_SEEDS, OBS_DIM
+
+#: The files a run folder gets beside ``checkpoints/`` and ``tb/`` (checked before a training starts).
+RUN_FILES = ("run.json", "final_model.zip", "vecnormalize.pkl")
 
 #: Defaults of a training config (``algo_kwargs`` are per algorithm).
 DEFAULTS: dict[str, Any] = {
@@ -111,7 +121,7 @@ def validate_config(raw: dict[str, Any]) -> dict[str, Any]:
     if cfg["algo"] not in _ALGOS:
         raise ConfigError(f"invalid config: `algo` = {cfg['algo']!r} is outside the allowed range {list(_ALGOS)}")
     for key, low, high in (("total_timesteps", 1, 10**12), ("num_envs", 1, 65_536), ("num_threads", 0, 1024),
-                           ("torch_threads", 1, 1024), ("update_threads", 0, 1024), ("checkpoint_every", 1, 10**12), ("seed", 0, 2**64 - 1)):
+                           ("torch_threads", 1, 1024), ("update_threads", 0, 1024), ("checkpoint_every", 1, 10**12), ("seed", 0, SEED_END - 1)):
         v = cfg[key]
         if not isinstance(v, int) or isinstance(v, bool) or not low <= v <= high:
             raise ConfigError(f"invalid config: `{key}` = {v!r} is outside the allowed range: an integer in [{low}, {high}]")
@@ -492,6 +502,13 @@ def _save_statistics(env: Any, path: Path) -> None:
         pickle.dump(env, f)
 
 
+def _save_model(model: Any, path: Path) -> None:
+    """Writes an SB3 model's zip (``model.save`` into the open temporary file of
+    :func:`accd_gym.files.atomic_open`, so that the one writer decides where it goes)."""
+    with files.atomic_open(path, "wb") as f:
+        model.save(f)
+
+
 def _save_checkpoint(model: Any, env: Any, cfg: dict[str, Any], out: Path, *, replay_buffer: bool = True) -> dict[str, Any]:
     """Writes the VecNormalize statistics, the envs' exact state, (SAC, with ``replay_buffer``)
     the replay buffer and the model as a checkpoint named like SB3's CheckpointCallback's; each
@@ -505,18 +522,19 @@ def _save_checkpoint(model: Any, env: Any, cfg: dict[str, Any], out: Path, *, re
     _save_statistics(env, folder / (stem.format("vecnormalize_") + ".pkl"))
     files.write_bytes(folder / (stem.format("envstate_") + ".bin"), _base_env(env).get_state())
     if replay_buffer and hasattr(model, "save_replay_buffer") and cfg["algo"] == "sac":
-        with files.atomic_path(folder / (stem.format("replay_buffer_") + ".pkl")) as tmp:
-            model.save_replay_buffer(str(tmp))
-    with files.atomic_path(folder / (stem.format("") + ".zip")) as tmp:
-        model.save(str(tmp))
+        with files.atomic_open(folder / (stem.format("replay_buffer_") + ".pkl"), "wb") as f:
+            model.save_replay_buffer(f)
+    _save_model(model, folder / (stem.format("") + ".zip"))
     record = latest_checkpoint(out)
     assert record is not None and record["steps"] == steps
     return record
 
 
-def _checkpoint_callback(cfg: dict[str, Any], out: Path):
+def _checkpoint_callback(cfg: dict[str, Any], out: Path, meta: dict[str, Any]):
     """An SB3 callback writing a checkpoint (:func:`_save_checkpoint`, no replay buffer) every
-    ``checkpoint_every`` environment steps, named like SB3's CheckpointCallback's."""
+    ``checkpoint_every`` environment steps, named like SB3's CheckpointCallback's, then run.json
+    naming it (:func:`_note_checkpoint`): whatever stops the run later, run.json already names
+    the checkpoint ``--resume`` continues from."""
     from stable_baselines3.common.callbacks import BaseCallback
 
     every = max(1, cfg["checkpoint_every"] // cfg["num_envs"])
@@ -526,22 +544,44 @@ def _checkpoint_callback(cfg: dict[str, Any], out: Path):
 
         def _on_step(self) -> bool:
             if self.n_calls % every == 0:
-                _save_checkpoint(self.model, self.model.get_env(), cfg, out, replay_buffer=False)
+                ckpt = _save_checkpoint(self.model, self.model.get_env(), cfg, out, replay_buffer=False)
+                _note_checkpoint(meta, ckpt)
+                _write_meta(out, meta)
             return True
 
     return PeriodicCheckpoints()
 
 
+def _note_checkpoint(meta: dict[str, Any], ckpt: Optional[dict[str, Any]]) -> None:
+    """Records in the run summary the newest checkpoint written (``checkpoint``, ``vecnormalize``,
+    ``checkpoint_steps``: what ``--resume`` continues from), or removes the record without one."""
+    if ckpt is None:
+        for key in ("checkpoint", "vecnormalize", "checkpoint_steps"):
+            meta.pop(key, None)
+    else:
+        meta.update(checkpoint=str(ckpt["model"]), vecnormalize=str(ckpt["vecnormalize"]), checkpoint_steps=ckpt["steps"])
+
+
 def _write_meta(out: Path, meta: dict[str, Any]) -> None:
-    """Writes run.json atomically (a crash or a full disk never leaves half a file)."""
-    files.write_text(out / "run.json", json.dumps(meta, indent=1, default=str))
+    """Writes run.json atomically (a crash or a full disk never leaves half a file). On a full
+    disk the run folder's reserve (:func:`accd_gym.files.reserve_space`, made when the training
+    starts) is freed and the write tried once more, so that a run stopped by a full disk still
+    says where it stands."""
+    text = json.dumps(meta, indent=1, default=str)
+    try:
+        files.write_text(out / "run.json", text)
+    except OutputError as e:
+        if e.errno != errno.ENOSPC or not files.release_space(out):
+            raise
+        files.write_text(out / "run.json", text)
 
 
 def _kept(out: Path) -> str:
     """What a run folder keeps after a failed write, for the messages."""
     ckpt = latest_checkpoint(out)
     if ckpt is None:
-        return "the run has no checkpoint yet"
+        return (f"the run has no checkpoint yet (it lost less than one checkpoint interval); free space and start it "
+                f"over with: accd-gym train --resume {out}")
     return (f"the run keeps its checkpoint at {ckpt['steps']} steps ({ckpt['model']}); free space and continue with: "
             f"accd-gym train --resume {out}")
 
@@ -578,16 +618,26 @@ def train(
     :func:`resume` (``accd-gym train --resume OUT``) to the same total.
     """
     import torch
-    from stable_baselines3 import PPO, SAC
 
     cfg = validate_config(dict(config))
     if timesteps is not None:
         if timesteps < 1:
             raise ConfigError(f"invalid config: `timesteps` = {timesteps} is outside the allowed range >= 1")
         cfg["total_timesteps"] = int(timesteps)
-    out = files.writable_folder(out)
+    out = files.writable_folder(out, "--out", RUN_FILES)
     torch.set_num_threads(cfg["torch_threads"])
     _one_blas_thread()
+    env, model = _new_model(cfg, out)
+    meta = {"algo": cfg["algo"], "config": cfg, "status": "training", "total_timesteps": cfg["total_timesteps"]}
+    _write_meta(out, meta)
+    return _learn(model, env, cfg, out, meta, progress=progress, fresh=True)
+
+
+def _new_model(cfg: dict[str, Any], out: Path) -> tuple[Any, Any]:
+    """The training env and a new model of the validated config ``cfg`` (TensorBoard logs in
+    ``out/tb``); ConfigError when stable-baselines3 or torch refuses the config's values."""
+    from stable_baselines3 import PPO, SAC
+
     env = make_training_env(cfg)
     cls = {"ppo": PPO, "sac": SAC}[cfg["algo"]]
     try:
@@ -604,12 +654,11 @@ def train(
     except (TypeError, ValueError, AssertionError, RuntimeError) as e:
         # a value of the right key that stable-baselines3 or torch cannot use (a string learning
         # rate, a batch size the rollout cannot fill, an unknown device, ...)
+        env.close()
         raise ConfigError(f"invalid config: {cfg['algo'].upper()} refused the config's algo_kwargs "
                           f"{cfg['algo_kwargs']!r} / policy_kwargs {cfg['policy_kwargs']!r} / device "
                           f"{cfg['device']!r}: {type(e).__name__}: {e}") from e
-    meta = {"algo": cfg["algo"], "config": cfg, "status": "training", "total_timesteps": cfg["total_timesteps"]}
-    _write_meta(out, meta)
-    return _learn(model, env, cfg, out, meta, progress=progress, fresh=True)
+    return env, model
 
 
 def _one_blas_thread() -> None:
@@ -643,6 +692,9 @@ def resume(run: str | Path, *, progress: bool = True, report: Optional[Callable[
     another env, a model of another algorithm than run.json's) is skipped: ``report`` (default:
     a warning) gets one line per skipped checkpoint saying why, and the next older one is tried.
 
+    A run stopped before its first checkpoint (by a full disk, say) has lost less than one
+    checkpoint interval: it starts over from step 0 with its config and seeds, saying so.
+
     Raises ConfigError when ``run`` is not a run folder, its run.json is damaged, it has
     finished, or none of its checkpoints loads.
     """
@@ -652,9 +704,8 @@ def resume(run: str | Path, *, progress: bool = True, report: Optional[Callable[
     meta, cfg = _read_meta(out)
     if meta.get("status") == "done":
         raise ConfigError(f"invalid config: run {str(run)!r} is complete ({meta.get('timesteps')} steps); nothing to resume")
+    files.writable_folder(out, "--resume", RUN_FILES)
     found = checkpoints(out)
-    if not found:
-        raise ConfigError(f"invalid config: run {str(run)!r} has no checkpoint in {str(out / 'checkpoints')!r} to resume from")
     if report is None:
         import warnings
 
@@ -663,6 +714,14 @@ def resume(run: str | Path, *, progress: bool = True, report: Optional[Callable[
 
     torch.set_num_threads(cfg["torch_threads"])
     _one_blas_thread()
+    if not found:
+        report(f"run {str(run)!r} has no checkpoint in {str(out / 'checkpoints')!r}: it starts over from step 0")
+        env, model = _new_model(cfg, out)
+        meta.setdefault("resumed", []).append({"from_steps": 0, "checkpoint": None})
+        _note_checkpoint(meta, None)
+        meta.update(status="training", timesteps=0)
+        _write_meta(out, meta)
+        return _learn(model, env, cfg, out, meta, progress=progress, fresh=True)
     skipped: list[str] = []
     loaded = None
     for ckpt in found:
@@ -682,6 +741,7 @@ def resume(run: str | Path, *, progress: bool = True, report: Optional[Callable[
         record["skipped"] = skipped
     meta.setdefault("resumed", []).append(record)
     meta["status"] = "training"
+    _note_checkpoint(meta, ckpt)
     _write_meta(out, meta)
     return _learn(model, env, cfg, out, meta, progress=progress, fresh=False)
 
@@ -726,7 +786,19 @@ def _load_checkpoint(ckpt: dict[str, Any], cfg: dict[str, Any], out: Path) -> tu
 def _learn(model: Any, env: Any, cfg: dict[str, Any], out: Path, meta: dict[str, Any], *, progress: bool,
            fresh: bool) -> dict[str, Any]:
     """Runs ``model.learn`` to the config's total with checkpoints; on SIGINT/SIGTERM writes a
-    checkpoint and marks the run interrupted, else writes the final model. Returns ``meta``."""
+    checkpoint and marks the run interrupted, else writes the final model. Returns ``meta``.
+    While it runs, the run folder holds a reserve (:func:`accd_gym.files.reserve_space`) that
+    :func:`_write_meta` frees on a full disk, so that run.json still names the last checkpoint."""
+    files.reserve_space(out)
+    try:
+        return _learn_reserved(model, env, cfg, out, meta, progress=progress, fresh=fresh)
+    finally:
+        files.release_space(out)
+
+
+def _learn_reserved(model: Any, env: Any, cfg: dict[str, Any], out: Path, meta: dict[str, Any], *, progress: bool,
+                    fresh: bool) -> dict[str, Any]:
+    """:func:`_learn` with the run folder's reserve made."""
     import torch
     from stable_baselines3.common.callbacks import CallbackList
 
@@ -734,7 +806,7 @@ def _learn(model: Any, env: Any, cfg: dict[str, Any], out: Path, meta: dict[str,
     t0 = time.time()
     start_steps = 0 if fresh else int(model.num_timesteps)
     stop = _StopRequest()
-    callbacks = [_checkpoint_callback(cfg, out), _capture_callback(), stop.callback()]
+    callbacks = [_checkpoint_callback(cfg, out, meta), _capture_callback(), stop.callback()]
     init = _zero_action_init(cfg) if fresh else None
     if init is not None:
         callbacks.insert(0, init)
@@ -762,7 +834,8 @@ def _learn(model: Any, env: Any, cfg: dict[str, Any], out: Path, meta: dict[str,
     except OutputError as e:
         # A periodic checkpoint could not be written (a full disk): the earlier ones are intact.
         env.close()
-        raise _write_failed(out, meta, f"training stopped at {int(model.num_timesteps)} steps: {e}") from None
+        raise _write_failed(out, meta, f"training stopped at {int(model.num_timesteps)} steps: {e}",
+                            stop.signal_name) from None
     interrupted = stop.signal_name
     wall = time.time() - t0
     with _signals_deferred():
@@ -776,35 +849,35 @@ def _learn(model: Any, env: Any, cfg: dict[str, Any], out: Path, meta: dict[str,
         try:
             if interrupted is not None:
                 ckpt = _save_checkpoint(model, env, cfg, out)
-                meta.update(status="interrupted", interrupted_by=interrupted, checkpoint=str(ckpt["model"]),
-                            vecnormalize=str(ckpt["vecnormalize"]))
+                meta.update(status="interrupted", interrupted_by=interrupted)
+                _note_checkpoint(meta, ckpt)
             else:
                 # the statistics first: a final model on the disk always has its statistics
                 _save_statistics(env, out / "vecnormalize.pkl")
-                with files.atomic_path(out / "final_model.zip") as tmp:
-                    model.save(str(tmp))
+                _save_model(model, out / "final_model.zip")
                 meta.update(status="done")
-                for key in ("checkpoint", "vecnormalize", "interrupted_by"):
-                    meta.pop(key, None)
+                _note_checkpoint(meta, None)
+                meta.pop("interrupted_by", None)
             _write_meta(out, meta)
         except OutputError as e:
             env.close()
             what = (f"training interrupted ({interrupted}) at {done} steps, but its checkpoint could not be written"
                     if interrupted is not None else f"training finished {done} steps, but its results could not be written")
-            raise _write_failed(out, meta, f"{what}: {e}") from None
+            raise _write_failed(out, meta, f"{what}: {e}", interrupted) from None
     env.close()
     return meta
 
 
-def _write_failed(out: Path, meta: dict[str, Any], what: str) -> OutputError:
+def _write_failed(out: Path, meta: dict[str, Any], what: str, signal_name: Optional[str] = None) -> OutputError:
     """The OutputError for a run whose checkpoint or final model could not be written: run.json
-    marked interrupted at the steps its newest checkpoint holds, if it can still be written;
-    the message says what the run keeps and how to continue."""
+    marked interrupted (by ``signal_name``, or by the failed write) at the steps its newest
+    checkpoint holds and naming that checkpoint (:func:`_write_meta` frees the folder's reserve
+    for it on a full disk); the message says what the run keeps and how to continue."""
     ckpt = latest_checkpoint(out)
     with contextlib.suppress(OutputError):
-        meta.update(status="interrupted", interrupted_by="a failed write", timesteps=ckpt["steps"] if ckpt else 0)
-        for key in ("checkpoint", "vecnormalize"):
-            meta.pop(key, None)
+        meta.update(status="interrupted", interrupted_by=f"{signal_name}; then a failed write" if signal_name else "a failed write",
+                    timesteps=ckpt["steps"] if ckpt else 0)
+        _note_checkpoint(meta, ckpt)
         _write_meta(out, meta)
     return OutputError(f"{what}; {_kept(out)}")
 

@@ -33,7 +33,7 @@ from accd_gym import files
 from accd_gym._core import __version__
 from accd_gym.control.registry import Policy
 from accd_gym.envs.env import InAirCaptureEnv
-from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, INFO_NAMES, MAX_ENVS, check_count, check_seed
+from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, INFO_NAMES, MAX_ENVS, check_base_seed, check_count
 from accd_gym.errors import ConfigError
 from accd_gym.evals.episodes import EVAL_BASE_SEED, schedule_episodes
 from accd_gym.evals.policies import load_policy
@@ -346,7 +346,7 @@ def iter_recordings(
         wake_seeds = list(HELD_OUT_WAKE_SEEDS[:episodes])
     if len(wake_seeds) < episodes:
         raise ConfigError(f"invalid config: {len(wake_seeds)} wake seeds for {episodes} episodes; need at least as many")
-    base = EVAL_BASE_SEED if seed is None else check_seed(seed)
+    base = EVAL_BASE_SEED if seed is None else check_base_seed(seed, episodes, count="episodes")
     wanted = set(range(episodes)) if keep is None else {int(k) for k in keep}
     bad = sorted(k for k in wanted if not 0 <= k < episodes)
     if bad:

@@ -552,7 +552,12 @@ def run_replay(policy: str, episodes: int, out: str | Path, *, seed: Optional[in
         import sys
 
         print(f"note: {loaded.note}", file=sys.stderr)
-    folder = files.writable_folder(out)  # before the episodes: a read-only folder is refused at once
+    # before the episodes: a read-only folder or a special file among the outputs is refused at once
+    kinds = ("npz", "html") + (("mp4",) if video else ()) + (("png",) if screenshot else ())
+    # (the counts themselves are checked where the episodes start)
+    wanted = (sorted({k for k in only if isinstance(k, int)}) if only is not None
+              else range(episodes if isinstance(episodes, int) else 0))
+    folder = files.writable_folder(out, "--out", [f"episode_{k:04d}.{ext}" for k in wanted for ext in kinds])
     bar = None
     if progress:
         from tqdm import tqdm

@@ -45,6 +45,8 @@ import numpy as np
 from accd_gym import _core
 from accd_gym import files as _files
 from accd_gym.control.baselines import GuidancePolicy
+from accd_gym.envs.tiers import TIERS
+from accd_gym.errors import SimulationError
 from accd_gym.studies import study
 
 #: Simulated time of each Fig. 9 run, s (about two swings of case (b), four cycles of its elongation).

@@ -150,6 +150,13 @@ def check_scheme(names: Sequence[str], scheme: str) -> None:
         )
 
 
+def output_files(studies: Sequence[str]) -> list[str]:
+    """The JSON and markdown files :func:`run` writes for ``studies`` (``all`` standing for
+    :data:`STUDIES`); each study's figures come beside them."""
+    names = list(dict.fromkeys([*(STUDIES if "all" in studies else ()), *(s for s in studies if s != "all")]))
+    return [f for n in names for f in (f"{n}.json", f"{n}.md")] + (["summary.md"] if len(names) > 1 else [])
+
+
 def run(
     studies: Sequence[str],
     out_dir: Path,

@@ -14,6 +14,11 @@ from accd_gym import files as _files
 
 #: Depth band, as a fraction of the final depth, used for the settling time.
 SETTLING_BAND = 0.02
+#: The files :func:`run` writes into its folder.
+OUTPUT_FILES = ("summary.json", "settle.png", "history.npz")
+#: The longest simulated time :func:`simulate` takes, s (an hour of towing; the histories are
+#: kept in memory, 10 samples a second).
+MAX_DURATION_S = 3600.0
 #: Times (s) at which the tether's shape is kept for the side-view plot (plus the final time).
 SNAPSHOT_TIMES = (1.0, 2.0, 4.0, 6.0, 10.0, 20.0)
 
@@ -82,7 +87,7 @@ def simulate(
 
     Args:
         preset: tether preset name (see :func:`accd_gym.tether_config`).
-        duration: simulated time, s.
+        duration: simulated time, s, in (0, :data:`MAX_DURATION_S`].
         sample_interval: time between samples, s (a multiple of the tether's time step).
         config: overrides of the preset's fields.
         progress: show a progress bar (tqdm) on stderr.
@@ -90,6 +95,10 @@ def simulate(
     Returns:
         The time histories and key numbers.
     """
+    from accd_gym.errors import ConfigError
+
+    if not 0 < duration <= MAX_DURATION_S:  # also refuses NaN
+        raise ConfigError(f"invalid config: `duration` = {duration} is outside the allowed range (0, {MAX_DURATION_S:g}] s")
     tether = towed_tether(preset, config)
     steps_per_sample = max(1, round(sample_interval / tether.time_step))
     samples = max(1, round(duration / (steps_per_sample * tether.time_step)))
@@ -177,8 +186,7 @@ def plot(result: SettleResult, path: Path, title: str = "") -> None:
 
 def run(out_dir: Path, preset: str = "table3", duration: float = 120.0, progress: bool = True) -> dict[str, Any]:
     """Simulates, writes ``settle.png`` and ``summary.json`` into ``out_dir``; returns the summary."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = _files.writable_folder(out_dir, "out_dir", OUTPUT_FILES)
     result = simulate(preset=preset, duration=duration, progress=progress)
     summary = result.summary()
     summary["preset"] = preset

@@ -179,18 +179,19 @@ fn seeds_reset_and_replay_and_per_env_seeds_match_a_single_env() {
 }
 
 #[test]
-fn a_base_seed_never_wraps_past_64_bits() {
-    let top = u64::MAX - 2;
+fn a_base_seed_never_leaves_the_seed_range() {
+    let end = accd_sim::SEED_END;
+    let top = end - 3;
     let mut a = Runner::new(3, 1, Autoreset::SameStep);
     let highest = a.reset(SeedSpec::Base(top));
     assert_eq!(
         highest,
-        a.reset(SeedSpec::PerEnv(vec![top, top + 1, u64::MAX]))
+        a.reset(SeedSpec::PerEnv(vec![top, top + 1, end - 1]))
     );
     a.step(&actions(3, 0)).unwrap();
     let mut obs = vec![0.0; 3 * OBS_DIM];
     let mut wake = vec![0; 3];
-    for seed in [top + 1, u64::MAX] {
+    for seed in [top + 1, end - 1, u64::MAX] {
         let buffers = ResetBuffers {
             obs: &mut obs,
             wake_seed: &mut wake,
@@ -226,11 +227,30 @@ fn a_base_seed_never_wraps_past_64_bits() {
     assert!(BatchEnv::new(
         config().validated().unwrap(),
         1,
-        u64::MAX,
+        end - 1,
         Autoreset::SameStep,
         1
     )
     .is_ok());
+    // A per-env list entry and a wake seed outside the range are refused, quoting the value.
+    for seed in [end, u64::MAX] {
+        let buffers = ResetBuffers {
+            obs: &mut obs,
+            wake_seed: &mut wake,
+        };
+        let e = a
+            .env
+            .reset(SeedSpec::PerEnv(vec![0, seed, 1]), None, buffers)
+            .unwrap_err();
+        assert!(e.to_string().contains(&format!("`seed` = {seed}")), "{e}");
+        for schedule in [WakeSchedule::Fixed(seed), WakeSchedule::List(vec![1, seed])] {
+            let e = a.env.set_wake_schedule(schedule).unwrap_err().to_string();
+            assert!(
+                e.contains(&format!("= {seed}")) && e.contains("[0, 2^63)"),
+                "{e}"
+            );
+        }
+    }
 }
 
 #[test]

@@ -268,6 +268,39 @@ impl TurbulenceConfig {
             .saturating_mul(std::mem::size_of::<f32>())
     }
 
+    /// Checks that the gust history at `airspeed_mps` (the value of the field `airspeed_field`)
+    /// holds at most [`MAX_RING_ENTRIES`] entries. The size follows from several fields, and
+    /// the error names each of them: `history_distance_m` (the one refused), the airspeed, the
+    /// grid step `time_step_s` and the channels (the lanes and the ambient turbulence).
+    pub fn check_history(
+        &self,
+        airspeed_mps: f64,
+        airspeed_field: &str,
+    ) -> std::result::Result<(), OutOfRange> {
+        let entries = self
+            .history_slots(airspeed_mps)
+            .saturating_mul(self.channels());
+        if entries <= MAX_RING_ENTRIES {
+            return Ok(());
+        }
+        Err(out_of_range(
+            "turbulence.history_distance_m",
+            self.history_distance_m,
+            format!(
+                "a distance giving at most {MAX_RING_ENTRIES} history entries (gives {entries}, \
+                 {:.1} MiB per env: \
+                 history_distance_m / {airspeed_field} / turbulence.time_step_s grid times at \
+                 {airspeed_field} = {airspeed_mps} m/s and turbulence.time_step_s = {} s, times {} \
+                 channels from turbulence.lanes_y_m, lanes_z_m, wake_length_scale_m and ambient); \
+                 shorten turbulence.history_distance_m, raise {airspeed_field} or \
+                 turbulence.time_step_s, or use fewer lanes",
+                self.history_bytes(airspeed_mps) as f64 / (1024.0 * 1024.0),
+                self.time_step_s,
+                self.channels()
+            ),
+        ))
+    }
+
     /// Checks every value against its declared range and the [`Rules`]; errors name the field
     /// as `turbulence.<field>`.
     pub fn validate(&self) -> Result<()> {
@@ -389,16 +422,7 @@ impl Turbulence {
         let channels = config.channels();
         let max_delay = config.history_distance_m / airspeed_mps;
         let slots = config.history_slots(airspeed_mps);
-        if slots * channels > MAX_RING_ENTRIES {
-            return Err(SimError::invalid_config(
-                "turbulence.history_distance_m",
-                config.history_distance_m,
-                &format!(
-                    "a distance giving at most {MAX_RING_ENTRIES} history entries (gives {})",
-                    slots * channels
-                ),
-            ));
-        }
+        config.check_history(airspeed_mps, "airspeed_mps")?;
         let on_demand = config.lane_streams == LaneStreams::PerLane && lanes > 0;
         let a_wake = (-airspeed_mps * dt / spacing).exp();
         let a_ambient = (-airspeed_mps * dt / config.ambient.length_scale_m()).exp();

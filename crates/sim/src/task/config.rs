@@ -107,11 +107,36 @@ accd_spec::config_struct! {
     }
 }
 
+/// The most physics steps the set-up of an env may take: settling the open-loop equilibrium
+/// ([`crate::Equilibrium::settle`]) runs `initial.settle_time / tether.time_step` of them before
+/// the first episode. A physics step of the default tether takes 10 to 40 us (an idle or a busy
+/// processor), so the bound keeps the set-up within seconds (the default settles in 4,000 steps,
+/// the longest `initial.settle_time` at the default step in 60,000); a configuration above it is
+/// refused rather than left to run for minutes or hours.
+pub const MAX_SETTLE_STEPS: f64 = 2e5;
+
 /// The agent step a whole multiple of the physics step, the capture window a whole multiple of
-/// the agent step, a wake-seed list not empty.
+/// the agent step, the set-up within [`MAX_SETTLE_STEPS`], a wake-seed list not empty and every
+/// wake seed in the seed range.
 impl Rules for EnvConfig {
     fn check_rules(&self, prefix: &str) -> std::result::Result<(), OutOfRange> {
         let dt = self.physics.tether.time_step;
+        let settle_steps = self.initial.settle_time / dt;
+        if settle_steps > MAX_SETTLE_STEPS {
+            return Err(out_of_range(
+                &join(prefix, "tether.time_step"),
+                dt,
+                format!(
+                    "[initial.settle_time / {MAX_SETTLE_STEPS:e}, 1] s = [{:e}, 1] s: settling the \
+                     open-loop equilibrium takes initial.settle_time / tether.time_step = {:.3e} \
+                     physics steps before the first episode, at most {MAX_SETTLE_STEPS:e} (seconds \
+                     of set-up); use a longer tether.time_step or a shorter initial.settle_time = {} s",
+                    self.initial.settle_time / MAX_SETTLE_STEPS,
+                    settle_steps,
+                    self.initial.settle_time
+                ),
+            ));
+        }
         if self.agent_step < dt {
             return Err(out_of_range(
                 &join(prefix, "agent_step"),
@@ -158,12 +183,68 @@ impl Rules for EnvConfig {
                     "a non-empty list of wake seeds",
                 ));
             }
+            if let Some(seed) = list.iter().find(|s| **s >= crate::rng::SEED_END) {
+                return Err(out_of_range(
+                    &join(prefix, "wake_seeds"),
+                    seed,
+                    format!("{} for every entry", crate::rng::SEED_RANGE),
+                ));
+            }
+        }
+        if let Some(seed) = self.wake_seed.filter(|s| *s >= crate::rng::SEED_END) {
+            return Err(out_of_range(
+                &join(prefix, "wake_seed"),
+                seed,
+                crate::rng::SEED_RANGE,
+            ));
         }
         Ok(())
     }
 }
 
 impl EnvConfig {
+    /// The fields set away from their defaults, as `dotted.name = value` (values cut to 40
+    /// characters), in document order: what an error names when a combination of values fails
+    /// and no single range says which ([`crate::SimError::Unsettled`]).
+    pub fn changed_fields(&self) -> Vec<String> {
+        fn diff(
+            path: &str,
+            now: &serde_json::Value,
+            default: &serde_json::Value,
+            out: &mut Vec<String>,
+        ) {
+            match (now, default) {
+                (serde_json::Value::Object(a), serde_json::Value::Object(b)) => {
+                    for (key, value) in a {
+                        let name = join(path, key);
+                        match b.get(key) {
+                            Some(d) => diff(&name, value, d, out),
+                            None => diff(&name, value, &serde_json::Value::Null, out),
+                        }
+                    }
+                }
+                _ if now != default => {
+                    let text = now.to_string();
+                    let shown = if text.chars().count() > 40 {
+                        format!("{}...", text.chars().take(37).collect::<String>())
+                    } else {
+                        text
+                    };
+                    out.push(format!("{path} = {shown}"));
+                }
+                _ => {}
+            }
+        }
+        let mut out = Vec::new();
+        if let (Ok(now), Ok(default)) = (
+            serde_json::to_value(self),
+            serde_json::to_value(EnvConfig::default()),
+        ) {
+            diff("", &now, &default, &mut out);
+        }
+        out
+    }
+
     /// Parses JSON (unknown keys are errors) and validates. A value of the wrong type is named
     /// by its dotted field (see [`crate::config::locate_parse_error`]).
     pub fn from_json(text: &str) -> Result<Valid<Self>> {
@@ -229,6 +310,64 @@ impl Valid<EnvConfig> {
 mod tests {
     use super::*;
     use crate::physics::accd::AccdConfig;
+
+    #[test]
+    fn wake_seeds_beyond_the_seed_range_are_refused_quoting_the_value() {
+        for seed in [crate::rng::SEED_END, u64::MAX] {
+            for doc in [
+                format!(r#"{{"wake_seed": {seed}}}"#),
+                format!(r#"{{"wake_seeds": [1, {seed}]}}"#),
+            ] {
+                let e = EnvConfig::from_json(&doc).unwrap_err().to_string();
+                assert!(
+                    e.contains(&format!("= {seed} ")) && e.contains("[0, 2^63)"),
+                    "{e}"
+                );
+            }
+        }
+        let top = crate::rng::SEED_END - 1;
+        EnvConfig::from_json(&format!(r#"{{"wake_seed": {top}, "wake_seeds": [{top}]}}"#)).unwrap();
+    }
+
+    #[test]
+    fn a_set_up_beyond_the_settle_step_bound_is_refused_naming_both_fields() {
+        let e = EnvConfig::from_json(r#"{"tether": {"time_step": 1e-7}}"#)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("`tether.time_step`")
+                && e.contains("initial.settle_time")
+                && e.contains("at most 2e5"),
+            "{e}"
+        );
+        // A step of 1e-4 s is within the bound with a settle short enough.
+        let e = EnvConfig::from_json(r#"{"tether": {"time_step": 1e-4}}"#).unwrap_err();
+        assert!(e.to_string().contains("[2e-4, 1] s"), "{e}");
+        EnvConfig::from_json(r#"{"tether": {"time_step": 1e-4}, "initial": {"settle_time": 20}}"#)
+            .unwrap();
+    }
+
+    #[test]
+    fn a_gust_history_too_long_for_the_airspeed_names_the_airspeed() {
+        let e = EnvConfig::from_json(r#"{"aircraft": {"airspeed": 0.3}}"#)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("turbulence.history_distance_m")
+                && e.contains("aircraft.airspeed = 0.3 m/s"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn changed_fields_name_every_value_set_away_from_its_default() {
+        assert!(EnvConfig::default().changed_fields().is_empty());
+        let c = EnvConfig::from_json(r#"{"accd": {"mass": 0.01}, "wake_seed": 7}"#).unwrap();
+        assert_eq!(
+            c.changed_fields(),
+            vec!["accd.mass = 0.01".to_string(), "wake_seed = 7".to_string()]
+        );
+    }
 
     #[test]
     fn defaults_validate_and_derive_the_step_counts() {

@@ -125,7 +125,7 @@ impl Equilibrium {
         config: &Valid<EnvConfig>,
         interrupted: &mut dyn FnMut() -> bool,
     ) -> Result<Equilibrium> {
-        let settled = settle_open_loop(config, interrupted)?;
+        let settled = settle_open_loop(config, interrupted).map_err(|e| unsettled(config, e))?;
         let capture_point = settled.snapshot.capture_point;
         let boom_nominal = config.physics.boom.nominal(&capture_point, || {
             reference_capture_point(config.physics.wake.sampling, interrupted)
@@ -139,6 +139,28 @@ impl Equilibrium {
             boom_nominal,
             outside_limits,
         })
+    }
+}
+
+/// A divergence while settling `config`'s equilibrium as [`SimError::Unsettled`], naming the
+/// fields set away from their defaults (every value is inside its range, so one of them or
+/// their combination is what fails); any other error as it is.
+fn unsettled(config: &EnvConfig, e: SimError) -> SimError {
+    let diverged = matches!(
+        e,
+        SimError::Diverged { .. } | SimError::Tether(accd_tether::TetherError::Diverged { .. })
+    );
+    if !diverged {
+        return e;
+    }
+    let fields = config.changed_fields();
+    SimError::Unsettled {
+        fields: if fields.is_empty() {
+            "none (the defaults)".into()
+        } else {
+            fields.join(", ")
+        },
+        reason: e.to_string(),
     }
 }
 
