@@ -11,6 +11,7 @@ from typing import NoReturn, Optional, Sequence
 
 from accd_gym import files as _files
 from accd_gym._core import default_aero_table_json
+from accd_gym.envs.task import SEED_END
 from accd_gym.envs.tiers import TIERS
 from accd_gym.errors import AccdError, ConfigError
 from accd_gym.studies.settle import MAX_DURATION_S
@@ -211,8 +212,6 @@ def _positive(name: str, high: int = 10**6):
 def _seed_value(name: str, text: str) -> int:
     """``text`` as a seed: an integer in the one seed range [0, 2^63)
     (:data:`accd_gym.envs.task.SEED_END`); the error quotes the value as given."""
-    from accd_gym.envs.task import SEED_END
-
     return _integer(name, text, 0, SEED_END - 1)
 
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from accd_gym._core import stand_in_body, towed_tether
 from accd_gym import files as _files
+from accd_gym.errors import ConfigError
 
 #: Depth band, as a fraction of the final depth, used for the settling time.
 SETTLING_BAND = 0.02
@@ -95,8 +96,6 @@ def simulate(
     Returns:
         The time histories and key numbers.
     """
-    from accd_gym.errors import ConfigError
-
     if not 0 < duration <= MAX_DURATION_S:  # also refuses NaN
         raise ConfigError(f"invalid config: `duration` = {duration} is outside the allowed range (0, {MAX_DURATION_S:g}] s")
     tether = towed_tether(preset, config)
