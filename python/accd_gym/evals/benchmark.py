@@ -872,10 +872,11 @@ def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] =
     import datetime
 
     # before the jobs: a read-only folder (or --docs folder) is refused at once
-    out = files.writable_folder(Path(out).resolve())
+    out = files.writable_folder(Path(out).resolve(), "--out",
+                                ("benchmark.json", "benchmark.md", "episodes.json", "performance_profile.png"))
     if docs is not None:
-        files.writable_folder(docs, "--docs")
-        files.writable_folder(docs / "figures", "--docs")
+        files.writable_folder(docs, "--docs", ("benchmark.md",))
+        files.writable_folder(docs / "figures", "--docs", ("benchmark_profile.png",))
     _claim(out, config)
     t0 = time.perf_counter()
     every = jobs(config)

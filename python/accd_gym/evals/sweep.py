@@ -351,8 +351,8 @@ def run(config: dict[str, Any] | str | Path, out: str | Path, *, progress: bool 
     cfg = config if isinstance(config, dict) else load_config(config)
     cfg = validate_config(cfg)
     cfg["train_config"] = str(Path(cfg["train_config"]).resolve())
-    out = Path(out).resolve()
-    out.mkdir(parents=True, exist_ok=True)
+    # before Ray starts: a read-only folder or a special file among the outputs is refused at once
+    out = _files.writable_folder(Path(out).resolve(), "--out", ("sweep.json", "summary.md"))
     ray = distributed.connect(cfg["ray_address"])
     from ray import tune
 
