@@ -48,15 +48,17 @@ install_chromium() {
   fi
 }
 
-# The newest CPython (>= 3.11) on the machine: on PATH or installed by pyenv, each one run to check it.
+# The newest CPython (3.11 to 3.14) on the machine, installed by pyenv or on PATH (pyenv's shims
+# left out: a shim of a version that is not selected fails), the first that runs.
 newest_python() {
-  local best="" best_version=0 p v
-  for p in $(compgen -c python3. | grep -E '^python3\.[0-9]+$' | sort -u) \
-           ${PYENV_ROOT:-$HOME/.pyenv}/versions/*/bin/python3; do
-    v=$("$p" -c 'import sys; print(sys.version_info[0] * 100 + sys.version_info[1])' 2>/dev/null) || continue
-    if [ "$v" -ge 311 ] && [ "$v" -gt "$best_version" ]; then best="$p"; best_version="$v"; fi
+  local minor p
+  for minor in 14 13 12 11; do
+    for p in "${PYENV_ROOT:-$HOME/.pyenv}"/versions/3."$minor".*/bin/python3."$minor" \
+             "$(command -v "python3.$minor" | grep -v /shims/)"; do
+      [ -x "$p" ] && "$p" -c 'import sys' 2>/dev/null && { echo "$p"; return; }
+    done
   done
-  echo "${best:-python3}"
+  echo python3
 }
 
 # PATH without the folders that hold cargo or rustc.
@@ -74,11 +76,13 @@ WHEEL_TOOLS="$ROOT/target/ci-tools"
 # fresh venv of the newest Python with the newest dependencies of the core and the sb3 extra, read
 # from pyproject.toml; then the workflow checks.
 wheel_prepare() {
-  echo "== wheel job: tools and a fresh venv of $(newest_python) [$SECONDS s]"
+  local python
+  python=$(newest_python)
+  echo "== wheel job: tools and a fresh venv of $python [$SECONDS s]"
   [ -x "$WHEEL_TOOLS/bin/python" ] || python3 -m venv "$WHEEL_TOOLS"
   "$WHEEL_TOOLS/bin/python" -m pip --disable-pip-version-check -q install "maturin>=1.5,<2" auditwheel twine \
     check-jsonschema zizmor
-  "$(newest_python)" -m venv "$WHEEL_VENV"
+  "$python" -m venv "$WHEEL_VENV"
   "$WHEEL_VENV/bin/python" -m pip --disable-pip-version-check -q install --upgrade pip
   "$WHEEL_VENV/bin/python" - <<'PY' >"$LOGS/wheel-deps.txt"
 import tomllib
