@@ -8,7 +8,10 @@
 # they end. Cargo's lock on the build folder orders the two builds that share it.
 #
 # The wheel job proves that the wheel works without Rust: it packs the extension the set-up built
-# into a wheel (scripts/wheel.sh with the `ci` profile: cargo finds the build unchanged), checks it
+# into a wheel (scripts/wheel.sh with the `ci` profile: cargo finds the build unchanged, unless the
+# Rust checks' clippy re-ran pyo3's build script after the set-up's build, with another Python
+# configuration, when it recompiles pyo3, numpy and the bindings crate; it waits for cargo's lock
+# on the build folder while a Rust check holds it), checks it
 # (auditwheel, twine), installs it into a fresh virtual environment of the newest Python on the
 # machine with the newest dependencies, and runs scripts/wheel_smoke.py there with no cargo or
 # rustc on PATH. Its downloads run from the start beside the set-up; its checks beside pytest.
