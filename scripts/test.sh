@@ -86,7 +86,6 @@ wheel_prepare() {
   "$WHEEL_TOOLS/bin/python" -m pip --disable-pip-version-check -q install "maturin>=1.5,<2" auditwheel twine \
     check-jsonschema zizmor
   "$python" -m venv "$WHEEL_VENV"
-  "$WHEEL_VENV/bin/python" -m pip --disable-pip-version-check -q install --upgrade pip
   "$WHEEL_VENV/bin/python" - <<'PY' >"$LOGS/wheel-deps.txt"
 import tomllib
 project = tomllib.load(open("pyproject.toml", "rb"))["project"]
