@@ -390,6 +390,9 @@ def _resumes_from_its_last_checkpoint(run: Path, filler: Path) -> None:
 
 
 def test_a_disk_that_fills_up_while_training_costs_at_most_one_checkpoint_interval(tmp_path, capsys):
+    """The disk fills up between two periodic checkpoints, no signal: the next checkpoint fails,
+    the training stops by itself, run.json names the last checkpoint written. (About 20 s, like
+    the Ctrl+C case above: a training process has to start and write two checkpoints first.)"""
     with _tmpfs(tmp_path / "disk", "64m") as disk:
         run = disk / "run"
         cfg = tmp_path / "cfg.json"
