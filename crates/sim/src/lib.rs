@@ -33,6 +33,7 @@ pub mod config;
 pub mod error;
 pub mod physics;
 pub mod rng;
+pub mod rotation;
 pub mod state_format;
 pub mod table_file;
 pub mod task;

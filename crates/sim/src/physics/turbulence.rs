@@ -400,8 +400,8 @@ impl Turbulence {
             ));
         }
         let on_demand = config.lane_streams == LaneStreams::PerLane && lanes > 0;
-        let a_wake = (-airspeed_mps * dt / spacing).exp();
-        let a_ambient = (-airspeed_mps * dt / config.ambient.length_scale_m()).exp();
+        let a_wake = libm::exp(-airspeed_mps * dt / spacing);
+        let a_ambient = libm::exp(-airspeed_mps * dt / config.ambient.length_scale_m());
         let mut t = Turbulence {
             config: config.clone(),
             seed,
