@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
-# Runs every test: formatting, clippy, the Rust test suites with and without the `lockstep`
-# feature, the Python suite, and the wheel job, all against one optimised build (the `ci` profile:
-# release optimisation without LTO; they integrate physics). Does its own set-up.
+# Runs every test: formatting, clippy, the Rust test suites, the Python suite (the physics
+# fingerprints again with ACCD_GYM_ARITHMETIC=portable), and the wheel job, all against one
+# optimised build (the `ci` profile: release optimisation without LTO; they integrate physics).
+# Does its own set-up.
 #
 # The Rust checks need no Python, so they run while scripts/setup.sh installs the Python side
 # (pip's downloads and unpacking leave the processors mostly idle); their output is printed when
@@ -33,9 +34,9 @@ rust_checks() {
   echo "== cargo test (profile ci: release optimisation, no LTO) [$SECONDS s]"
   # The bindings crate is a cdylib built and tested through Python below.
   cargo test --profile ci --workspace --exclude accd-py
-  echo "== without the lockstep feature (envs stepped one at a time) [$SECONDS s]"
-  cargo clippy -p accd-tether -p accd-sim -p accd-batch --all-targets --profile ci -q --no-default-features -- -D warnings
-  cargo test --profile ci -q -p accd-tether -p accd-batch --no-default-features
+  # The build of a processor without AVX2 and FMA must give the recorded fingerprint too.
+  echo "== the Rust fingerprint with ACCD_GYM_ARITHMETIC=portable [$SECONDS s]"
+  ACCD_GYM_ARITHMETIC=portable cargo test --profile ci -q -p accd-sim --test integration fingerprint
   echo "== Rust checks done [$SECONDS s]"
 }
 
@@ -155,6 +156,8 @@ finish "$CHROMIUM" "chromium install" "$LOGS/chromium"
 
 echo "== pytest (two workers; the slowest tests listed at the end; the wheel job runs meanwhile) [$SECONDS s]"
 "$ACCD_PY" -m pytest -q -n 2 --dist worksteal --durations=15 tests
+echo "== the physics fingerprints with ACCD_GYM_ARITHMETIC=portable [$SECONDS s]"
+ACCD_GYM_ARITHMETIC=portable "$ACCD_PY" -m pytest -q tests/test_physics_hash.py
 echo "== pytest done [$SECONDS s]"
 finish "$WHEEL" "wheel job" "$LOGS/wheel"
 echo "== done [$SECONDS s]"

@@ -39,6 +39,7 @@ from accd_gym._core import (
     CaptureSim,
     Tether,
     __version__,
+    arithmetic,
     default_aero_table_json,
     isa,
     mix_flaps,
@@ -90,6 +91,9 @@ else:
         raise AttributeError(f"module 'accd_gym' has no attribute {name!r}")
 
 
+# A misspelt ACCD_GYM_ARITHMETIC fails here, naming its value, rather than being ignored.
+arithmetic()
+
 __all__ = [
     "AccdError",
     "AccdVecEnv",
@@ -114,6 +118,7 @@ __all__ = [
     "Tether",
     "__version__",
     "default_aero_table_json",
+    "arithmetic",
     "isa",
     "linearize",
     "mix_flaps",

@@ -13,8 +13,6 @@ use std::time::{Duration, Instant};
 use accd_sim::state_format::{self, Expected, StateError, StateKind};
 use accd_sim::task::episode::EpisodeState;
 use accd_sim::{EnvConfig, Episode, Equilibrium, Outcome, SimError, Valid, ACT_DIM, OBS_DIM};
-#[cfg(feature = "lockstep")]
-use accd_tether::LockstepWork;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -545,30 +543,20 @@ impl BatchEnv {
             n: n as u64,
             stop: &stop,
         };
-        // Runs of four rows where every thread gets at least one run; one row at a time below.
-        let run_len = if cfg!(feature = "lockstep") && n >= LANES * self.threads {
-            LANES
-        } else {
-            1
-        };
         let queue = Queue::new(StepRows::new(&mut self.slots, actions, out));
-        let take_run = || match pop_rows(&queue, run_len) {
-            Some(rows) => {
-                stepper.step(rows);
+        let take_one = || match queue.pop() {
+            Some(row) => {
+                stepper.step(row);
                 true
             }
             None => false,
         };
         match watch {
             None => {
-                // Rayon's parallel iterator over the runs (no allocation).
+                // Rayon's parallel iterator over the rows (no allocation).
                 let pool = &self.pool;
                 run(&mut self.poisoned, || {
-                    pool.install(|| {
-                        (0..n.div_ceil(run_len))
-                            .into_par_iter()
-                            .for_each(|_| _ = take_run())
-                    })
+                    pool.install(|| (0..n).into_par_iter().for_each(|_| _ = take_one()))
                 })?;
             }
             Some(interrupted) => {
@@ -576,7 +564,7 @@ impl BatchEnv {
                 let share = self.env_step_time.is_some_and(|t| t < SHARE_BELOW);
                 let start = Instant::now();
                 run(&mut self.poisoned, || {
-                    share_rows(&self.pool, threads, n, share, &take_run, &stop, interrupted)
+                    share_rows(&self.pool, threads, n, share, &take_one, &stop, interrupted)
                 })?;
                 if !stop.load(Ordering::Relaxed) {
                     self.env_step_time = Some(start.elapsed() * threads as u32 / n as u32);
@@ -885,12 +873,6 @@ fn restart(slot: &mut Slot, env: u64, n: u64, schedule: &WakeSchedule) -> Option
     }
 }
 
-/// The next run of `len` (at most [`LANES`]) rows nobody has taken, or None when all are.
-fn pop_rows<'q>(queue: &'q Queue<StepRows<'_>>, len: usize) -> Option<[Option<Row<'q>>; LANES]> {
-    let mut rows = queue.pop_run(len.min(LANES))?;
-    Some(std::array::from_fn(|_| rows.next()))
-}
-
 /// What every row of a step shares: the autoreset mode, the wake-seed schedule of new episodes,
 /// the number of envs and the flag that stops the step.
 struct RowStepper<'s> {
@@ -901,41 +883,12 @@ struct RowStepper<'s> {
 }
 
 impl RowStepper<'_> {
-    /// Steps a run of up to [`LANES`] rows: each row's [`RowStepper::begin`], then the rows whose
-    /// episode steps, four together where all four do (`Episode::step_four`, the tether's
-    /// recursion four AVX2 lanes wide, bit for bit as one by one), and each row's
+    /// Steps a row: its [`RowStepper::begin`], its episode's step if it steps, and its
     /// [`RowStepper::finish`].
-    fn step(&self, mut rows: [Option<Row<'_>>; LANES]) {
-        let steps: [bool; LANES] =
-            std::array::from_fn(|j| rows[j].as_mut().is_some_and(|row| self.begin(row)));
-        #[cfg(feature = "lockstep")]
-        if steps.iter().all(|&s| s) {
-            let [Some(r0), Some(r1), Some(r2), Some(r3)] = &mut rows else {
-                unreachable!("all four step")
-            };
-            let results = LOCKSTEP.with_borrow_mut(|work| {
-                Episode::step_four(
-                    [
-                        &mut r0.slot.episode,
-                        &mut r1.slot.episode,
-                        &mut r2.slot.episode,
-                        &mut r3.slot.episode,
-                    ],
-                    [r0.action, r1.action, r2.action, r3.action],
-                    self.stop,
-                    work,
-                )
-            });
-            for (row, result) in rows.iter_mut().zip(results) {
-                self.finish(row.as_mut().expect("all four step"), result);
-            }
-            return;
-        }
-        for (row, steps) in rows.iter_mut().zip(steps) {
-            if let (Some(row), true) = (row, steps) {
-                let result = row.slot.episode.step_interruptible(row.action, self.stop);
-                self.finish(row, result);
-            }
+    fn step(&self, mut row: Row<'_>) {
+        if self.begin(&mut row) {
+            let result = row.slot.episode.step_interruptible(row.action, self.stop);
+            self.finish(&mut row, result);
         }
     }
 
@@ -999,16 +952,16 @@ impl RowStepper<'_> {
     }
 }
 
-/// Runs `take_run` (which steps the next run of rows and says whether there was one) until no
+/// Runs `take_one` (which steps the next row and says whether there was one) until no
 /// row is left, on the pool's threads and, where `share`, on the calling thread too, which asks
-/// `interrupted()` between its runs and while it waits ([`run_shared`]). Long env steps
+/// `interrupted()` between its rows and while it waits ([`run_shared`]). Long env steps
 /// (unusual configs) run on the pool alone, the caller watching.
 fn share_rows(
     pool: &rayon::ThreadPool,
     threads: usize,
     n: usize,
     share: bool,
-    take_run: &(dyn Fn() -> bool + Sync),
+    take_one: &(dyn Fn() -> bool + Sync),
     stop: &AtomicBool,
     interrupted: &mut dyn FnMut() -> bool,
 ) {
@@ -1022,20 +975,11 @@ fn share_rows(
         pool,
         helpers,
         share,
-        take_run,
+        take_one,
         stop,
         WATCH_INTERVAL,
         interrupted,
     )
-}
-
-/// Envs stepped together in a run ([`Episode::step_four`]).
-const LANES: usize = 4;
-
-#[cfg(feature = "lockstep")]
-thread_local! {
-    /// The lanes' work space of the thread's runs of four (sized on its first run).
-    static LOCKSTEP: std::cell::RefCell<LockstepWork> = std::cell::RefCell::new(LockstepWork::default());
 }
 
 /// Longest time the calling thread of [`BatchEnv::step_interruptible`] waits between two

@@ -2,10 +2,7 @@
 //!
 //! N In-Air Capturing episodes ([`accd_sim::Episode`]) stepped by one call, in parallel over
 //! threads, into struct-of-arrays buffers, with same-step or next-step autoreset and the seed
-//! scheme of [`seeds`]. With the `lockstep` feature (on by default) and at least
-//! four envs per thread, the envs step in runs of four (`accd_sim::Episode::step_four`: their
-//! tethers' recursions four AVX2 lanes wide), every env bit for bit its own step. Nothing here
-//! knows about Python.
+//! scheme of [`seeds`]. Nothing here knows about Python.
 
 #![warn(missing_docs)]
 

@@ -50,19 +50,12 @@ impl<T: Rows> Queue<T> {
     }
 
     /// The next row nobody has taken, or None when all are.
-    #[cfg(test)]
     pub fn pop(&self) -> Option<T::Row<'_>> {
-        self.pop_run(1).and_then(|mut rows| rows.next())
-    }
-
-    /// The next `len` rows nobody has taken (fewer at the end), or None when all are taken.
-    pub fn pop_run(&self, len: usize) -> Option<impl Iterator<Item = T::Row<'_>>> {
-        let i = self.next.fetch_add(len, Ordering::Relaxed);
-        // Each index comes out of the counter once (it can only grow past the rows' length, by
-        // at most `len` per asking thread, which never wraps a usize), so row i is handed out
-        // once.
-        let end = self.rows.len().min(i.saturating_add(len));
-        (i < self.rows.len()).then(|| (i..end).map(|k| unsafe { self.rows.row(k) }))
+        let i = self.next.fetch_add(1, Ordering::Relaxed);
+        // Each index comes out of the counter once (it can only grow past the rows' length by
+        // one per asking thread, which never wraps a usize), so row i is handed out once.
+        // SAFETY: i < len(), and row i is handed out only here, once.
+        (i < self.rows.len()).then(|| unsafe { self.rows.row(i) })
     }
 }
 

@@ -52,6 +52,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(capture::default_aero_table_json, m)?)?;
     m.add_function(wrap_pyfunction!(tether::tether_config, m)?)?;
     m.add_function(wrap_pyfunction!(tether::isa, m)?)?;
+    m.add_function(wrap_pyfunction!(tether::arithmetic, m)?)?;
     m.add_function(wrap_pyfunction!(tether::stand_in_body, m)?)?;
     m.add_function(wrap_pyfunction!(tether::towed_tether, m)?)?;
     Ok(())

@@ -95,6 +95,27 @@ pub fn tether_config<'py>(
     config_to_dict(py, &config)
 }
 
+/// The build of the physics' arithmetic this process runs: ``"native"`` (compiled for AVX2 and
+/// FMA, on an x86-64 processor that has them) or ``"portable"`` (every other processor, or the
+/// environment variable ``ACCD_GYM_ARITHMETIC=portable``). Both compute the same bits.
+///
+/// Raises ``ConfigError`` if ``ACCD_GYM_ARITHMETIC`` holds a value other than ``native`` or
+/// ``portable`` (or nothing).
+#[pyfunction]
+pub fn arithmetic() -> PyResult<&'static str> {
+    accd_tether::portable_requested().map_err(|value| {
+        crate::errors::raise(
+            crate::errors::Kind::Config,
+            format!(
+                "`{}` is {value:?}; allowed: {} (or unset)",
+                accd_tether::ARITHMETIC_VARIABLE,
+                accd_tether::ARITHMETIC_VALUES.join(", ")
+            ),
+        )
+    })?;
+    Ok(accd_tether::arithmetic())
+}
+
 /// International Standard Atmosphere at a geometric altitude (m, -500 to 20000).
 ///
 /// Returns a dict with ``altitude`` (m), ``temperature`` (K), ``pressure`` (Pa), ``density``

@@ -38,6 +38,7 @@ pub mod control;
 pub mod error;
 pub mod physics;
 pub mod rng;
+pub mod rotation;
 pub mod state_format;
 pub mod table_file;
 pub mod task;

@@ -158,8 +158,8 @@ impl Stream {
         const SCALE: f64 = 1.0 / (1u64 << 53) as f64;
         let u1 = 1.0 - (self.rng.next_u64() >> 11) as f64 * SCALE;
         let u2 = (self.rng.next_u64() >> 11) as f64 * SCALE;
-        let r = (-2.0 * u1.ln()).sqrt();
-        let (s, c) = (std::f64::consts::TAU * u2).sin_cos();
+        let r = (-2.0 * libm::log(u1)).sqrt();
+        let (s, c) = libm::sincos(std::f64::consts::TAU * u2);
         self.spare = Some(r * s);
         r * c
     }

@@ -14,8 +14,6 @@ use std::hint::black_box;
 
 use accd_tether::config::{StepLoad, RK4_STABILITY_LIMIT};
 use accd_tether::{reference, Elasticity, Scheme, Solver, Tether, TetherConfig};
-#[cfg(feature = "lockstep")]
-use accd_tether::{LockstepWork, TetherModel};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 
 /// The towed reference case with `n` segments and the given solver, advanced 20 s so that the
@@ -63,69 +61,8 @@ fn group(c: &mut Criterion, name: &str, solver: Solver, sizes: &[usize]) {
         group.bench_with_input(BenchmarkId::new("rk4_step", n), &n, |b, _| {
             b.iter(|| stepper.step(black_box(&flow)).unwrap())
         });
-        #[cfg(feature = "lockstep")]
-        if solver == Solver::Recursive {
-            lockstep(&mut group, &tether, &flow, n);
-        }
     }
     group.finish();
-}
-
-#[cfg(feature = "lockstep")]
-/// Four tethers in lockstep ([`TetherModel::accelerations_four`], [`Tether::step_four`]): the
-/// towed tether and three copies 0.1, 0.2 and 0.3 s further on, so that the four states differ.
-/// Criterion's time is that of the four; per tether divide by 4.
-fn lockstep(
-    group: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
-    tether: &Tether,
-    flow: &accd_tether::UniformFlow,
-    n: usize,
-) {
-    let mut four: Vec<Tether> = (0..4)
-        .map(|j| {
-            let mut t = tether.clone();
-            t.step_many(10 * j, flow).unwrap();
-            t
-        })
-        .collect();
-    let states: Vec<_> = four.iter().map(|t| t.state().clone()).collect();
-    let mut models: Vec<TetherModel> = four.iter_mut().map(|t| t.model_mut().clone()).collect();
-    let mut qdd = vec![vec![0.0; models[0].dofs()]; 4];
-    let mut work = LockstepWork::default();
-    group.bench_with_input(BenchmarkId::new("rhs_four", n), &n, |b, _| {
-        b.iter(|| {
-            let [m0, m1, m2, m3] = &mut models[..] else {
-                unreachable!()
-            };
-            let [a0, a1, a2, a3] = &mut qdd[..] else {
-                unreachable!()
-            };
-            let results = TetherModel::accelerations_four(
-                [m0, m1, m2, m3],
-                std::array::from_fn(|j| states[j].time),
-                std::array::from_fn(|j| black_box(&states[j].q[..])),
-                std::array::from_fn(|j| black_box(&states[j].qd[..])),
-                [flow; 4],
-                [a0, a1, a2, a3],
-                &mut work,
-            );
-            for r in results {
-                r.unwrap();
-            }
-            black_box(&qdd);
-        })
-    });
-    let flows = [flow; 4];
-    group.bench_with_input(BenchmarkId::new("rk4_step_four", n), &n, |b, _| {
-        b.iter(|| {
-            let [t0, t1, t2, t3] = &mut four[..] else {
-                unreachable!()
-            };
-            for r in Tether::step_four([t0, t1, t2, t3], black_box(flows), &mut work) {
-                r.unwrap();
-            }
-        })
-    });
 }
 
 /// The towed attachment-model state of [`towed`] in the distributed layout, the attachment

@@ -1,71 +1,95 @@
-//! Multiply-add, fused or not, for the right-hand side's hot loops.
+//! Multiply-adds for the right-hand side's hot loops, and the choice of its build.
 //!
-//! Rust never contracts `a * b + c` into one fused multiply-add, and `f64::mul_add` is a slow
-//! library call on a processor without FMA. The hot loops are therefore written against [`Madd`]
-//! and compiled twice: with [`Fused`] inside a function built for AVX2 and FMA (chosen at run time
-//! when the processor has them) and with [`Plain`] otherwise. The two differ only in rounding.
+//! One arithmetic on every processor: every multiply-add of the hot loops is one fused
+//! multiply-add (`f64::mul_add`, rounded once), which IEEE 754 defines to the bit. Rust never
+//! contracts `a * b + c` by itself, so everything else is plain arithmetic, also the same
+//! everywhere. Where the code is compiled for AVX2 and FMA (the build chosen at run time on a
+//! processor that has them, [`native`]) and on aarch64, `mul_add` is one instruction; elsewhere it
+//! is the C library's `fma`, correctly rounded in software, slower but with the same bits. The
+//! two builds therefore differ in speed only.
+
+use std::sync::OnceLock;
 
 use nalgebra::Vector3;
 
 type V3 = Vector3<f64>;
 
-/// `a * b + c`, fused or not.
-pub(crate) trait Madd: 'static {
-    fn madd(a: f64, b: f64, c: f64) -> f64;
-}
-
-/// Separate multiply and add.
-pub(crate) struct Plain;
-
-/// One fused multiply-add (use only where the processor has FMA).
-pub(crate) struct Fused;
-
-impl Madd for Plain {
-    #[inline(always)]
-    fn madd(a: f64, b: f64, c: f64) -> f64 {
-        a * b + c
-    }
-}
-
-impl Madd for Fused {
-    #[inline(always)]
-    fn madd(a: f64, b: f64, c: f64) -> f64 {
-        a.mul_add(b, c)
-    }
+/// `a * b + c` with one rounding.
+#[inline(always)]
+pub(crate) fn madd(a: f64, b: f64, c: f64) -> f64 {
+    a.mul_add(b, c)
 }
 
 /// `a . b`.
 #[inline(always)]
-pub(crate) fn dot<M: Madd>(a: &V3, b: &V3) -> f64 {
-    M::madd(a.x, b.x, M::madd(a.y, b.y, a.z * b.z))
+pub(crate) fn dot(a: &V3, b: &V3) -> f64 {
+    madd(a.x, b.x, madd(a.y, b.y, a.z * b.z))
 }
 
 /// `a s + y`.
 #[inline(always)]
-pub(crate) fn axpy<M: Madd>(a: &V3, s: f64, y: &V3) -> V3 {
-    V3::new(
-        M::madd(a.x, s, y.x),
-        M::madd(a.y, s, y.y),
-        M::madd(a.z, s, y.z),
-    )
+pub(crate) fn axpy(a: &V3, s: f64, y: &V3) -> V3 {
+    V3::new(madd(a.x, s, y.x), madd(a.y, s, y.y), madd(a.z, s, y.z))
 }
 
 /// `a x b`.
 #[inline(always)]
-pub(crate) fn cross<M: Madd>(a: &V3, b: &V3) -> V3 {
+pub(crate) fn cross(a: &V3, b: &V3) -> V3 {
     V3::new(
-        M::madd(a.y, b.z, -(a.z * b.y)),
-        M::madd(a.z, b.x, -(a.x * b.z)),
-        M::madd(a.x, b.y, -(a.y * b.x)),
+        madd(a.y, b.z, -(a.z * b.y)),
+        madd(a.z, b.x, -(a.x * b.z)),
+        madd(a.x, b.y, -(a.y * b.x)),
     )
 }
 
-/// Whether the processor has AVX2 and FMA: where [`Fused`] and the vectorized loops may run
-/// (cached by the standard library after the first call).
+/// The environment variable that chooses the arithmetic's build: `portable` takes the build of
+/// a processor without AVX2 and FMA whatever the processor has (same results, slower; for
+/// checking that both builds agree); unset, empty or `native`, the build the processor allows.
+pub const ARITHMETIC_VARIABLE: &str = "ACCD_GYM_ARITHMETIC";
+
+/// The values [`ARITHMETIC_VARIABLE`] takes.
+pub const ARITHMETIC_VALUES: [&str; 2] = ["native", "portable"];
+
+/// Whether [`ARITHMETIC_VARIABLE`] asks for the portable build: `Ok(true)` for `portable`,
+/// `Ok(false)` when unset, empty or `native`, and otherwise `Err` with the value it holds. Read
+/// once per process.
+pub fn portable_requested() -> std::result::Result<bool, String> {
+    static CHOICE: OnceLock<std::result::Result<bool, String>> = OnceLock::new();
+    CHOICE
+        .get_or_init(|| match std::env::var(ARITHMETIC_VARIABLE) {
+            Err(std::env::VarError::NotPresent) => Ok(false),
+            Ok(v) if v.is_empty() || v == "native" => Ok(false),
+            Ok(v) if v == "portable" => Ok(true),
+            Ok(v) => Err(v),
+            Err(std::env::VarError::NotUnicode(v)) => Err(v.to_string_lossy().into_owned()),
+        })
+        .clone()
+}
+
+/// Whether the build for AVX2 and FMA runs: the processor has both and [`ARITHMETIC_VARIABLE`]
+/// does not ask for the portable build (a value it does not know counts as `native`; the Python
+/// package rejects such a value on import). A question of speed only: both builds compute the
+/// same bits.
 #[cfg(target_arch = "x86_64")]
 #[inline]
-pub(crate) fn has_avx2_fma() -> bool {
-    std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+pub(crate) fn native() -> bool {
+    static NATIVE: OnceLock<bool> = OnceLock::new();
+    *NATIVE.get_or_init(|| {
+        std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma")
+            && portable_requested() != Ok(true)
+    })
+}
+
+/// The build of the right-hand side this process runs: `"native"` (compiled for AVX2 and FMA)
+/// or `"portable"` (every other processor, or [`ARITHMETIC_VARIABLE`] set to `portable`). Both
+/// give the same bits.
+pub fn arithmetic() -> &'static str {
+    #[cfg(target_arch = "x86_64")]
+    if native() {
+        return "native";
+    }
+    "portable"
 }
 
 #[cfg(test)]
@@ -73,14 +97,17 @@ mod tests {
     use super::*;
 
     #[test]
-    fn fused_and_plain_agree() {
+    fn products_are_rounded_once() {
         let a = V3::new(0.3, -1.7, 2.9);
         let b = V3::new(-4.1, 0.6, 1.25);
         let y = V3::new(1.0, 2.0, -3.0);
-        assert!((dot::<Plain>(&a, &b) - a.dot(&b)).abs() < 1e-15);
-        assert!((dot::<Fused>(&a, &b) - a.dot(&b)).abs() < 1e-14);
-        assert!((axpy::<Fused>(&a, 0.7, &y) - (a * 0.7 + y)).norm() < 1e-15);
-        assert!((cross::<Fused>(&a, &b) - a.cross(&b)).norm() < 1e-14);
-        assert!((cross::<Plain>(&a, &b) - a.cross(&b)).norm() == 0.0);
+        assert!((dot(&a, &b) - a.dot(&b)).abs() < 1e-14);
+        assert!((axpy(&a, 0.7, &y) - (a * 0.7 + y)).norm() < 1e-15);
+        assert!((cross(&a, &b) - a.cross(&b)).norm() < 1e-14);
+        // 1 + 2^-30 squared is 1 + 2^-29 + 2^-60: one rounding keeps the 2^-60 that a separate
+        // product loses.
+        let x = 1.0 + f64::powi(2.0, -30);
+        assert_eq!(madd(x, x, -1.0), f64::powi(2.0, -29) + f64::powi(2.0, -60));
+        assert_eq!(x * x - 1.0, f64::powi(2.0, -29));
     }
 }

@@ -55,14 +55,15 @@ impl Atmosphere {
             let t = SEA_LEVEL_TEMPERATURE - LAPSE_RATE * altitude;
             (
                 t,
-                SEA_LEVEL_PRESSURE * (t / SEA_LEVEL_TEMPERATURE).powf(exponent),
+                SEA_LEVEL_PRESSURE * libm::pow(t / SEA_LEVEL_TEMPERATURE, exponent),
             )
         } else {
             let p11 = SEA_LEVEL_PRESSURE
-                * (tropopause_temperature / SEA_LEVEL_TEMPERATURE).powf(exponent);
-            let decay = (-STANDARD_GRAVITY * (altitude - TROPOPAUSE)
-                / (GAS_CONSTANT * tropopause_temperature))
-                .exp();
+                * libm::pow(tropopause_temperature / SEA_LEVEL_TEMPERATURE, exponent);
+            let decay = libm::exp(
+                -STANDARD_GRAVITY * (altitude - TROPOPAUSE)
+                    / (GAS_CONSTANT * tropopause_temperature),
+            );
             (tropopause_temperature, p11 * decay)
         };
         Ok(Atmosphere {

@@ -15,7 +15,7 @@
 
 use nalgebra::Vector3;
 
-use crate::arith::{axpy, cross, dot, Madd};
+use crate::arith::{axpy, cross, dot, madd};
 use crate::direction::DirectionJet;
 use crate::error::{Result, TetherError};
 use crate::surroundings::Surroundings;
@@ -151,19 +151,20 @@ pub(crate) struct ChainState {
 }
 
 /// The inputs of the kinematics a [`ChainState`] holds: the bits of `q` and `q'` (their first
-/// 2n + 1 entries, all the pass reads) and the multiply-add flavour, or nothing.
+/// 2n + 1 entries, all the pass reads), or nothing.
 #[derive(Debug, Clone)]
 struct HeldKinematics {
-    flavour: Option<std::any::TypeId>,
+    /// Whether `inputs` holds the inputs of the kinematics fields.
+    valid: bool,
     /// `q` then `q'`, as bits (so that -0 and +0 differ, and NaN never matches).
     inputs: Vec<u64>,
 }
 
 impl HeldKinematics {
-    /// Whether the held kinematics are those of `(q, qd)` with flavour `M`.
+    /// Whether the held kinematics are those of `(q, qd)`.
     #[inline(always)]
-    fn holds<M: Madd>(&self, q: &[f64], qd: &[f64]) -> bool {
-        if self.flavour != Some(std::any::TypeId::of::<M>()) {
+    fn holds(&self, q: &[f64], qd: &[f64]) -> bool {
+        if !self.valid {
             return false;
         }
         let (held_q, held_qd) = self.inputs.split_at(q.len());
@@ -172,7 +173,7 @@ impl HeldKinematics {
     }
 
     #[inline(always)]
-    fn hold<M: Madd>(&mut self, q: &[f64], qd: &[f64]) {
+    fn hold(&mut self, q: &[f64], qd: &[f64]) {
         let (held_q, held_qd) = self.inputs.split_at_mut(q.len());
         for (h, v) in held_q.iter_mut().zip(q) {
             *h = v.to_bits();
@@ -180,7 +181,7 @@ impl HeldKinematics {
         for (h, v) in held_qd.iter_mut().zip(qd) {
             *h = v.to_bits();
         }
-        self.flavour = Some(std::any::TypeId::of::<M>());
+        self.valid = true;
     }
 }
 
@@ -212,7 +213,7 @@ impl ChainState {
             tip_vel: V3::zeros(),
             tip_force: V3::zeros(),
             held: HeldKinematics {
-                flavour: None,
+                valid: false,
                 inputs: vec![0; 2 * (2 * n + 1)],
             },
         }
@@ -225,7 +226,7 @@ impl ChainState {
 
     /// Directions and their partials only, from libm's sin and cos (for the mass matrix).
     pub fn directions(&mut self, q: &[f64]) {
-        self.held.flavour = None;
+        self.held.valid = false;
         for k in 0..self.n {
             let jet = DirectionJet::new(q[1 + 2 * k], q[2 + 2 * k]);
             self.e.set(k, jet.e);
@@ -243,41 +244,35 @@ impl ChainState {
     /// stage of a capture step, whose state the step before has just walked through
     /// ([`crate::TetherModel::centres_and_tip_batch`]).
     #[inline(always)]
-    pub fn kinematics<M: Madd>(&mut self, time: f64, l: f64, q: &[f64], qd: &[f64]) -> Result<()> {
+    pub fn kinematics(&mut self, time: f64, l: f64, q: &[f64], qd: &[f64]) -> Result<()> {
         let n = self.n;
         let (q, qd) = (&q[..2 * n + 1], &qd[..2 * n + 1]);
-        if self.held.holds::<M>(q, qd) {
+        if self.held.holds(q, qd) {
             return Ok(());
         }
-        self.held.flavour = None;
-        self.kinematics_pass::<M>(time, l, q, qd)
+        self.held.valid = false;
+        self.kinematics_pass(time, l, q, qd)
     }
 
-    /// Whether the kinematics fields hold the pass of `(q, qd)` with flavour `M` (for tests).
+    /// Whether the kinematics fields hold the pass of `(q, qd)` (for tests).
     #[cfg(test)]
-    pub fn holds_kinematics_of<M: Madd>(&self, q: &[f64], qd: &[f64]) -> bool {
+    pub fn holds_kinematics_of(&self, q: &[f64], qd: &[f64]) -> bool {
         let n = self.n;
-        self.held.holds::<M>(&q[..2 * n + 1], &qd[..2 * n + 1])
+        self.held.holds(&q[..2 * n + 1], &qd[..2 * n + 1])
     }
 
     /// [`ChainState::kinematics`], then remembers its inputs, so that the next pass of the same
     /// inputs is skipped (for a walk through a state that a step will start from).
     #[inline(always)]
-    pub fn kinematics_held<M: Madd>(
-        &mut self,
-        time: f64,
-        l: f64,
-        q: &[f64],
-        qd: &[f64],
-    ) -> Result<()> {
-        self.kinematics::<M>(time, l, q, qd)?;
+    pub fn kinematics_held(&mut self, time: f64, l: f64, q: &[f64], qd: &[f64]) -> Result<()> {
+        self.kinematics(time, l, q, qd)?;
         let n = self.n;
-        self.held.hold::<M>(&q[..2 * n + 1], &qd[..2 * n + 1]);
+        self.held.hold(&q[..2 * n + 1], &qd[..2 * n + 1]);
         Ok(())
     }
 
     #[inline(always)]
-    fn kinematics_pass<M: Madd>(&mut self, time: f64, l: f64, q: &[f64], qd: &[f64]) -> Result<()> {
+    fn kinematics_pass(&mut self, time: f64, l: f64, q: &[f64], qd: &[f64]) -> Result<()> {
         let n = self.n;
         let (s, sd) = (q[0], qd[0]);
         let (phi, psi) = (&mut self.phi[..n], &mut self.psi[..n]);
@@ -293,7 +288,7 @@ impl ChainState {
         let (edx, edy, edz) = self.e_dot.slices(n);
         let (wx, wy, wz) = self.w.slices(n);
         let (ox, oy, oz) = self.omega.slices(n);
-        let singular = directions_and_rates::<M>(
+        let singular = directions_and_rates(
             &self.sin_phi[..n],
             &self.cos_phi[..n],
             &self.sin_psi[..n],
@@ -338,14 +333,14 @@ impl ChainState {
         let (vx, vy, vz) = self.com_vel.slices(n);
         let e0 = e.get(0);
         let mut p = e0 * s;
-        let mut pv = axpy::<M>(&e_dot.get(0), s, &(e0 * sd));
+        let mut pv = axpy(&e_dot.get(0), s, &(e0 * sd));
         for k in 0..n {
             let (e, e_dot) = (e.get(k), e_dot.get(k));
-            let (c, v) = (axpy::<M>(&e, half, &p), axpy::<M>(&e_dot, half, &pv));
+            let (c, v) = (axpy(&e, half, &p), axpy(&e_dot, half, &pv));
             (cx[k], cy[k], cz[k]) = (c.x, c.y, c.z);
             (vx[k], vy[k], vz[k]) = (v.x, v.y, v.z);
-            p = axpy::<M>(&e, l, &p);
-            pv = axpy::<M>(&e_dot, l, &pv);
+            p = axpy(&e, l, &p);
+            pv = axpy(&e_dot, l, &pv);
         }
         self.tip = p;
         self.tip_vel = pv;
@@ -357,7 +352,7 @@ impl ChainState {
     /// rod starts `s_k e_k` beyond its joint, with `s_k` and `s_k'` from `stretch(k)`.
     pub fn stretch_centres(&mut self, l: f64, stretch: impl Fn(usize) -> (f64, f64)) {
         // The centres and the tip are no longer the kinematics pass's alone.
-        self.held.flavour = None;
+        self.held.valid = false;
         let n = self.n;
         let half = 0.5 * l;
         let mut p = V3::zeros();
@@ -379,7 +374,7 @@ impl ChainState {
     /// The loads pass (see the module documentation), after [`ChainState::kinematics`]. Errors if
     /// a joint has folded back on itself.
     #[inline(always)]
-    pub fn loads<M: Madd, S: Surroundings + ?Sized>(
+    pub fn loads<S: Surroundings + ?Sized>(
         &mut self,
         time: f64,
         c: &LoadConstants,
@@ -402,12 +397,12 @@ impl ChainState {
             for j in 1..n {
                 let prev = V3::new(ex[j - 1], ey[j - 1], ez[j - 1]);
                 let e = V3::new(ex[j], ey[j], ez[j]);
-                let one_plus_cos = 1.0 + dot::<M>(&prev, &e);
+                let one_plus_cos = 1.0 + dot(&prev, &e);
                 folded += usize::from(!(FOLDED_JOINT..f64::INFINITY).contains(&one_plus_cos));
                 let coef = c.bend_gain / one_plus_cos;
                 let tau = V3::new(ox[j] - ox[j - 1], oy[j] - oy[j - 1], oz[j] - oz[j - 1]) * c.c_b;
-                let out = axpy::<M>(&prev, coef, &(-cross::<M>(&tau, &e)));
-                let inb = axpy::<M>(&e, coef, &cross::<M>(&tau, &prev));
+                let out = axpy(&prev, coef, &(-cross(&tau, &e)));
+                let inb = axpy(&e, coef, &cross(&tau, &prev));
                 (tox[j], toy[j], toz[j]) = (out.x, out.y, out.z);
                 (tix[j], tiy[j], tiz[j]) = (inb.x, inb.y, inb.z);
             }
@@ -432,7 +427,7 @@ impl ChainState {
         let (fx, fy, fz) = self.force.slices(n);
         let (xx, xy, xz) = self.extra.slices(n);
         let (rx, ry, rz) = self.reduced.slices(n);
-        segment_loads::<M, S>(
+        segment_loads::<S>(
             time,
             c,
             surroundings,
@@ -475,7 +470,7 @@ impl ChainState {
 /// they do not overlap and vectorizes the loop.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn directions_and_rates<M: Madd>(
+fn directions_and_rates(
     sf: &[f64],
     cf: &[f64],
     sp: &[f64],
@@ -522,15 +517,15 @@ fn directions_and_rates<M: Madd>(
         let e_phi = V3::new(cp * sf, 0.0, cp * cf);
         let e_psi = V3::new(sp * cf, cp, -sp * sf);
         let (phi_d, psi_d) = (rates[2 * k], rates[2 * k + 1]);
-        let e_dot = axpy::<M>(&e_psi, psi_d, &(e_phi * phi_d));
+        let e_dot = axpy(&e_psi, psi_d, &(e_phi * phi_d));
         let (pp, ps2, ss) = (phi_d * phi_d, 2.0 * phi_d * psi_d, psi_d * psi_d);
         let w = V3::new(
-            M::madd(e_phi.z, pp, e_psi.z * ps2),
+            madd(e_phi.z, pp, e_psi.z * ps2),
             0.0,
-            -M::madd(e_phi.x, pp, e_psi.x * ps2),
+            -madd(e_phi.x, pp, e_psi.x * ps2),
         );
-        let w = axpy::<M>(&e, -ss, &w);
-        let omega = cross::<M>(&e, &e_dot);
+        let w = axpy(&e, -ss, &w);
+        let omega = cross(&e, &e_dot);
         (ex[k], ey[k], ez[k]) = (e.x, e.y, e.z);
         (epx[k], epz[k]) = (e_phi.x, e_phi.z);
         (esx[k], esy[k], esz[k]) = (e_psi.x, e_psi.y, e_psi.z);
@@ -546,7 +541,7 @@ fn directions_and_rates<M: Madd>(
 /// entries 0 and n zero. Separate slices for the vectorizer, as [`directions_and_rates`].
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn segment_loads<M: Madd, S: Surroundings + ?Sized>(
+fn segment_loads<S: Surroundings + ?Sized>(
     time: f64,
     c: &LoadConstants,
     surroundings: &S,
@@ -599,19 +594,19 @@ fn segment_loads<M: Madd, S: Surroundings + ?Sized>(
                 let rho = surroundings.air_density(time, &com);
                 // x * 1.0 == x exactly: the default (relative) drag is bit for bit the plain difference.
                 let rel = ($air)(k, &com) - V3::new(vx[k], vy[k], vz[k]) * c.segment_velocity_weight;
-                let vt = dot::<M>(&rel, &e);
-                let vn = axpy::<M>(&e, -vt, &rel);
-                let vn_abs = dot::<M>(&vn, &vn).sqrt();
-                let force = axpy::<M>(&e, rho * c.tangential_drag * vt * vt.abs(), &weight);
-                let force = axpy::<M>(&vn, rho * c.normal_drag * vn_abs, &force);
+                let vt = dot(&rel, &e);
+                let vn = axpy(&e, -vt, &rel);
+                let vn_abs = dot(&vn, &vn).sqrt();
+                let force = axpy(&e, rho * c.tangential_drag * vt * vt.abs(), &weight);
+                let force = axpy(&vn, rho * c.normal_drag * vn_abs, &force);
                 let joints = V3::new(
                     tox[k] + tix[k + 1],
                     toy[k] + tiy[k + 1],
                     toz[k] + tiz[k + 1],
                 );
                 let w = V3::new(wx[k], wy[k], wz[k]);
-                let extra = axpy::<M>(&w, -c.rod_inertia, &joints);
-                let r = axpy::<M>(&force, half_inv_l, &axpy::<M>(&extra, inv_l2, &(w * m4)));
+                let extra = axpy(&w, -c.rod_inertia, &joints);
+                let r = axpy(&force, half_inv_l, &axpy(&extra, inv_l2, &(w * m4)));
                 (fx[k], fy[k], fz[k]) = (force.x, force.y, force.z);
                 (xx[k], xy[k], xz[k]) = (extra.x, extra.y, extra.z);
                 (rx[k], ry[k], rz[k]) = (r.x, r.y, r.z);

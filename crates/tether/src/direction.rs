@@ -42,8 +42,8 @@ impl DirectionJet {
     /// Evaluates the direction and its derivatives at (phi, psi).
     #[inline]
     pub fn new(phi: f64, psi: f64) -> Self {
-        let (sf, cf) = phi.sin_cos();
-        let (sp, cp) = psi.sin_cos();
+        let (sf, cf) = libm::sincos(phi);
+        let (sp, cp) = libm::sincos(psi);
         DirectionJet {
             e: Vector3::new(-cp * cf, sp, cp * sf),
             e_phi: Vector3::new(cp * sf, 0.0, cp * cf),
@@ -78,8 +78,8 @@ pub fn direction(phi: f64, psi: f64) -> Vector3<f64> {
 /// Angles (phi, psi) of a direction (normalised first); psi in [-pi/2, pi/2], phi in (-pi, pi].
 pub fn angles(e: &Vector3<f64>) -> (f64, f64) {
     let u = e.normalize();
-    let psi = u.y.clamp(-1.0, 1.0).asin();
-    let phi = u.z.atan2(-u.x);
+    let psi = libm::asin(u.y.clamp(-1.0, 1.0));
+    let phi = libm::atan2(u.z, -u.x);
     (phi, psi)
 }
 

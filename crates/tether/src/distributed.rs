@@ -67,9 +67,9 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::arith::{axpy, dot, Madd};
+use crate::arith::{axpy, dot, madd};
+use crate::axial::AxialSolve;
 use crate::chain::ChainState;
-use crate::dynamics::AxialSolve;
 use crate::error::{Result, TetherError};
 
 type V3 = Vector3<f64>;
@@ -77,8 +77,8 @@ type M3 = Matrix3<f64>;
 
 /// `a . b` for an `a` whose y component is zero (the frame's second axis `e_phi / cos psi`).
 #[inline(always)]
-fn dot_xz<M: Madd>(a: &V3, b: &V3) -> f64 {
-    M::madd(a.x, b.x, a.z * b.z)
+fn dot_xz(a: &V3, b: &V3) -> f64 {
+    madd(a.x, b.x, a.z * b.z)
 }
 
 /// Index in q of segment k's stretch s_k (n segments).
@@ -136,56 +136,55 @@ impl Sym {
     }
 
     #[inline(always)]
-    fn mul<M: Madd>(&self, v: &V3) -> V3 {
+    fn mul(&self, v: &V3) -> V3 {
         V3::new(
-            M::madd(self.xx, v.x, M::madd(self.xy, v.y, self.xz * v.z)),
-            M::madd(self.xy, v.x, M::madd(self.yy, v.y, self.yz * v.z)),
-            M::madd(self.xz, v.x, M::madd(self.yz, v.y, self.zz * v.z)),
+            madd(self.xx, v.x, madd(self.xy, v.y, self.xz * v.z)),
+            madd(self.xy, v.x, madd(self.yy, v.y, self.yz * v.z)),
+            madd(self.xz, v.x, madd(self.yz, v.y, self.zz * v.z)),
         )
     }
 
     /// [`Sym::mul`] of a vector whose y component is zero.
     #[inline(always)]
-    fn mul_xz<M: Madd>(&self, v: &V3) -> V3 {
+    fn mul_xz(&self, v: &V3) -> V3 {
         V3::new(
-            M::madd(self.xx, v.x, self.xz * v.z),
-            M::madd(self.xy, v.x, self.yz * v.z),
-            M::madd(self.xz, v.x, self.zz * v.z),
+            madd(self.xx, v.x, self.xz * v.z),
+            madd(self.xy, v.x, self.yz * v.z),
+            madd(self.xz, v.x, self.zz * v.z),
         )
     }
 
     /// The inverse of a positive definite matrix by its cofactors, or `None` where a leading
     /// minor is not positive (or NaN).
     #[inline(always)]
-    fn inverse_spd<M: Madd>(&self) -> Option<Sym> {
-        let c_xx = M::madd(self.yy, self.zz, -(self.yz * self.yz));
-        let c_xy = M::madd(self.xz, self.yz, -(self.xy * self.zz));
-        let c_xz = M::madd(self.xy, self.yz, -(self.xz * self.yy));
-        let minor2 = M::madd(self.xx, self.yy, -(self.xy * self.xy));
-        let det = M::madd(self.xx, c_xx, M::madd(self.xy, c_xy, self.xz * c_xz));
+    fn inverse_spd(&self) -> Option<Sym> {
+        let c_xx = madd(self.yy, self.zz, -(self.yz * self.yz));
+        let c_xy = madd(self.xz, self.yz, -(self.xy * self.zz));
+        let c_xz = madd(self.xy, self.yz, -(self.xz * self.yy));
+        let minor2 = madd(self.xx, self.yy, -(self.xy * self.xy));
+        let det = madd(self.xx, c_xx, madd(self.xy, c_xy, self.xz * c_xz));
         if !(self.xx > 0.0 && minor2 > 0.0 && det > 0.0) {
             return None;
         }
         let inv = 1.0 / det;
         Some(Sym {
             xx: c_xx * inv,
-            yy: M::madd(self.xx, self.zz, -(self.xz * self.xz)) * inv,
+            yy: madd(self.xx, self.zz, -(self.xz * self.xz)) * inv,
             zz: minor2 * inv,
             xy: c_xy * inv,
             xz: c_xz * inv,
-            yz: M::madd(self.xy, self.xz, -(self.xx * self.yz)) * inv,
+            yz: madd(self.xy, self.xz, -(self.xx * self.yz)) * inv,
         })
     }
 
     /// `U S U^T` for the orthonormal frame `U = [u0, u1, u2]` (columns).
     #[inline(always)]
-    fn in_frame<M: Madd>(&self, u0: &V3, u1: &V3, u2: &V3) -> Sym {
+    fn in_frame(&self, u0: &V3, u1: &V3, u2: &V3) -> Sym {
         // Columns of S U^T's transpose: r_i = sum_j S_ij u_j, then U S U^T = sum_i u_i r_i^T.
-        let r0 = axpy::<M>(u0, self.xx, &axpy::<M>(u1, self.xy, &(u2 * self.xz)));
-        let r1 = axpy::<M>(u0, self.xy, &axpy::<M>(u1, self.yy, &(u2 * self.yz)));
-        let r2 = axpy::<M>(u0, self.xz, &axpy::<M>(u1, self.yz, &(u2 * self.zz)));
-        let entry =
-            |a: usize, b: usize| M::madd(u0[a], r0[b], M::madd(u1[a], r1[b], u2[a] * r2[b]));
+        let r0 = axpy(u0, self.xx, &axpy(u1, self.xy, &(u2 * self.xz)));
+        let r1 = axpy(u0, self.xy, &axpy(u1, self.yy, &(u2 * self.yz)));
+        let r2 = axpy(u0, self.xz, &axpy(u1, self.yz, &(u2 * self.zz)));
+        let entry = |a: usize, b: usize| madd(u0[a], r0[b], madd(u1[a], r1[b], u2[a] * r2[b]));
         Sym {
             xx: entry(0, 0),
             yy: entry(1, 1),
@@ -259,12 +258,12 @@ fn singular(time: f64, segment: usize) -> TetherError {
 
 /// The O(n) recursion (module documentation): q'' into `qdd`, the tensions (n + 1 values) into
 /// `tensions` if given. With `axial` (a stage of a linearly implicit step,
-/// [`crate::dynamics::AxialStage`]) every element's force is evaluated at the stage's arguments
+/// [`crate::axial::AxialStage`]) every element's force is evaluated at the stage's arguments
 /// and its stretch entry of `H` gains the added mass. Inlined into its caller, which compiles it
 /// with fused multiply-adds where the processor has them ([`crate::arith`]).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-pub(crate) fn solve<M: Madd>(
+pub(crate) fn solve(
     time: f64,
     c: &Constants,
     chain: &ChainState,
@@ -298,7 +297,7 @@ pub(crate) fn solve<M: Madd>(
     let mut b = chain.tip_force;
     for k in (0..n).rev() {
         let (s, sd, spring_s, spring_sd) = stretches.get(k);
-        let spring = M::madd(c.k, spring_s, c.c * spring_sd);
+        let spring = madd(c.k, spring_s, c.c * spring_sd);
         // The segment's frame U = [e, e_phi / cos psi, e_psi]; e_phi has no y component.
         let inv_cos = 1.0 / cos_psi[k];
         let u0 = e.get(k);
@@ -308,60 +307,60 @@ pub(crate) fn solve<M: Madd>(
         let inv_rho_t = 1.0 / rho_t;
         let drift = e_dot.get(k) * (2.0 * sd);
         let wk = w.get(k);
-        let c0 = axpy::<M>(&wk, rho_c, &drift);
-        let t0 = axpy::<M>(&wk, rho_t, &drift);
+        let c0 = axpy(&wk, rho_c, &drift);
+        let t0 = axpy(&wk, rho_t, &drift);
         // A in the segment's frame.
-        let (a0, a1, a2) = (a.mul::<M>(&u0), a.mul_xz::<M>(&u1), a.mul::<M>(&u2));
-        let delta = M::madd(m * rho_c, rho_c, c.rod_inertia) * inv_rho_t * inv_rho_t;
+        let (a0, a1, a2) = (a.mul(&u0), a.mul_xz(&u1), a.mul(&u2));
+        let delta = madd(m * rho_c, rho_c, c.rod_inertia) * inv_rho_t * inv_rho_t;
         let gp = m * rho_c * inv_rho_t;
         let x = Sym {
-            xx: dot::<M>(&u0, &a0) + (m + added),
-            yy: dot_xz::<M>(&u1, &a1) + delta,
-            zz: dot::<M>(&u2, &a2) + delta,
-            xy: dot::<M>(&u0, &a1),
-            xz: dot::<M>(&u0, &a2),
-            yz: dot_xz::<M>(&u1, &a2),
+            xx: dot(&u0, &a0) + (m + added),
+            yy: dot_xz(&u1, &a1) + delta,
+            zz: dot(&u2, &a2) + delta,
+            xy: dot(&u0, &a1),
+            xz: dot(&u0, &a2),
+            yz: dot_xz(&u1, &a2),
         };
-        let x_inv = x.inverse_spd::<M>().ok_or_else(|| singular(time, k + 1))?;
+        let x_inv = x.inverse_spd().ok_or_else(|| singular(time, k + 1))?;
         let eps = delta - gp;
         let sigma = m + delta - 2.0 * gp;
         let eps2 = eps * eps;
         // A_k = U (diag(d, sigma, sigma) - E X^-1 E) U^T.
         let local = Sym {
-            xx: M::madd(-added * added, x_inv.xx, added),
-            yy: M::madd(-eps2, x_inv.yy, sigma),
-            zz: M::madd(-eps2, x_inv.zz, sigma),
+            xx: madd(-added * added, x_inv.xx, added),
+            yy: madd(-eps2, x_inv.yy, sigma),
+            zz: madd(-eps2, x_inv.zz, sigma),
             xy: -added * eps * x_inv.xy,
             xz: -added * eps * x_inv.xz,
             yz: -eps2 * x_inv.yz,
         };
         // The bias: g_w = D_t^-1 g, y = X^-1 g_w, b_k = f1 + f2 - U (g_w - E y).
-        let f1 = axpy::<M>(&c0, -m, &force.get(k));
-        let f2 = b - a.mul::<M>(&t0);
+        let f1 = axpy(&c0, -m, &force.get(k));
+        let f2 = b - a.mul(&t0);
         let ext = extra.get(k);
         let ratio = rho_c * inv_rho_t;
         let g_w = V3::new(
-            dot::<M>(&u0, &f1) + dot::<M>(&u0, &f2) - spring,
-            M::madd(
-                dot_xz::<M>(&u1, &f1),
+            dot(&u0, &f1) + dot(&u0, &f2) - spring,
+            madd(
+                dot_xz(&u1, &f1),
                 ratio,
-                M::madd(dot_xz::<M>(&u1, &ext), inv_rho_t, dot_xz::<M>(&u1, &f2)),
+                madd(dot_xz(&u1, &ext), inv_rho_t, dot_xz(&u1, &f2)),
             ),
-            M::madd(
-                dot::<M>(&u2, &f1),
+            madd(
+                dot(&u2, &f1),
                 ratio,
-                M::madd(dot::<M>(&u2, &ext), inv_rho_t, dot::<M>(&u2, &f2)),
+                madd(dot(&u2, &ext), inv_rho_t, dot(&u2, &f2)),
             ),
         );
-        let y = x_inv.mul::<M>(&g_w);
+        let y = x_inv.mul(&g_w);
         let r = V3::new(
-            M::madd(-added, y.x, g_w.x),
-            M::madd(-eps, y.y, g_w.y),
-            M::madd(-eps, y.z, g_w.z),
+            madd(-added, y.x, g_w.x),
+            madd(-eps, y.y, g_w.y),
+            madd(-eps, y.z, g_w.z),
         );
-        let ur = axpy::<M>(&u0, r.x, &axpy::<M>(&u1, r.y, &(u2 * r.z)));
+        let ur = axpy(&u0, r.x, &axpy(&u1, r.y, &(u2 * r.z)));
         b = f1 + f2 - ur;
-        a = local.in_frame::<M>(&u0, &u1, &u2);
+        a = local.in_frame(&u0, &u1, &u2);
         let art = &mut work[k];
         art.x_inv = x_inv;
         art.e_d = added;
@@ -385,16 +384,12 @@ pub(crate) fn solve<M: Madd>(
         let u1 = V3::new(e_phi.x[k] * art.inv_cos, 0.0, e_phi.z[k] * art.inv_cos);
         let u2 = e_psi.get(k);
         if let Some(t) = tensions.as_deref_mut() {
-            t[k] = dot::<M>(&(art.b - art.a.mul::<M>(&acc)), &u0);
+            t[k] = dot(&(art.b - art.a.mul(&acc)), &u0);
         }
         // w'' = y - a_loc + X^-1 E a_loc, z'' = D_t^-1 w''.
-        let a_loc = V3::new(
-            dot::<M>(&u0, &acc),
-            dot_xz::<M>(&u1, &acc),
-            dot::<M>(&u2, &acc),
-        );
+        let a_loc = V3::new(dot(&u0, &acc), dot_xz(&u1, &acc), dot(&u2, &acc));
         let ea = V3::new(art.e_d * a_loc.x, art.e_eps * a_loc.y, art.e_eps * a_loc.z);
-        let wdd = art.y - a_loc + art.x_inv.mul::<M>(&ea);
+        let wdd = art.y - a_loc + art.x_inv.mul(&ea);
         if k == 0 {
             stretch_qdd[0] = wdd.x;
         } else {
@@ -402,15 +397,11 @@ pub(crate) fn solve<M: Madd>(
         }
         angles[0] = wdd.y * art.inv_rho_t * art.inv_cos;
         angles[1] = wdd.z * art.inv_rho_t;
-        acc += axpy::<M>(
-            &u0,
-            wdd.x,
-            &axpy::<M>(&u1, wdd.y, &axpy::<M>(&u2, wdd.z, &art.t0)),
-        );
+        acc += axpy(&u0, wdd.x, &axpy(&u1, wdd.y, &axpy(&u2, wdd.z, &art.t0)));
     }
     if let Some(t) = tensions {
-        t[n] = dot::<M>(
-            &axpy::<M>(&acc, -c.tip_mass, &chain.tip_force),
+        t[n] = dot(
+            &axpy(&acc, -c.tip_mass, &chain.tip_force),
             &chain.e.get(n - 1),
         );
     }

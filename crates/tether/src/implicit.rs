@@ -60,7 +60,7 @@
 //! `t + c_i h`, with no `df/dt` correction: a W-method keeps its order with any `T`, including
 //! the zero time column. Stage buffers are allocated once; a step allocates nothing.
 
-use crate::dynamics::AxialStage;
+use crate::axial::AxialStage;
 use crate::error::{Result, TetherError};
 use crate::integrator::{InSurroundings, System, STATE_BOUND};
 use crate::surroundings::Surroundings;

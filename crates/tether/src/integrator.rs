@@ -11,8 +11,6 @@
 //! substep j starts at `t + j dt / k`. The stepper never keeps time: callers hold the clock
 //! (`origin + steps dt`, free of the drift of summing dt). Stage buffers are allocated once.
 
-#[cfg(feature = "lockstep")]
-use crate::dynamics::LockstepWork;
 use crate::dynamics::TetherModel;
 use crate::error::{Result, TetherError};
 use crate::surroundings::Surroundings;
@@ -51,26 +49,6 @@ pub trait System {
     }
 }
 
-#[cfg(feature = "lockstep")]
-/// A [`System`] of which four can have their derivatives evaluated together, as
-/// [`Rk4::advance_adaptive_four`] steps them: the tether's recursion then runs four AVX2 lanes
-/// wide ([`TetherModel::accelerations_four`]).
-pub trait Lockstep: System {
-    /// [`System::derivatives`] of four systems, lane j for `systems[j]`, each bit for bit what
-    /// it gives alone; a lane's error leaves the others' results unchanged.
-    #[allow(clippy::too_many_arguments)]
-    fn derivatives_four(
-        systems: &mut [&mut Self; 4],
-        time: [f64; 4],
-        q: [&[f64]; 4],
-        qd: [&[f64]; 4],
-        x: [&[f64]; 4],
-        qdd: [&mut [f64]; 4],
-        xd: [&mut [f64]; 4],
-        work: &mut LockstepWork,
-    ) -> [Result<()>; 4];
-}
-
 /// The tether model in its surroundings, as a [`System`] without first-order states.
 pub struct InSurroundings<'a, S: Surroundings + ?Sized> {
     /// The equations of motion.
@@ -96,31 +74,6 @@ impl<S: Surroundings + ?Sized> System for InSurroundings<'_, S> {
         self.model
             .accelerations(time, q, qd, self.surroundings, qdd)
             .map(|_| ())
-    }
-}
-
-#[cfg(feature = "lockstep")]
-impl<S: Surroundings + ?Sized> Lockstep for InSurroundings<'_, S> {
-    fn derivatives_four(
-        systems: &mut [&mut Self; 4],
-        time: [f64; 4],
-        q: [&[f64]; 4],
-        qd: [&[f64]; 4],
-        _x: [&[f64]; 4],
-        qdd: [&mut [f64]; 4],
-        _xd: [&mut [f64]; 4],
-        work: &mut LockstepWork,
-    ) -> [Result<()>; 4] {
-        let [a, b, c, d] = systems;
-        let surroundings = [
-            a.surroundings,
-            b.surroundings,
-            c.surroundings,
-            d.surroundings,
-        ];
-        let models = [&mut *a.model, &mut *b.model, &mut *c.model, &mut *d.model];
-        TetherModel::accelerations_four(models, time, q, qd, surroundings, qdd, work)
-            .map(|r| r.map(|_| ()))
     }
 }
 
@@ -358,157 +311,6 @@ impl Rk4 {
         };
         (stages, first_slot, second_slot)
     }
-
-    /// [`Rk4::advance_adaptive`] for four systems at once, lane j with `rk4[j]` for
-    /// `systems[j]`: each stage's derivatives of the four are evaluated together
-    /// ([`Lockstep::derivatives_four`]), everything else lane by lane with the very operations
-    /// of the single step, so that every lane's result, error included, is bit for bit what
-    /// `advance_adaptive` gives it alone. `substeps(j, system, q, qd)` chooses lane j's
-    /// substeps after its first stage; lanes that choose differently, or any state or buffer of
-    /// the wrong size, finish one at a time. A failed lane's state is unchanged, as alone.
-    /// Allocates nothing once `work` is sized.
-    #[cfg(feature = "lockstep")]
-    #[allow(clippy::too_many_arguments)]
-    pub fn advance_adaptive_four<Y, F>(
-        rk4: [&mut Rk4; 4],
-        systems: &mut [&mut Y; 4],
-        time: [f64; 4],
-        dt: [f64; 4],
-        q: [&mut Vec<f64>; 4],
-        qd: [&mut Vec<f64>; 4],
-        x: [&mut [f64]; 4],
-        work: &mut LockstepWork,
-        mut substeps: F,
-    ) -> [Result<usize>; 4]
-    where
-        Y: Lockstep,
-        F: FnMut(usize, &Y, &[f64], &[f64]) -> Result<usize>,
-    {
-        let [r0, r1, r2, r3] = rk4;
-        let [q0, q1, q2, q3] = q;
-        let [qd0, qd1, qd2, qd3] = qd;
-        let [x0, x1, x2, x3] = x;
-        let mut lanes = [
-            LaneRun::new(r0, &*systems[0], q0, qd0, x0),
-            LaneRun::new(r1, &*systems[1], q1, qd1, x1),
-            LaneRun::new(r2, &*systems[2], q2, qd2, x2),
-            LaneRun::new(r3, &*systems[3], q3, qd3, x3),
-        ];
-        if (0..4).any(|j| lanes[j].sizes.is_err()) {
-            return std::array::from_fn(|j| {
-                let lane = &mut lanes[j];
-                let (rk4, q, qd, x) = (&mut *lane.rk4, &mut *lane.q, &mut *lane.qd, &mut *lane.x);
-                rk4.advance_adaptive(&mut *systems[j], time[j], dt[j], q, qd, x, |y, q, qd| {
-                    substeps(j, y, q, qd)
-                })
-            });
-        }
-        let mut failed: [Option<TetherError>; 4] = Default::default();
-        let evaluate = |lanes: &mut [LaneRun<'_>; 4],
-                        systems: &mut [&mut Y; 4],
-                        work: &mut LockstepWork,
-                        stage: usize,
-                        sub: usize,
-                        t: [f64; 4],
-                        h: [f64; 4],
-                        failed: &mut [Option<TetherError>; 4]| {
-            let [l0, l1, l2, l3] = lanes;
-            let [(i0, a0, xd0), (i1, a1, xd1), (i2, a2, xd2), (i3, a3, xd3)] = [
-                l0.args(stage, sub),
-                l1.args(stage, sub),
-                l2.args(stage, sub),
-                l3.args(stage, sub),
-            ];
-            let inputs = [i0, i1, i2, i3];
-            let time = std::array::from_fn(|j| Stages::stage_time(t[j], stage, h[j]));
-            let results = Y::derivatives_four(
-                systems,
-                time,
-                inputs.map(|i| i[0]),
-                inputs.map(|i| i[1]),
-                inputs.map(|i| i[2]),
-                [a0, a1, a2, a3],
-                [xd0, xd1, xd2, xd3],
-                work,
-            );
-            for (j, r) in results.into_iter().enumerate() {
-                if let (Err(e), None) = (r, &failed[j]) {
-                    failed[j] = Some(e);
-                }
-            }
-        };
-        // The first stage of every lane, then the substeps each chooses.
-        evaluate(&mut lanes, systems, work, 0, 0, time, dt, &mut failed);
-        let mut chosen = [1usize; 4];
-        for j in 0..4 {
-            if failed[j].is_none() {
-                let lane = &lanes[j];
-                match substeps(j, &*systems[j], lane.q, lane.qd) {
-                    Ok(k) => chosen[j] = k.max(1),
-                    Err(e) => failed[j] = Some(e),
-                }
-            }
-        }
-        let alive = |failed: &[Option<TetherError>; 4]| -> [bool; 4] {
-            std::array::from_fn(|j| failed[j].is_none())
-        };
-        let live = alive(&failed);
-        let k = (0..4).find(|&j| live[j]).map_or(1, |j| chosen[j]);
-        if (0..4).any(|j| live[j] && chosen[j] != k) {
-            // Lanes that disagree on the substeps go on one at a time from their first stage.
-            return std::array::from_fn(|j| match failed[j].take() {
-                Some(e) => Err(e),
-                None => {
-                    let lane = &mut lanes[j];
-                    let (rk4, q, qd, x) =
-                        (&mut *lane.rk4, &mut *lane.q, &mut *lane.qd, &mut *lane.x);
-                    rk4.run_substeps(&mut *systems[j], time[j], dt[j], chosen[j], q, qd, x, true)
-                        .map(|_| chosen[j])
-                }
-            });
-        }
-        let h: [f64; 4] = std::array::from_fn(|j| dt[j] / k as f64);
-        for sub in 0..k {
-            let t: [f64; 4] = std::array::from_fn(|j| time[j] + sub as f64 * h[j]);
-            for stage in 0..4 {
-                if stage > 0 {
-                    for (j, lane) in lanes.iter_mut().enumerate() {
-                        lane.set_input(stage, sub, h[j]);
-                    }
-                }
-                if stage > 0 || sub > 0 {
-                    evaluate(&mut lanes, systems, work, stage, sub, t, h, &mut failed);
-                }
-            }
-            for (j, lane) in lanes.iter_mut().enumerate() {
-                if failed[j].is_none() {
-                    if let Err(e) = lane.finish(&*systems[j], sub, t[j], h[j]) {
-                        failed[j] = Some(e);
-                    }
-                }
-            }
-        }
-        std::array::from_fn(|j| match failed[j].take() {
-            Some(e) => Err(e),
-            None => {
-                lanes[j].take_result();
-                Ok(k)
-            }
-        })
-    }
-}
-
-/// One lane of [`Rk4::advance_adaptive_four`]: its integrator's buffers and its state.
-#[cfg(feature = "lockstep")]
-struct LaneRun<'a> {
-    /// Whether its state and buffers have the system's sizes.
-    sizes: Result<()>,
-    rk4: &'a mut Rk4,
-    q: &'a mut Vec<f64>,
-    qd: &'a mut Vec<f64>,
-    x: &'a mut [f64],
-    /// The slot that holds the end of the last substep.
-    done: usize,
 }
 
 /// The stage buffers, borrowed apart from the end-of-substep slots.
@@ -646,86 +448,6 @@ impl<'a> Stages<'a> {
             }
         }
         self.finish(system, t, dt, q0, qd0, x0, out)
-    }
-}
-
-#[cfg(feature = "lockstep")]
-impl<'a> LaneRun<'a> {
-    fn new<Y: System + ?Sized>(
-        rk4: &'a mut Rk4,
-        system: &Y,
-        q: &'a mut Vec<f64>,
-        qd: &'a mut Vec<f64>,
-        x: &'a mut [f64],
-    ) -> Self {
-        LaneRun {
-            sizes: rk4.check_sizes(system, q, qd, x),
-            rk4,
-            q,
-            qd,
-            x,
-            done: 0,
-        }
-    }
-
-    /// The slot substep `sub` writes.
-    fn out_slot(&self, sub: usize) -> usize {
-        if sub == 0 {
-            0
-        } else {
-            1 - self.done
-        }
-    }
-
-    /// The stage buffers, the start of substep `sub` and the slot it writes, borrowed apart.
-    #[allow(clippy::type_complexity)]
-    fn split(&mut self, sub: usize) -> (Stages<'_>, [&[f64]; 3], &mut Slot) {
-        let out = self.out_slot(sub);
-        let (stages, first, second) = self.rk4.parts();
-        let (written, other) = if out == 0 {
-            (first, second)
-        } else {
-            (second, first)
-        };
-        let start: [&[f64]; 3] = if sub == 0 {
-            [&self.q[..], &self.qd[..], &self.x[..]]
-        } else {
-            [&other.q[..], &other.qd[..], &other.x[..]]
-        };
-        (stages, start, written)
-    }
-
-    #[allow(clippy::type_complexity)]
-    fn args(&mut self, stage: usize, sub: usize) -> ([&[f64]; 3], &mut [f64], &mut [f64]) {
-        let (stages, start, _) = self.split(sub);
-        stages.args(stage, start)
-    }
-
-    fn set_input(&mut self, stage: usize, sub: usize, dt: f64) {
-        let (mut stages, [q0, qd0, x0], _) = self.split(sub);
-        stages.set_input(stage, q0, qd0, x0, dt);
-    }
-
-    fn finish<Y: System + ?Sized>(
-        &mut self,
-        system: &Y,
-        sub: usize,
-        t: f64,
-        dt: f64,
-    ) -> Result<()> {
-        let out = self.out_slot(sub);
-        let (mut stages, [q0, qd0, x0], written) = self.split(sub);
-        stages.finish(system, t, dt, q0, qd0, x0, written)?;
-        self.done = out;
-        Ok(())
-    }
-
-    /// The end of the last substep into the state (its vectors become the slot's buffers).
-    fn take_result(&mut self) {
-        let slot = &mut self.rk4.slots[self.done];
-        std::mem::swap(self.q, &mut slot.q);
-        std::mem::swap(self.qd, &mut slot.qd);
-        self.x.copy_from_slice(&slot.x);
     }
 }
 

@@ -18,15 +18,14 @@
 //!   [`Scheme::ImplicitAxial`], with the axial spring-dampers implicit ([`implicit`]);
 //! * [`Surroundings`] — what the caller supplies: air velocity and density at any point, the
 //!   aircraft's acceleration, the force on the tip;
-//! * [`Tether`] — the three together, for stepping. With the `lockstep` feature (on by default),
-//!   `Tether::step_four` steps four at once, their recursions four AVX2 lanes wide on x86-64
-//!   (`Lockstep`, `LockstepWork`), each bit for bit its own step.
+//! * [`Tether`] — the three together, for stepping.
 //!
 //! Frames and units: SI; the towing-aircraft frame has x forward, y starboard, z down, origin at
 //! the attachment point.
 
 mod arith;
 pub mod atmosphere;
+pub mod axial;
 mod chain;
 pub mod config;
 pub mod direction;
@@ -36,6 +35,7 @@ pub mod error;
 pub mod implicit;
 pub mod integrator;
 pub mod material;
+pub mod presets;
 pub mod recursive;
 pub mod reference;
 pub mod state;
@@ -43,16 +43,14 @@ pub mod surroundings;
 pub mod tether;
 mod trig;
 
+pub use arith::{arithmetic, portable_requested, ARITHMETIC_VALUES, ARITHMETIC_VARIABLE};
 pub use atmosphere::Atmosphere;
+pub use axial::AxialStage;
 pub use config::{DragVelocity, Elasticity, Scheme, TetherConfig, STANDARD_GRAVITY};
 pub use direction::DirectionJet;
-#[cfg(feature = "lockstep")]
-pub use dynamics::LockstepWork;
-pub use dynamics::{AxialStage, Energy, Solver, TetherModel};
+pub use dynamics::{Energy, Solver, TetherModel};
 pub use error::{Result, TetherError};
 pub use implicit::{AxialSystem, Rosenbrock};
-#[cfg(feature = "lockstep")]
-pub use integrator::Lockstep;
 pub use integrator::{InSurroundings, Rk4, System};
 pub use material::Material;
 pub use state::TetherState;

@@ -80,31 +80,24 @@
 //!   and comes from the vectorized loads pass (`chain.rs`).
 //! * The forward step is `a_{k+1} = (a_k + l (w_k + E_k y_k)) - E_k (l G_k a_k)`, where
 //!   `l G_k a_k` also gives `u_k`.
-//! * The three steps are written once, over a lane type (`Lane`): one chain per call in `f64`
-//!   (`One`, the single model's path), or, with the `lockstep` feature on x86-64, four chains
-//!   (four envs of a batch) one per AVX2 lane (`recursive/lockstep.rs`,
-//!   `TetherModel::accelerations_four`). One chain's sweeps are a chain of dependent
-//!   operations (`B_{k+1}` -> `B E` -> `K` -> `det` -> `1/det` -> `B_k`), bound by latency; four
-//!   in lockstep fill each other's waits. Lane j performs exactly the operations of the fused
-//!   single-chain solve for chain j, so its results are bit for bit those of chain j alone.
+//! * The three steps are written over a lane type (`Lane`), of which one chain's `f64` (`One`)
+//!   is the only one: several chains side by side in SIMD lanes (several envs of a batch
+//!   stepped together) were measured and gained too little at the batch level to keep
+//!   (docs/decisions.md, "Stepping envs in lockstep").
 //! * Only the directions, loads and `K`, `W`, `y` live in the sweep; everything independent per
 //!   segment (trigonometry, directions, rates, loads) is done beforehand in structure-of-arrays
-//!   passes the compiler vectorizes. Multiply-adds are fused where the processor has FMA
-//!   (`arith.rs`).
+//!   passes the compiler vectorizes. Every multiply-add is one fused multiply-add, on every
+//!   processor (`arith.rs`).
 //!
 //! Each sweep costs O(1) per segment with fixed-size 3x3 / 2x2 algebra and no allocation.
 
-use std::marker::PhantomData;
 use std::ops::{Add, Mul, Neg, Sub};
 
 use nalgebra::Vector3;
 
-use crate::arith::Madd;
+use crate::arith::madd;
 use crate::chain::ChainState;
 use crate::error::{Result, TetherError};
-
-#[cfg(all(feature = "lockstep", target_arch = "x86_64"))]
-pub(crate) mod lockstep;
 
 type V3 = Vector3<f64>;
 
@@ -137,25 +130,17 @@ pub(crate) trait Lane:
 }
 
 /// One chain's `f64`, with multiply-adds fused or not as `M` says.
-pub(crate) struct One<M>(pub f64, PhantomData<M>);
+#[derive(Clone, Copy)]
+pub(crate) struct One(pub f64);
 
-impl<M> Clone for One<M> {
-    #[inline(always)]
-    fn clone(&self) -> Self {
-        *self
-    }
-}
-
-impl<M> Copy for One<M> {}
-
-impl<M> One<M> {
+impl One {
     #[inline(always)]
     pub(crate) fn new(v: f64) -> Self {
-        One(v, PhantomData)
+        One(v)
     }
 }
 
-impl<M> Add for One<M> {
+impl Add for One {
     type Output = Self;
     #[inline(always)]
     fn add(self, o: Self) -> Self {
@@ -163,7 +148,7 @@ impl<M> Add for One<M> {
     }
 }
 
-impl<M> Sub for One<M> {
+impl Sub for One {
     type Output = Self;
     #[inline(always)]
     fn sub(self, o: Self) -> Self {
@@ -171,7 +156,7 @@ impl<M> Sub for One<M> {
     }
 }
 
-impl<M> Mul for One<M> {
+impl Mul for One {
     type Output = Self;
     #[inline(always)]
     fn mul(self, o: Self) -> Self {
@@ -179,7 +164,7 @@ impl<M> Mul for One<M> {
     }
 }
 
-impl<M> Neg for One<M> {
+impl Neg for One {
     type Output = Self;
     #[inline(always)]
     fn neg(self) -> Self {
@@ -187,7 +172,7 @@ impl<M> Neg for One<M> {
     }
 }
 
-impl<M: Madd> Lane for One<M> {
+impl Lane for One {
     const LANES: usize = 1;
     type Stored = f64;
 
@@ -201,7 +186,7 @@ impl<M: Madd> Lane for One<M> {
     }
     #[inline(always)]
     fn madd(a: Self, b: Self, c: Self) -> Self {
-        One::new(M::madd(a.0, b.0, c.0))
+        One::new(madd(a.0, b.0, c.0))
     }
     #[inline(always)]
     fn div(self, o: Self) -> Self {
@@ -321,9 +306,9 @@ struct ChainInputs<'a> {
     n: usize,
 }
 
-impl<M: Madd> Inputs<One<M>> for ChainInputs<'_> {
+impl Inputs<One> for ChainInputs<'_> {
     #[inline(always)]
-    fn directions(&self, k: usize) -> ([One<M>; 2], V<One<M>>, V<One<M>>) {
+    fn directions(&self, k: usize) -> ([One; 2], V<One>, V<One>) {
         let (c, n) = (self.chain, self.n);
         let (ep, es, w) = (c.e_phi.view(n), c.e_psi.view(n), c.w.view(n));
         (
@@ -333,7 +318,7 @@ impl<M: Madd> Inputs<One<M>> for ChainInputs<'_> {
         )
     }
     #[inline(always)]
-    fn loads(&self, k: usize) -> (V<One<M>>, V<One<M>>, One<M>) {
+    fn loads(&self, k: usize) -> (V<One>, V<One>, One) {
         let (c, n) = (self.chain, self.n);
         let (f, r) = (c.force.view(n), c.reduced.view(n));
         (
@@ -343,7 +328,7 @@ impl<M: Madd> Inputs<One<M>> for ChainInputs<'_> {
         )
     }
     #[inline(always)]
-    fn root(&self) -> [V<One<M>>; 4] {
+    fn root(&self) -> [V<One>; 4] {
         let c = self.chain;
         [&c.e, &c.e_phi, &c.e_dot, &c.extra].map(|v| {
             let v = v.get(0);
@@ -351,19 +336,19 @@ impl<M: Madd> Inputs<One<M>> for ChainInputs<'_> {
         })
     }
     #[inline(always)]
-    fn tip_force(&self) -> V<One<M>> {
+    fn tip_force(&self) -> V<One> {
         let f = self.chain.tip_force;
         one3(f.x, f.y, f.z)
     }
 }
 
 #[inline(always)]
-fn one3<M>(x: f64, y: f64, z: f64) -> V<One<M>> {
+fn one3(x: f64, y: f64, z: f64) -> V<One> {
     [One::new(x), One::new(y), One::new(z)]
 }
 
 #[inline(always)]
-fn to_v3<M>(v: &V<One<M>>) -> V3 {
+fn to_v3(v: &V<One>) -> V3 {
     V3::new(v[0].0, v[1].0, v[2].0)
 }
 
@@ -381,7 +366,7 @@ pub(crate) struct ChainConstants {
 /// The axial element's spring and damper as one solve sees them: the stretch and rate they are
 /// evaluated at (the state's own in a right-hand side) and the mass added to the stretch's
 /// diagonal of `M` (zero in a right-hand side; `gamma h c_s + (gamma h)^2 k` in a stage of a
-/// linearly implicit step, [`crate::dynamics::AxialStage`]).
+/// linearly implicit step, [`crate::axial::AxialStage`]).
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Spring {
     pub s: f64,
@@ -403,7 +388,7 @@ fn singular(time: f64, segment: usize) -> TetherError {
 /// mass `1 / (M^-1)_00`, kg (see [`Solved::result`]).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-pub(crate) fn solve<M: Madd>(
+pub(crate) fn solve(
     time: f64,
     c: &ChainConstants,
     chain: &ChainState,
@@ -422,7 +407,7 @@ pub(crate) fn solve<M: Madd>(
     let held = &mut held[..n];
     let Some(t) = tensions else {
         let solved =
-            sweeps::<1, One<M>, _>([c], &inputs, n, [s], [sd], [spring], work, [qdd], &mut ());
+            sweeps::<1, One, _>([c], &inputs, n, [s], [sd], [spring], work, [qdd], &mut ());
         return solved.result(time, 0);
     };
     let mut watch = TensionWatch {
@@ -431,7 +416,7 @@ pub(crate) fn solve<M: Madd>(
         t: &mut t[..n + 1],
         half_m: 0.5 * c.m,
     };
-    let solved = sweeps::<1, One<M>, _>(
+    let solved = sweeps::<1, One, _>(
         [c],
         &inputs,
         n,
@@ -475,9 +460,9 @@ struct TensionWatch<'a> {
     half_m: f64,
 }
 
-impl<M: Madd> Watch<One<M>> for TensionWatch<'_> {
+impl Watch<One> for TensionWatch<'_> {
     #[inline(always)]
-    fn backward(&mut self, k: usize, bm: &S3<One<M>>, bias: &V<One<M>>) {
+    fn backward(&mut self, k: usize, bm: &S3<One>, bias: &V<One>) {
         self.held[k] = Held {
             inertia: bm.map(|v| v.0),
             bias: bias.map(|v| v.0),
@@ -485,9 +470,9 @@ impl<M: Madd> Watch<One<M>> for TensionWatch<'_> {
     }
 
     #[inline(always)]
-    fn forward(&mut self, k: usize, acc: &V<One<M>>) {
+    fn forward(&mut self, k: usize, acc: &V<One>) {
         let h = &self.held[k];
-        let inertia: S3<One<M>> = h.inertia.map(One::new);
+        let inertia: S3<One> = h.inertia.map(One::new);
         let ba = to_v3(&sym_mul(&inertia, acc));
         let pull = V3::from(h.bias) - ba + to_v3(acc) * self.half_m;
         self.t[k] = pull.dot(&self.chain.e.get(k));

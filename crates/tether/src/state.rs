@@ -76,7 +76,7 @@ impl TetherState {
                 });
             }
             let (phi, psi) = angles(d);
-            if psi.cos() < MIN_COS_PSI {
+            if libm::cos(psi) < MIN_COS_PSI {
                 return Err(TetherError::InvalidState {
                     field: format!("directions[{k}]"),
                     value: format!("{:?}", d.as_slice()),
@@ -220,7 +220,7 @@ impl TetherState {
         }
         for k in 0..segments {
             let psi = self.q[2 + 2 * k];
-            if psi.cos().abs() < MIN_COS_PSI {
+            if libm::cos(psi).abs() < MIN_COS_PSI {
                 return Err(TetherError::InvalidState {
                     field: format!("psi[{k}]"),
                     value: psi.to_string(),

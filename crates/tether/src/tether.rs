@@ -3,8 +3,6 @@
 use nalgebra::Vector3;
 
 use crate::config::{StepLoad, TetherConfig};
-#[cfg(feature = "lockstep")]
-use crate::dynamics::LockstepWork;
 use crate::dynamics::{Energy, TetherModel};
 use crate::error::{Result, TetherError};
 use crate::implicit::Rosenbrock;
@@ -149,75 +147,6 @@ impl Tether {
         self.steps += 1;
         s.time = self.time_origin + self.steps as f64 * dt;
         Ok(())
-    }
-
-    /// [`Tether::step`] of four tethers at once, each in its own surroundings: the right-hand
-    /// sides of the four are evaluated together, their recursion four AVX2 lanes wide
-    /// ([`TetherModel::accelerations_four`], [`Rk4::advance_adaptive_four`]). Every tether's
-    /// result, error included, is bit for bit that of its own `step`. `work` is the lanes' work
-    /// space (one per thread).
-    #[cfg(feature = "lockstep")]
-    pub fn step_four<S: Surroundings + ?Sized>(
-        tethers: [&mut Tether; 4],
-        surroundings: [&S; 4],
-        work: &mut LockstepWork,
-    ) -> [Result<()>; 4] {
-        let [t0, t1, t2, t3] = tethers;
-        let mut tethers = [t0, t1, t2, t3];
-        let dt: [f64; 4] = std::array::from_fn(|j| tethers[j].model.config().time_step);
-        let time: [f64; 4] = std::array::from_fn(|j| tethers[j].state.time);
-        let air: [(f64, f64); 4] =
-            std::array::from_fn(|j| attachment_air(surroundings[j], time[j]));
-        let results = {
-            let [a, b, c, d] = &mut tethers;
-            let parts = [a, b, c, d].map(|t| {
-                let Tether {
-                    model, state, rk4, ..
-                } = &mut **t;
-                (model, state, rk4)
-            });
-            let [(m0, s0, r0), (m1, s1, r1), (m2, s2, r2), (m3, s3, r3)] = parts;
-            let mut systems = [
-                &mut InSurroundings {
-                    model: m0,
-                    surroundings: surroundings[0],
-                },
-                &mut InSurroundings {
-                    model: m1,
-                    surroundings: surroundings[1],
-                },
-                &mut InSurroundings {
-                    model: m2,
-                    surroundings: surroundings[2],
-                },
-                &mut InSurroundings {
-                    model: m3,
-                    surroundings: surroundings[3],
-                },
-            ];
-            let [TetherState { q: q0, qd: qd0, .. }, TetherState { q: q1, qd: qd1, .. }, TetherState { q: q2, qd: qd2, .. }, TetherState { q: q3, qd: qd3, .. }] =
-                [s0, s1, s2, s3];
-            let (mut e0, mut e1, mut e2, mut e3) = ([0.0; 0], [0.0; 0], [0.0; 0], [0.0; 0]);
-            Rk4::advance_adaptive_four(
-                [r0, r1, r2, r3],
-                &mut systems,
-                time,
-                dt,
-                [q0, q1, q2, q3],
-                [qd0, qd1, qd2, qd3],
-                [&mut e0[..], &mut e1[..], &mut e2[..], &mut e3[..]],
-                work,
-                |j, system, q, qd| substeps_at(system.model, time[j], air[j].0, air[j].1, q, qd),
-            )
-        };
-        let mut results = results.into_iter();
-        std::array::from_fn(|j| {
-            results.next().unwrap()?;
-            let t = &mut tethers[j];
-            t.steps += 1;
-            t.state.time = t.time_origin + t.steps as f64 * dt[j];
-            Ok(())
-        })
     }
 
     /// Steps `steps` times, stopping at the first error.

@@ -72,7 +72,7 @@ pub fn sin_cos_batch(x: &[f64], sin: &mut [f64], cos: &mut [f64]) {
     if out_of_range > 0 {
         for i in 0..len {
             if !(0.0..=REDUCTION_LIMIT).contains(&x[i].abs()) {
-                (sin[i], cos[i]) = x[i].sin_cos();
+                (sin[i], cos[i]) = libm::sincos(x[i]);
             }
         }
     }
@@ -149,7 +149,7 @@ mod tests {
         sin_cos_batch(&x, &mut s, &mut c);
         let mut worst = 0.0f64;
         for i in 0..x.len() {
-            let (es, ec) = x[i].sin_cos();
+            let (es, ec) = libm::sincos(x[i]);
             if !x[i].is_finite() {
                 assert!(s[i].is_nan() && c[i].is_nan());
                 continue;

@@ -177,7 +177,7 @@ impl Actuators {
     /// Advances the actuators by `dt`: exact first-order lag towards the command, then the rate
     /// limit, then the hard stops.
     pub fn advance(&mut self, config: &AccdConfig, dt: f64) {
-        let lag = 1.0 - (-dt / config.actuator_time_constant).exp();
+        let lag = 1.0 - libm::exp(-dt / config.actuator_time_constant);
         let max_change = config.actuator_rate_limit_deg_s.to_radians() * dt;
         let limit = config.flap_limit_deg.to_radians();
         for i in 0..4 {
@@ -246,8 +246,8 @@ pub fn aero_loads(
         air_relative_body.y,
         air_relative_body.z,
     );
-    let alpha = w.atan2(u);
-    let beta = (v / airspeed).clamp(-1.0, 1.0).asin();
+    let alpha = libm::atan2(w, u);
+    let beta = libm::asin((v / airspeed).clamp(-1.0, 1.0));
     let c = model.coefficients(alpha, beta, deflections);
     let qbar_s = 0.5 * density * airspeed * airspeed * model.reference_area();
     let d = model.reference_length();

@@ -210,8 +210,8 @@ impl FinnedBody {
 
     /// Base coefficients at (alpha, beta), rad.
     pub fn base(&self, alpha: f64, beta: f64) -> [f64; 6] {
-        let (sa, ca) = alpha.sin_cos();
-        let (sb, cb) = beta.sin_cos();
+        let (sa, ca) = libm::sincos(alpha);
+        let (sb, cb) = libm::sincos(beta);
         let cx = -(self.axial_zero + self.axial_incidence * (sa * sa + sb * sb));
         let cz = -(self.normal_slope * sa * ca + self.normal_crossflow * sa * sa.abs());
         let cy = -(self.normal_slope * sb * cb + self.normal_crossflow * sb * sb.abs());
@@ -224,9 +224,11 @@ impl FinnedBody {
     pub fn flap(&self, flap: usize, alpha: f64, beta: f64, deflection: f64) -> [f64; 6] {
         let horizontal = flap < 2;
         let incidence = if horizontal { alpha } else { beta };
-        let effectiveness = 1.0 / (1.0 + (incidence / self.flap_stall).powi(2));
-        let force = self.flap_slope * deflection.sin() * effectiveness;
-        let drag = -self.flap_drag * deflection.sin().powi(2);
+        let ratio = incidence / self.flap_stall;
+        let effectiveness = 1.0 / (1.0 + ratio * ratio);
+        let sin_deflection = libm::sin(deflection);
+        let force = self.flap_slope * sin_deflection * effectiveness;
+        let drag = -self.flap_drag * (sin_deflection * sin_deflection);
         let arm = self.flap_arm / self.diameter;
         let radius = self.flap_radius / self.diameter;
         match flap {

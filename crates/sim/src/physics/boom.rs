@@ -152,12 +152,12 @@ impl Boom {
 
     fn drift(&self, t: f64) -> V3 {
         let w = 2.0 * std::f64::consts::PI / self.config.drift_period;
-        V3::from_fn(|i, _| self.config.drift_amplitude[i] * (w * t + self.phase[i]).sin())
+        V3::from_fn(|i, _| self.config.drift_amplitude[i] * libm::sin(w * t + self.phase[i]))
     }
 
     fn drift_rate(&self, t: f64) -> V3 {
         let w = 2.0 * std::f64::consts::PI / self.config.drift_period;
-        V3::from_fn(|i, _| self.config.drift_amplitude[i] * w * (w * t + self.phase[i]).cos())
+        V3::from_fn(|i, _| self.config.drift_amplitude[i] * w * libm::cos(w * t + self.phase[i]))
     }
 
     /// True when the RLV approaches along track (`approach_speed > 0`), false for a fixed
@@ -189,7 +189,7 @@ impl Boom {
             let step = self.config.approach_speed * dt;
             self.along += (x - self.along).clamp(-step, step);
         }
-        let a = (-dt / self.config.perturbation_time_constant).exp();
+        let a = libm::exp(-dt / self.config.perturbation_time_constant);
         let kick = self.config.perturbation_sigma * (1.0 - a * a).sqrt();
         for i in 0..3 {
             self.perturbation[i] = a * self.perturbation[i] + kick * self.stream.gaussian();

@@ -10,9 +10,7 @@
 //! the tether as the tip force, and its moment drives Euler's equations. Once per step, before
 //! the RK4 stages: the flap actuators, the boom and the air disturbance advance, and the air
 //! density is taken from ISA at the aircraft's altitude (varying linearly with depth below it).
-//! The quaternion is renormalised after each step. With the `lockstep` feature,
-//! `CaptureSim::step_four` steps four simulations with their tethers' recursions four AVX2 lanes
-//! wide, each bit for bit its own step.
+//! The quaternion is renormalised after each step.
 
 use std::sync::Arc;
 
@@ -20,8 +18,6 @@ use accd_tether::{
     Atmosphere, AxialStage, AxialSystem, Rk4, Rosenbrock, Surroundings, System, TetherModel,
     TetherState,
 };
-#[cfg(feature = "lockstep")]
-use accd_tether::{Lockstep, LockstepWork};
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -224,41 +220,6 @@ impl AxialSystem for Coupled<'_> {
             .accelerations_axial(time, q, qd, axial, &self.stage, qdd)?;
         accd_rates(&self.inertia, (quat, omega), &loads, xd);
         Ok(())
-    }
-}
-
-#[cfg(feature = "lockstep")]
-impl Lockstep for Coupled<'_> {
-    fn derivatives_four(
-        systems: &mut [&mut Self; 4],
-        time: [f64; 4],
-        q: [&[f64]; 4],
-        qd: [&[f64]; 4],
-        x: [&[f64]; 4],
-        qdd: [&mut [f64]; 4],
-        xd: [&mut [f64]; 4],
-        work: &mut LockstepWork,
-    ) -> [accd_tether::Result<()>; 4] {
-        let parts: [(Quaternion<f64>, V3); 4] = std::array::from_fn(|j| states_to_parts(x[j]));
-        for (system, &(quat, omega)) in systems.iter_mut().zip(&parts) {
-            system.stage.accd = AccdState {
-                attitude: UnitQuaternion::new_normalize(quat),
-                omega,
-            };
-        }
-        let loads = {
-            let [a, b, c, d] = systems;
-            let stages = [&a.stage, &b.stage, &c.stage, &d.stage];
-            let models = [&mut *a.model, &mut *b.model, &mut *c.model, &mut *d.model];
-            TetherModel::accelerations_four(models, time, q, qd, stages, qdd, work)
-        };
-        let mut xd = xd.into_iter();
-        let mut loads = loads.into_iter();
-        std::array::from_fn(|j| {
-            let (loads, xd) = (loads.next().unwrap()?, xd.next().unwrap());
-            accd_rates(&systems[j].inertia, parts[j], &loads, xd);
-            Ok(())
-        })
     }
 }
 
@@ -718,94 +679,6 @@ impl CaptureSim {
     pub fn step(&mut self, command: [f64; 4]) -> Result<()> {
         let start = self.begin_step(command)?;
         self.step_from(start)
-    }
-
-    /// [`CaptureSim::step`] of four simulations at once (four envs of a batch), each with its
-    /// command: the tether's right-hand sides of the four are evaluated together, their
-    /// recursion four AVX2 lanes wide ([`accd_tether::Rk4::advance_adaptive_four`]); everything
-    /// else runs per simulation. Every simulation's result, error included, is bit for bit that
-    /// of its own `step`. `work` is the lanes' work space (one per thread).
-    #[cfg(feature = "lockstep")]
-    pub fn step_four(
-        sims: [&mut CaptureSim; 4],
-        commands: [[f64; 4]; 4],
-        work: &mut LockstepWork,
-    ) -> [Result<()>; 4] {
-        let [s0, s1, s2, s3] = sims;
-        let mut sims = [s0, s1, s2, s3];
-        let mut starts: [Option<Result<StepStart>>; 4] =
-            std::array::from_fn(|j| Some(sims[j].begin_step(commands[j])));
-        // The air of every step (what `parts` may fail on) before any is lent out: a step that
-        // cannot start, or a group with one, runs one by one.
-        let together = (0..4).all(|j| {
-            matches!(starts[j], Some(Ok(_)))
-                && sims[j].air_at_step().is_ok()
-                && sims[j].rosenbrock.is_none()
-        });
-        if !together {
-            return std::array::from_fn(|j| {
-                let start = starts[j].take().unwrap()?;
-                sims[j].step_from(start)
-            });
-        }
-        let starts: [StepStart; 4] =
-            std::array::from_fn(|j| starts[j].take().unwrap().expect("checked above"));
-        let mut x: [[f64; ACCD_STATES]; 4] = std::array::from_fn(|j| accd_to_states(&sims[j].accd));
-        let mut q: [Vec<f64>; 4] = std::array::from_fn(|j| std::mem::take(&mut sims[j].tether.q));
-        let mut qd: [Vec<f64>; 4] = std::array::from_fn(|j| std::mem::take(&mut sims[j].tether.qd));
-        let rules: [SubstepRule; 4] = std::array::from_fn(|j| sims[j].substep_rule(starts[j].time));
-        let results = {
-            let [a, b, c, d] = &mut sims;
-            let inertia = [a.inertia, b.inertia, c.inertia, d.inertia];
-            let parts = [
-                a.parts(starts[0].hold),
-                b.parts(starts[1].hold),
-                c.parts(starts[2].hold),
-                d.parts(starts[3].hold),
-            ];
-            let [Ok((g0, m0, r0)), Ok((g1, m1, r1)), Ok((g2, m2, r2)), Ok((g3, m3, r3))] = parts
-            else {
-                unreachable!("the air of every step was checked")
-            };
-            let coupled = |model, stage, j: usize| Coupled {
-                model,
-                stage,
-                inertia: inertia[j],
-            };
-            let (mut c0, mut c1, mut c2, mut c3) = (
-                coupled(m0, g0, 0),
-                coupled(m1, g1, 1),
-                coupled(m2, g2, 2),
-                coupled(m3, g3, 3),
-            );
-            let [q0, q1, q2, q3] = &mut q;
-            let [qd0, qd1, qd2, qd3] = &mut qd;
-            let [x0, x1, x2, x3] = &mut x;
-            Rk4::advance_adaptive_four(
-                [r0, r1, r2, r3],
-                &mut [&mut c0, &mut c1, &mut c2, &mut c3],
-                std::array::from_fn(|j| starts[j].time),
-                std::array::from_fn(|j| starts[j].dt),
-                [q0, q1, q2, q3],
-                [qd0, qd1, qd2, qd3],
-                [&mut x0[..], &mut x1[..], &mut x2[..], &mut x3[..]],
-                work,
-                |j, system, q, qd| rules[j].substeps(system.model, q, qd),
-            )
-        };
-        let mut results = results.into_iter();
-        let mut q = q.into_iter();
-        let mut qd = qd.into_iter();
-        let mut starts = starts.into_iter();
-        std::array::from_fn(|j| {
-            let result = results.next().unwrap().map(|_| ()).map_err(SimError::from);
-            let (q, qd, start) = (
-                q.next().unwrap(),
-                qd.next().unwrap(),
-                starts.next().unwrap(),
-            );
-            sims[j].end_step(start, q, qd, &x[j], result)
-        })
     }
 
     /// Everything of a step before the RK4: the command and the flaps, the boom, the air

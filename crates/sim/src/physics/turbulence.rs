@@ -424,8 +424,8 @@ impl Turbulence {
         let slots = config.history_slots(airspeed_mps);
         config.check_history(airspeed_mps, "airspeed_mps")?;
         let on_demand = config.lane_streams == LaneStreams::PerLane && lanes > 0;
-        let a_wake = (-airspeed_mps * dt / spacing).exp();
-        let a_ambient = (-airspeed_mps * dt / config.ambient.length_scale_m()).exp();
+        let a_wake = libm::exp(-airspeed_mps * dt / spacing);
+        let a_ambient = libm::exp(-airspeed_mps * dt / config.ambient.length_scale_m());
         let mut t = Turbulence {
             config: config.clone(),
             seed,

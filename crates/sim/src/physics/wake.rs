@@ -361,10 +361,15 @@ pub struct AnalyticWake {
     pub tke_spread: f64,
 }
 
+/// `x^2`.
+fn square(x: f64) -> f64 {
+    x * x
+}
+
 /// `cos^2(pi s / 2)` on |s| < 1, else 0.
 fn bump(s: f64) -> f64 {
     if s.abs() < 1.0 {
-        let c = (0.5 * std::f64::consts::PI * s).cos();
+        let c = libm::cos(0.5 * std::f64::consts::PI * s);
         c * c
     } else {
         0.0
@@ -419,7 +424,7 @@ impl AnalyticWake {
             return [0.0; 4];
         }
         let (eta, zeta) = (y_over_l, z_over_l);
-        let growth = |xi: f64| 1.0 - (-xi / self.growth_l).exp();
+        let growth = |xi: f64| 1.0 - libm::exp(-xi / self.growth_l);
         let r = growth(xi);
         let behind_tail = (xi - 1.0).max(0.0);
         let u = self.deficit_peak * r / (1.0 + behind_tail / self.deficit_decay_l)
@@ -428,13 +433,13 @@ impl AnalyticWake {
         let xi_ref = DOWNWASH_REFERENCE_DISTANCE_M / self.length_scale_m;
         let g = |xi: f64| growth(xi) / (1.0 + xi / self.downwash_decay_l);
         let w = self.downwash_at_315m * g(xi) / g(xi_ref)
-            * (-(zeta / self.downwash_half_height_l).powi(2)).exp()
-            * (-(eta / self.downwash_half_width_l).powi(2)).exp();
+            * libm::exp(-square(zeta / self.downwash_half_height_l))
+            * libm::exp(-square(eta / self.downwash_half_width_l));
         let intensity =
             self.intensity_peak * r / (1.0 + behind_tail / self.intensity_decay_l).sqrt();
         let h = self.tke_half_height_l + self.tke_spread * xi;
         let b = self.tke_half_width_l + self.tke_spread * xi;
-        let k = 1.5 * intensity * intensity * (-(zeta / h).powi(2) - (eta / b).powi(2)).exp();
+        let k = 1.5 * intensity * intensity * libm::exp(-square(zeta / h) - square(eta / b));
         [u, 0.0, w, k]
     }
 

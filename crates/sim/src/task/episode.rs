@@ -5,10 +5,8 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
-#[cfg(feature = "lockstep")]
-use accd_tether::LockstepWork;
 use accd_tether::TetherState;
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, SimError};
@@ -17,6 +15,7 @@ use crate::physics::capture::{CaptureSim, CaptureState, Snapshot};
 use crate::physics::turbulence::AmbientTurbulence;
 use crate::physics::wake::AirSampling;
 use crate::rng::{Seeds, Stream};
+use crate::rotation;
 use crate::state_format::{check_len, StateError};
 use crate::task::config::EnvConfig;
 use crate::task::observation::{
@@ -371,7 +370,7 @@ impl Episode {
             self.start.q[2 + 2 * k] += d_psi;
         }
         let accd = AccdState {
-            attitude: eq.accd.attitude * UnitQuaternion::from_euler_angles(roll, pitch, yaw),
+            attitude: eq.accd.attitude * rotation::from_euler_angles(roll, pitch, yaw),
             omega: eq.accd.omega,
         };
         self.sim.reset(seeds, &self.start, accd)?;
@@ -429,77 +428,6 @@ impl Episode {
             }
         }
         Ok(self.finish(step))
-    }
-
-    /// [`Episode::step_interruptible`] of four episodes at once (four envs of a batch), each
-    /// with its action: while all four are in their agent step's physics steps, those run
-    /// together ([`CaptureSim::step_four`], the tether's recursion four AVX2 lanes wide), one
-    /// by one otherwise. Every episode's outcome, error included, is bit for bit that of its own
-    /// `step_interruptible` (but for where a `stop` set meanwhile interrupts it). `work` is the
-    /// lanes' work space (one per thread).
-    #[cfg(feature = "lockstep")]
-    pub fn step_four(
-        episodes: [&mut Episode; 4],
-        actions: [&[f32]; 4],
-        stop: &AtomicBool,
-        work: &mut LockstepWork,
-    ) -> [Result<Outcome>; 4] {
-        let [e0, e1, e2, e3] = episodes;
-        let mut episodes = [e0, e1, e2, e3];
-        let mut steps: [Option<Result<AgentStep>>; 4] =
-            std::array::from_fn(|j| Some(episodes[j].begin(actions[j])));
-        // Physics steps taken, and whether the agent step goes on.
-        let mut taken = [0usize; 4];
-        let mut going: [bool; 4] = std::array::from_fn(|j| matches!(steps[j], Some(Ok(_))));
-        let mut ended: [Option<Result<Outcome>>; 4] = Default::default();
-        loop {
-            for j in 0..4 {
-                if going[j] && taken[j] >= episodes[j].substeps {
-                    going[j] = false;
-                }
-            }
-            if !going.iter().any(|&g| g) {
-                break;
-            }
-            if stop.load(Ordering::Relaxed) {
-                for j in 0..4 {
-                    if going[j] {
-                        ended[j] = Some(Err(episodes[j].interrupt(taken[j])));
-                        going[j] = false;
-                    }
-                }
-                break;
-            }
-            let command = |j: usize, steps: &[Option<Result<AgentStep>>; 4]| match &steps[j] {
-                Some(Ok(step)) => step.command,
-                _ => [0.0; ACT_DIM],
-            };
-            let results: [Option<Result<()>>; 4] = if going.iter().all(|&g| g) {
-                let [a, b, c, d] = &mut episodes;
-                let sims = [&mut a.sim, &mut b.sim, &mut c.sim, &mut d.sim];
-                let commands = std::array::from_fn(|j| command(j, &steps));
-                CaptureSim::step_four(sims, commands, work).map(Some)
-            } else {
-                std::array::from_fn(|j| going[j].then(|| episodes[j].sim.step(command(j, &steps))))
-            };
-            for (j, result) in results.into_iter().enumerate() {
-                let Some(result) = result else { continue };
-                let Some(Ok(step)) = &mut steps[j] else {
-                    unreachable!("only going episodes step")
-                };
-                taken[j] += 1;
-                if !episodes[j].after_physics_step(&mut step.out, result) {
-                    going[j] = false;
-                }
-            }
-        }
-        std::array::from_fn(|j| match ended[j].take() {
-            Some(result) => result,
-            None => {
-                let step = steps[j].take().expect("every lane began")?;
-                Ok(episodes[j].finish(step))
-            }
-        })
     }
 
     /// The checks and the flap commands of an agent step with `action`, and its outcome so far.
@@ -614,7 +542,7 @@ impl Episode {
                     out.envelope_exit = !out.captured
                         && (s.capture.distance > limits.max_distance
                             || tilt(&s.attitude) > limits.max_tilt_deg.to_radians()
-                            || s.omega.y.hypot(s.omega.z) > limits.max_body_rate
+                            || libm::hypot(s.omega.y, s.omega.z) > limits.max_body_rate
                             || s.omega.x.abs() > limits.max_roll_rate);
                 }
                 Ok(s) => {
@@ -665,10 +593,13 @@ impl Episode {
         let rate = a
             .iter()
             .zip(&self.previous_action)
-            .map(|(v, p)| (0.5 * (v - p)).powi(2))
+            .map(|(v, p)| {
+                let d = 0.5 * (v - p);
+                d * d
+            })
             .sum::<f64>()
             / ACT_DIM as f64;
-        let mut r = w.proximity * (-out.distance / w.proximity_scale).exp()
+        let mut r = w.proximity * libm::exp(-out.distance / w.proximity_scale)
             - w.effort * effort
             - w.smoothness * rate;
         if out.captured {

@@ -71,6 +71,7 @@ use crate::physics::turbulence::{AmbientTurbulence, Turbulence};
 use crate::physics::wake::Wake;
 use crate::physics::wake_field::WakeField;
 use crate::rng::Seeds;
+use crate::rotation;
 use crate::state_format::StateError;
 use crate::task::config::EnvConfig;
 use crate::task::episode::Equilibrium;
@@ -301,7 +302,7 @@ impl Plant {
         state.q.copy_from_slice(&x[..n]);
         state.qd.copy_from_slice(&x[n..2 * n]);
         let theta = V3::new(x[2 * n], x[2 * n + 1], x[2 * n + 2]);
-        let attitude = self.trim_attitude * UnitQuaternion::from_scaled_axis(theta);
+        let attitude = self.trim_attitude * rotation::from_scaled_axis(theta);
         let c = attitude.coords;
         state.attitude = [c[0], c[1], c[2], c[3]];
         state.omega = [x[2 * n + 3], x[2 * n + 4], x[2 * n + 5]];
@@ -325,7 +326,7 @@ impl Plant {
         out[..n].copy_from_slice(&t.q);
         out[n..2 * n].copy_from_slice(&t.qd);
         let accd = sim.accd_state();
-        let theta = (self.trim_attitude.inverse() * accd.attitude).scaled_axis();
+        let theta = rotation::scaled_axis(&(self.trim_attitude.inverse() * accd.attitude));
         out[2 * n..2 * n + 3].copy_from_slice(theta.as_slice());
         out[2 * n + 3..2 * n + 6].copy_from_slice(accd.omega.as_slice());
         out[2 * n + 6..2 * n + 10].copy_from_slice(&sim.actuators().deflection);
@@ -389,7 +390,7 @@ impl Plant {
     fn retrim(&mut self, x: &mut [f64]) {
         let n = self.dofs;
         let theta = V3::new(x[2 * n], x[2 * n + 1], x[2 * n + 2]);
-        self.trim_attitude *= UnitQuaternion::from_scaled_axis(theta);
+        self.trim_attitude *= rotation::from_scaled_axis(theta);
         x[2 * n..2 * n + 3].fill(0.0);
     }
 }

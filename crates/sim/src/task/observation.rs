@@ -322,7 +322,7 @@ pub fn observe_sensed(
 /// Angle between the body's nose (body x) and the flight direction (TA x), rad.
 pub fn tilt(attitude: &nalgebra::UnitQuaternion<f64>) -> f64 {
     let nose = attitude.transform_vector(&Vector3::x());
-    nose.x.clamp(-1.0, 1.0).acos()
+    libm::acos(nose.x.clamp(-1.0, 1.0))
 }
 
 #[cfg(test)]

@@ -108,6 +108,7 @@ use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::rng::{NormalSampler, Stream, StreamState, SENSOR_STREAM};
+use crate::rotation;
 use crate::state_format::{check_len, StateError};
 use accd_spec::Rules;
 
@@ -430,7 +431,7 @@ impl Sensors {
             raw[a + 2],
             raw[a + 3],
         ));
-        let m = (q * UnitQuaternion::from_scaled_axis(delta)).into_inner();
+        let m = (q * rotation::from_scaled_axis(delta)).into_inner();
         let sign = if m.w < 0.0 { -1.0 } else { 1.0 };
         raw[a] = sign * m.w;
         raw[a + 1] = sign * m.i;

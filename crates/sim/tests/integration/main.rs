@@ -9,9 +9,8 @@ mod aircraft_profile;
 mod behaviour;
 mod boom_placement;
 mod episode;
+mod fingerprint;
 mod linearize;
-#[cfg(feature = "lockstep")]
-mod lockstep;
 mod module_graph;
 mod randomization;
 mod reliability;

@@ -12,8 +12,6 @@ mod energy;
 mod held_air;
 mod implicit_axial;
 mod kinematics;
-#[cfg(feature = "lockstep")]
-mod lockstep;
 mod mass_matrix;
 mod oscillation;
 mod recursive_vs_dense;
