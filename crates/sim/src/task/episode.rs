@@ -23,6 +23,7 @@ use crate::task::observation::{
 };
 use crate::task::randomization::Parameters;
 use crate::task::sensors::{SensorState, Sensors};
+use crate::task::static_equilibrium;
 use crate::valid::Valid;
 
 type V3 = Vector3<f64>;
@@ -47,6 +48,9 @@ pub struct Equilibrium {
     /// Why episodes starting around this equilibrium would end at their first step (it breaks
     /// an episode limit), if they would.
     pub outside_limits: Option<String>,
+    /// Physics steps spent finding it: settled in time, or solved directly
+    /// ([`Equilibrium::solve_near`]).
+    pub cost_steps: usize,
 }
 
 /// The settled state alone (no boom placed): what [`Equilibrium::settle`] and the reference
@@ -55,6 +59,8 @@ struct Settled {
     tether: TetherState,
     accd: AccdState,
     snapshot: Snapshot,
+    /// Physics steps spent.
+    steps: usize,
 }
 
 fn settle_open_loop(
@@ -84,6 +90,7 @@ fn settle_open_loop(
         tether,
         accd: *sim.accd_state(),
         snapshot,
+        steps,
     })
 }
 
@@ -125,6 +132,38 @@ impl Equilibrium {
         interrupted: &mut dyn FnMut() -> bool,
     ) -> Result<Equilibrium> {
         let settled = settle_open_loop(config, interrupted).map_err(|e| unsettled(config, e))?;
+        Equilibrium::place(config, settled, interrupted)
+    }
+
+    /// The open-loop equilibrium of `config` solved directly from `near`, the equilibrium of
+    /// `near_config` (another configuration of the same system: the base of randomized physics),
+    /// with at most [`static_equilibrium::MAX_STEPS`] physics steps
+    /// ([`crate::task::static_equilibrium`]): the state the time settle converges to, at rest.
+    /// When that solve does not converge, settled in time as [`Equilibrium::settle`].
+    pub fn solve_near(
+        config: &Valid<EnvConfig>,
+        near: &Equilibrium,
+        near_config: &EnvConfig,
+    ) -> Result<Equilibrium> {
+        let settled =
+            match static_equilibrium::solve(config, near_config, &near.tether, &near.accd)? {
+                Some(s) => Settled {
+                    tether: s.tether,
+                    accd: s.accd,
+                    snapshot: s.snapshot,
+                    steps: s.steps,
+                },
+                None => settle_open_loop(config, &mut || false).map_err(|e| unsettled(config, e))?,
+            };
+        Equilibrium::place(config, settled, &mut || false)
+    }
+
+    /// The equilibrium at `settled`, with the boom's formation placed relative to it.
+    fn place(
+        config: &Valid<EnvConfig>,
+        settled: Settled,
+        interrupted: &mut dyn FnMut() -> bool,
+    ) -> Result<Equilibrium> {
         let capture_point = settled.snapshot.capture_point;
         let boom_nominal = config.physics.boom.nominal(&capture_point, || {
             reference_capture_point(config.physics.wake.sampling, interrupted)
@@ -137,6 +176,7 @@ impl Equilibrium {
             capture_point,
             boom_nominal,
             outside_limits,
+            cost_steps: settled.steps,
         })
     }
 }
@@ -244,6 +284,8 @@ pub struct Episode {
     /// This episode's configuration: `base`, or with randomization the episode's drawn physics.
     config: Arc<Valid<EnvConfig>>,
     equilibrium: Arc<Equilibrium>,
+    /// The equilibrium of `base`: what randomized physics solves its own equilibria from.
+    base_equilibrium: Arc<Equilibrium>,
     /// The drawn physical parameters, with randomization.
     parameters: Option<Parameters>,
     sim: CaptureSim,
@@ -294,6 +336,7 @@ impl Episode {
             overload_tension: config.limits.overload_fraction
                 * config.physics.tether.breaking_tension,
             config,
+            base_equilibrium: Arc::clone(&equilibrium),
             equilibrium,
             sim,
             steps: 0,
@@ -321,7 +364,11 @@ impl Episode {
             return Ok(None);
         }
         let config = Arc::new(drawn_config(&self.base, &parameters)?);
-        let equilibrium = Arc::new(Equilibrium::settle(&config)?);
+        let equilibrium = Arc::new(Equilibrium::solve_near(
+            &config,
+            &self.base_equilibrium,
+            &self.base,
+        )?);
         let mut sim = CaptureSim::new(&config.capture(), seeds)?;
         sim.set_boom_nominal(equilibrium.boom_nominal)?;
         Ok(Some(Physics {
@@ -347,7 +394,8 @@ impl Episode {
     /// Starts a new episode: the ACCD displaced from the equilibrium and tilted at random (from
     /// the `initial` stream of `seeds.initial`), boom and turbulence from their seeds, t = 0.
     /// With randomized physics the episode's parameters are drawn from `seeds.wake` first, and
-    /// its equilibrium settled (unless the parameters are the current ones).
+    /// its equilibrium solved from the base's ([`Equilibrium::solve_near`]; unless the
+    /// parameters are the current ones).
     pub fn reset(&mut self, seeds: Seeds) -> Result<()> {
         if let Some(physics) = self.drawn_physics(seeds)? {
             self.install(physics);

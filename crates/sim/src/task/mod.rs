@@ -52,6 +52,8 @@ pub mod linearize;
 pub mod observation;
 pub mod randomization;
 pub mod sensors;
+pub mod state_steps;
+pub mod static_equilibrium;
 
 pub use config::{EnvConfig, InitialConfig, LimitsConfig, RewardConfig};
 pub use observation::{

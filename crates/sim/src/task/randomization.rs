@@ -24,10 +24,11 @@
 //! | towing speed | 170-200 m/s | `aircraft.airspeed` around the paper's 185 m/s |
 //! | ambient turbulence | 0-2.8 m/s RMS | `turbulence.ambient` as a MIL-F-8785C level of that RMS (533.4 m), none to moderate |
 //!
-//! A range with equal ends fixes the parameter. Each episode then settles its own open-loop
-//! equilibrium (episodes start around it and the boom is placed relative to it,
-//! [`crate::BoomConfig::nominal`]): about 4000 physics steps per reset, which a reset with the
-//! same parameters (the same wake seed) skips.
+//! A range with equal ends fixes the parameter. Each episode then solves its own open-loop
+//! equilibrium from the base configuration's (episodes start around it and the boom is placed
+//! relative to it, [`crate::BoomConfig::nominal`]; [`crate::Equilibrium::solve_near`],
+//! [`crate::task::static_equilibrium`]): at most 200 physics steps per reset (75-150 measured),
+//! which a reset with the same parameters (the same wake seed) skips.
 
 use accd_spec::{join, out_of_range, OutOfRange, Rules};
 use accd_tether::{Material, TetherConfig};
