@@ -235,7 +235,6 @@ def test_the_design_and_the_filter_are_bitwise_the_same_whatever_the_blas_kernel
     for threads, kernels in (("1", None), ("3", None), ("2", "Haswell"), ("1", "Prescott")):
         env = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS") and k != "OPENBLAS_CORETYPE"}
         env["OPENBLAS_NUM_THREADS"] = threads
-        env["RAYON_NUM_THREADS"] = threads
         if kernels:
             env["OPENBLAS_CORETYPE"] = kernels
         r = subprocess.run([sys.executable, "-c", _DESIGN_BITS], env=env, capture_output=True, text=True, timeout=120)

@@ -151,3 +151,35 @@ fn rl_episodes_step_and_reset_without_allocating() {
         after - before
     );
 }
+
+#[test]
+fn the_lqr_filter_step_does_not_allocate() {
+    use accd_sim::control::filter::LqrFilter;
+    use accd_sim::control::lqr::{EXTRA_STATES, MEASURED_DIM};
+    use accd_sim::control::matrix::Matrix;
+    use accd_sim::{ACT_DIM, OBS_DIM};
+
+    let n = 20;
+    let nz = n + EXTRA_STATES;
+    let m = |r: usize, c: usize, s: f64| Matrix::from_fn(r, c, |i, j| s / (1 + i + j) as f64);
+    let filter = LqrFilter::from_parts(
+        n,
+        &m(nz, nz, 0.5),
+        &m(nz, ACT_DIM, 1.0),
+        &m(MEASURED_DIM, nz, 1.0),
+        &m(nz, MEASURED_DIM, 0.1),
+        &m(ACT_DIM, n, 0.1),
+        &m(ACT_DIM, 4, 1.0),
+        [0.0; MEASURED_DIM],
+    )
+    .unwrap();
+    let mut state = filter.new_state();
+    let obs = [0.1; OBS_DIM];
+    let mut command = [0.0_f32; ACT_DIM];
+    filter.step(&mut state, &obs, &mut command).unwrap();
+    let before = allocations();
+    for _ in 0..10 {
+        filter.step(&mut state, &obs, &mut command).unwrap();
+    }
+    assert_eq!(allocations() - before, 0);
+}

@@ -242,8 +242,11 @@ class LqrPolicy:
 
     def __setstate__(self, state: Mapping[str, Any]) -> None:
         self.__init__(state["design"])
-        self.name = state["name"]
-        self.set_state(state["state"])
+        self.name = state.get("name", type(self).name)
+        if "state" in state:
+            self.set_state(state["state"])
+        elif state.get("_z") is not None:  # the numpy filter's attributes
+            self.set_state({"z": state["_z"], "u": state["_u"], "fresh": state["_fresh"]})
 
     @classmethod
     def for_config(cls, config: Any = None, tuning: Optional[LqrTuning | Mapping[str, Any]] = None,
@@ -281,8 +284,8 @@ class LqrPolicy:
 
     def predict(self, obs: Any) -> np.ndarray:
         """Flap commands (N, 4) in [-1, 1] for observations (N, 25); advances the estimates. The
-        filter step runs in Rust with the GIL released, the rows on several threads, each row in
-        fixed-order arithmetic (the same bits for any batch size, thread count or CPU)."""
+        filter step runs in Rust with the GIL released, each row in fixed-order arithmetic (the
+        same bits for any batch size or CPU)."""
         o = check_observations(obs)
         return self._filter.step(np.ascontiguousarray(o, dtype=np.float64))
 

@@ -941,8 +941,8 @@ def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] =
 
 def _machine() -> str:
     """The machine a report comes from: architecture, CPU model, CPU count, Python, and the
-    kernels numpy's and SciPy's BLAS chose for this CPU (the LQR's last bits follow them; see
-    docs/decisions.md, "Known limitations")."""
+    kernels the loaded BLAS libraries chose for this CPU (a record of the machine: the
+    environment and the LQR run on none of them)."""
     model = platform.processor()
     try:
         with open("/proc/cpuinfo") as f:
