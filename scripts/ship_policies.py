@@ -18,6 +18,15 @@ LQR's those of the same folder's baseline. It may instead be a JSON file of the 
 outcome, steps and miss distance in policy.json (tests/test_trained_policies.py compares them)
 and checks the outcomes against the recorded ones. Every file is written atomically; an
 existing policy of that name is replaced only with ``--replace``.
+
+    python scripts/ship_policies.py --recheck residual_sac_hard [--check 16]
+
+``--recheck NAME`` re-records an already shipped policy after a change that moves episodes on
+purpose (a numerical scheme, the LQR's arithmetic, the resets): it evaluates the policy as shipped
+(its exported network) and the LQR on the policy's tier over the recorded number of held-out
+episodes, exactly as ``accd-gym evaluate --policy NAME --policy lqr --episodes 500 --num-envs 50``
+does, and rewrites policy.json's held-out row and check episodes from them. Nothing else of the
+policy (weights, statistics, run.json, network) changes.
 """
 
 from __future__ import annotations
@@ -70,18 +79,71 @@ def benchmark_results(folder: Path, name: str) -> dict:
     return {tier: out}
 
 
+def check_record(episodes: list) -> list[dict]:
+    """The check episodes as policy.json stores them: index, outcome, steps and the miss distance
+    as the float it is (JSON keeps a double's every bit), so that a re-run compares exactly."""
+    return [{"index": e.index, "outcome": e.outcome, "steps": e.steps, "min_distance": float(e.min_distance)}
+            for e in episodes]
+
+
+def recheck(name: str, check: int) -> int:
+    """Re-records shipped policy ``name``'s held-out row and check episodes with the current code
+    (see the module docstring); 0 on success."""
+    import json
+
+    from accd_gym import trained
+    from accd_gym.evals.episodes import EVAL_BASE_SEED, run_episodes
+    from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS
+    from accd_gym.evals.policies import load_policy
+    from accd_gym.evals.shipped import info, policy_dir
+
+    doc = info(name)
+    tier, held = doc["tier"], doc["held_out"]
+    n = int(held["episodes"])
+    as_bits = lambda eps: "".join("1" if e.captured else "0" for e in eps)  # noqa: E731
+    policy_eps = trained.held_out_episodes(name, n, num_envs=50)
+    config = {"tier": tier}
+    lqr_eps = run_episodes(load_policy("lqr", config=config), n, seed=EVAL_BASE_SEED,
+                           wake_seeds=list(HELD_OUT_WAKE_SEEDS[:n]), num_envs=50, config=config)
+    before = (held["captures"], held.get("lqr_captures"), held["captured"])
+    captured, lqr = as_bits(policy_eps), as_bits(lqr_eps)
+    held.update({
+        "results": "re-evaluated with the current code (scripts/ship_policies.py --recheck)",
+        "base_seed": EVAL_BASE_SEED,
+        "captures": captured.count("1"),
+        "captured": captured,
+        "lqr_captures": lqr.count("1"),
+        "lqr_captured": lqr,
+    })
+    doc.pop("check_blas_kernels", None)
+    doc["check_episodes"] = check_record(policy_eps[:check])
+    write_text(policy_dir(name) / "policy.json", json.dumps(doc, indent=1) + "\n")
+    changed = sum(a != b for a, b in zip(captured, before[2]))
+    print(f"rechecked {name}: {tier}, {held['captures']}/{n} (was {before[0]}), LQR {held['lqr_captures']}/{n} "
+          f"(was {before[1]}); {changed} of {n} outcomes changed")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Ships one run's newest checkpoint (or final model) under ``--name``; 0 on success."""
+    """Ships one run's newest checkpoint (or final model) under ``--name``, or re-records a shipped
+    policy (``--recheck``); 0 on success."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--name", required=True, help="the shipped policy's name (a folder name)")
-    ap.add_argument("--run", required=True, help="the training run folder (run.json, checkpoints/)")
-    ap.add_argument("--results", required=True,
-                    help="results JSON with {tier: {key: {captured: '0101..'}}}, or a benchmark folder")
-    ap.add_argument("--key", required=True,
-                    help="the run's entry in --results (e.g. residual_ppo_s2, or a benchmark run's name)")
+    ap.add_argument("--recheck", metavar="NAME", help="re-record shipped policy NAME's held-out row and check "
+                    "episodes with the current code (no other option but --check)")
+    ap.add_argument("--name", help="the shipped policy's name (a folder name)")
+    ap.add_argument("--run", help="the training run folder (run.json, checkpoints/)")
+    ap.add_argument("--results", help="results JSON with {tier: {key: {captured: '0101..'}}}, or a benchmark folder")
+    ap.add_argument("--key", help="the run's entry in --results (e.g. residual_ppo_s2, or a benchmark run's name)")
     ap.add_argument("--check", type=int, default=8, help="held-out episodes to run and store (default 8)")
     ap.add_argument("--replace", action="store_true", help="replace a shipped policy of that name")
     args = ap.parse_args(argv)
+    if args.recheck is not None:
+        if any(v is not None for v in (args.name, args.run, args.results, args.key)) or args.replace:
+            ap.error("--recheck takes no other option but --check")
+        return recheck(args.recheck, args.check)
+    missing = [f"--{k}" for k in ("name", "run", "results", "key") if getattr(args, k) is None]
+    if missing:
+        ap.error(f"the following arguments are required: {', '.join(missing)}")
 
     from accd_gym.learning.training import latest_checkpoint
     from accd_gym.evals.shipped import TRAINED_DIR
@@ -146,8 +208,7 @@ def main(argv: list[str] | None = None) -> int:
         from accd_gym import trained
 
         eps = trained.held_out_episodes(args.name, args.check)
-        doc["check_episodes"] = [{"index": e.index, "outcome": e.outcome, "steps": e.steps,
-                                  "min_distance": round(float(e.min_distance), 6)} for e in eps]
+        doc["check_episodes"] = check_record(eps)
         got = "".join("1" if e.outcome == "captured" else "0" for e in eps)
         if got != captured[: args.check]:
             print(f"warning: {args.name}: first {args.check} held-out outcomes {got} differ from the recorded "

@@ -9,7 +9,6 @@ import json
 import subprocess
 import sys
 
-import numpy as np
 import pytest
 
 from accd_gym import ConfigError, trained
@@ -66,7 +65,9 @@ def test_shipped_policy_reproduces_its_stored_held_out_episodes(name):
     assert [e["index"] for e in episodes] == [s["index"] for s in stored]
     assert [e["outcome"] for e in episodes] == [s["outcome"] for s in stored]
     assert [e["steps"] for e in episodes] == [s["steps"] for s in stored]
-    np.testing.assert_allclose([e["min_distance"] for e in episodes], [s["min_distance"] for s in stored], atol=1e-3)
+    # Every bit: the physics, the LQR and the network are fixed-order arithmetic (JSON keeps a
+    # double exactly).
+    assert [e["min_distance"] for e in episodes] == [s["min_distance"] for s in stored]
     recorded = doc["held_out"]["captured"][: len(stored)]
     assert "".join("1" if e["captured"] else "0" for e in episodes) == recorded
 
