@@ -15,7 +15,8 @@
 # on the build folder while a Rust check holds it), checks it
 # (auditwheel, twine), installs it into a fresh virtual environment of the newest Python on the
 # machine with the newest dependencies, and runs scripts/wheel_smoke.py there with no cargo or
-# rustc on PATH. Its downloads run from the start beside the set-up; its checks beside pytest.
+# rustc on PATH. Its downloads run from the start beside the set-up; its checks, as soon as the
+# set-up is done, beside the Rust checks' end and pytest.
 # It also checks .github/workflows (the workflow schema, zizmor's audits, actionlint if on PATH).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -124,6 +125,15 @@ wheel_test() {
   echo "== wheel job done [$SECONDS s]"
 }
 
+# The whole wheel job, from the start: its set-up, then (once the Python set-up has written the
+# marker file naming its interpreter) its build, checks and smoke test.
+wheel_job() {
+  wheel_prepare
+  until [ -s "$LOGS/setup-done" ]; do sleep 2; done
+  ACCD_PY=$(cat "$LOGS/setup-done")
+  wheel_test
+}
+
 # On any exit (a failure, Ctrl+C) the background checks end too, their cargo and rustc included.
 kill_tree() { local child; for child in $(pgrep -P "$1"); do kill_tree "$child"; done; kill "$1" 2>/dev/null || true; }
 LOGS="$(mktemp -d)"
@@ -133,8 +143,8 @@ trap 'for job in $(jobs -p); do kill_tree "$job"; done; rm -rf "$LOGS"' EXIT
 RUST=$!
 ( set -euo pipefail; install_chromium ) >"$LOGS/chromium" 2>&1 &
 CHROMIUM=$!
-( set -euo pipefail; wheel_prepare ) >"$LOGS/wheel-prepare" 2>&1 &
-WHEEL_PREPARE=$!
+( set -euo pipefail; wheel_job ) >"$LOGS/wheel" 2>&1 &
+WHEEL=$!
 
 # Waits for a background job, prints its log, stops on its failure.
 finish() {
@@ -147,10 +157,8 @@ finish() {
 echo "== Python set-up (the Rust checks and the wheel job's set-up run meanwhile) [$SECONDS s]"
 source scripts/setup.sh
 echo "== Python set-up done [$SECONDS s]"
+echo "$ACCD_PY" >"$LOGS/setup-done"
 
-finish "$WHEEL_PREPARE" "wheel job set-up" "$LOGS/wheel-prepare"
-( set -euo pipefail; wheel_test ) >"$LOGS/wheel" 2>&1 &
-WHEEL=$!
 finish "$RUST" "Rust checks" "$LOGS/rust"
 finish "$CHROMIUM" "chromium install" "$LOGS/chromium"
 
