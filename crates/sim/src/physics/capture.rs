@@ -349,8 +349,20 @@ impl CaptureSim {
     /// ACCD flies level with the aircraft, flaps neutral, t = 0.
     pub fn new(config: &Valid<CaptureConfig>, seeds: Seeds) -> Result<Self> {
         let aero = Arc::new(config.accd.aero_model()?);
+        let wake = Wake::from_config(&config.wake, config.aircraft.airspeed)?;
+        CaptureSim::with_model(config, seeds, aero, wake)
+    }
+
+    /// [`CaptureSim::new`] with the aerodynamic model and the mean wake already built from the
+    /// config (`config.accd.aero_model()`, `Wake::from_config(&config.wake, airspeed)`): the
+    /// same simulation, for callers that build several of one configuration.
+    pub fn with_model(
+        config: &Valid<CaptureConfig>,
+        seeds: Seeds,
+        aero: Arc<AeroModel>,
+        wake: Wake,
+    ) -> Result<Self> {
         let airspeed = config.aircraft.airspeed;
-        let wake = Wake::from_config(&config.wake, airspeed)?;
         let turbulence = Turbulence::new(&config.turbulence, airspeed, seeds.wake)?;
         let density = Atmosphere::isa(config.aircraft.altitude)?.density;
         let field = WakeField::from_parts(wake, turbulence, density);

@@ -11,9 +11,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, SimError};
 use crate::physics::accd::AccdState;
+use crate::physics::aero::AeroModel;
 use crate::physics::capture::{CaptureSim, CaptureState, Snapshot};
 use crate::physics::turbulence::AmbientTurbulence;
-use crate::physics::wake::AirSampling;
+use crate::physics::wake::{AirSampling, Wake};
 use crate::rng::{Seeds, Stream};
 use crate::rotation;
 use crate::state_format::{check_len, StateError};
@@ -145,16 +146,27 @@ impl Equilibrium {
         near: &Equilibrium,
         near_config: &EnvConfig,
     ) -> Result<Equilibrium> {
-        let settled =
-            match static_equilibrium::solve(config, near_config, &near.tether, &near.accd)? {
-                Some(s) => Settled {
-                    tether: s.tether,
-                    accd: s.accd,
-                    snapshot: s.snapshot,
-                    steps: s.steps,
-                },
-                None => settle_open_loop(config, &mut || false).map_err(|e| unsettled(config, e))?,
-            };
+        Equilibrium::solve_near_with(config, near, near_config, None)
+    }
+
+    /// [`Equilibrium::solve_near`] with `config`'s aerodynamic model and mean wake built.
+    fn solve_near_with(
+        config: &Valid<EnvConfig>,
+        near: &Equilibrium,
+        near_config: &EnvConfig,
+        model: Option<(Arc<AeroModel>, Wake)>,
+    ) -> Result<Equilibrium> {
+        let solved =
+            static_equilibrium::solve(config, near_config, &near.tether, &near.accd, model)?;
+        let settled = match solved {
+            Some(s) => Settled {
+                tether: s.tether,
+                accd: s.accd,
+                snapshot: s.snapshot,
+                steps: s.steps,
+            },
+            None => settle_open_loop(config, &mut || false).map_err(|e| unsettled(config, e))?,
+        };
         Equilibrium::place(config, settled, &mut || false)
     }
 
@@ -364,12 +376,17 @@ impl Episode {
             return Ok(None);
         }
         let config = Arc::new(drawn_config(&self.base, &parameters)?);
-        let equilibrium = Arc::new(Equilibrium::solve_near(
+        // The aerodynamic model and the wake tables, built once for the solve and the episode.
+        let capture = config.capture();
+        let aero = Arc::new(capture.accd.aero_model()?);
+        let wake = Wake::from_config(&capture.wake, capture.aircraft.airspeed)?;
+        let equilibrium = Arc::new(Equilibrium::solve_near_with(
             &config,
             &self.base_equilibrium,
             &self.base,
+            Some((Arc::clone(&aero), wake.clone())),
         )?);
-        let mut sim = CaptureSim::new(&config.capture(), seeds)?;
+        let mut sim = CaptureSim::with_model(&capture, seeds, aero, wake)?;
         sim.set_boom_nominal(equilibrium.boom_nominal)?;
         Ok(Some(Physics {
             parameters,

@@ -33,12 +33,16 @@
 //! for its randomized episodes): its in-plane coordinates, its elongations scaled by the ratio of
 //! the axial stiffnesses (the same tension), at rest.
 
+use std::sync::Arc;
+
 use nalgebra::{DMatrix, DVector, Quaternion, UnitQuaternion, Vector3};
 
 use crate::error::Result;
 use crate::physics::accd::AccdState;
+use crate::physics::aero::AeroModel;
 use crate::physics::capture::{CaptureSim, CaptureState, Snapshot};
 use crate::physics::turbulence::AmbientTurbulence;
+use crate::physics::wake::Wake;
 use crate::rng::Seeds;
 use crate::task::config::EnvConfig;
 use crate::task::state_steps::{state_step, Component};
@@ -160,7 +164,8 @@ fn in_plane(tether: &TetherState, accd: &AccdState, segments: usize) -> bool {
 }
 
 /// The open-loop equilibrium of `config` (neutral flaps, mean wake, no turbulence) solved from
-/// the equilibrium `(tether, accd)` of `guess_config` (module docs); `Ok(None)` when the solve
+/// the equilibrium `(tether, accd)` of `guess_config` (module docs), with `model`, the
+/// aerodynamic model and mean wake of `config` when the caller has them built; `Ok(None)` when the solve
 /// does not reach [`ACCEPT`] within [`MAX_STEPS`] physics steps or the guess is not in the
 /// plane.
 pub(crate) fn solve(
@@ -168,13 +173,19 @@ pub(crate) fn solve(
     guess_config: &EnvConfig,
     tether: &TetherState,
     accd: &AccdState,
+    model: Option<(Arc<AeroModel>, Wake)>,
 ) -> Result<Option<Solved>> {
     let mut capture = config.capture().into_inner();
     capture.turbulence.wake_turbulence = false;
     capture.turbulence.ambient = AmbientTurbulence::None;
     // Switching the turbulence off keeps every rule (as in the time settle).
     let capture = Valid::trusted(capture);
-    let sim = CaptureSim::new(&capture, Seeds::default())?;
+    // The turbulence changes neither the aerodynamic model nor the mean wake: the same
+    // simulation as `CaptureSim::new` of `capture`.
+    let sim = match model {
+        Some((aero, wake)) => CaptureSim::with_model(&capture, Seeds::default(), aero, wake)?,
+        None => CaptureSim::new(&capture, Seeds::default())?,
+    };
     let segments = config.physics.tether.segments;
     let dofs = sim.tether_state().q.len();
     if tether.q.len() != dofs
