@@ -1,8 +1,8 @@
 //! The physics fingerprint on the Rust side: every output of a fixed set of episodes, hashed,
 //! equals the recorded digest whatever the processor and build. `scripts/test.sh` runs it with
 //! the native arithmetic and again with `ACCD_GYM_ARITHMETIC=portable` (the build of a processor
-//! without AVX2 and FMA); it also runs under qemu-aarch64 (docs/decisions.md, "One arithmetic on
-//! every processor").
+//! without AVX2 and FMA); built for aarch64 it passes under qemu-aarch64 too (docs/decisions.md,
+//! "One arithmetic on every processor").
 
 use std::sync::Arc;
 
