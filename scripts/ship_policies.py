@@ -26,7 +26,13 @@ purpose (a numerical scheme, the LQR's arithmetic, the resets): it evaluates the
 (its exported network) and the LQR on the policy's tier over the recorded number of held-out
 episodes, exactly as ``accd-gym evaluate --policy NAME --policy lqr --episodes 500 --num-envs 50``
 does, and rewrites policy.json's held-out row and check episodes from them. Nothing else of the
-policy (weights, statistics, run.json, network) changes.
+policy (weights, statistics, run.json, network) changes. It also stores every episode's length
+and miss distance, which
+
+    python scripts/ship_policies.py --verify residual_sac_hard [--episodes 100]
+
+compares to the last bit: the check that a machine, a Python or numpy version or
+``ACCD_GYM_ARITHMETIC=portable`` gives the recorded episodes.
 """
 
 from __future__ import annotations
@@ -114,6 +120,9 @@ def recheck(name: str, check: int) -> int:
         "captured": captured,
         "lqr_captures": lqr.count("1"),
         "lqr_captured": lqr,
+        # Every episode's length and miss distance (m, every bit): what --verify compares.
+        "steps": [e.steps for e in policy_eps],
+        "min_distance": [float(e.min_distance) for e in policy_eps],
     })
     doc.pop("check_blas_kernels", None)
     doc["check_episodes"] = check_record(policy_eps[:check])
@@ -124,12 +133,42 @@ def recheck(name: str, check: int) -> int:
     return 0
 
 
+def verify(name: str, episodes: int) -> int:
+    """Runs shipped policy ``name``'s first ``episodes`` held-out episodes and compares each one's
+    outcome, length and miss distance, to the last bit, with those recorded by ``--recheck``;
+    0 when every one agrees, 1 otherwise (the differing episodes printed)."""
+    import os
+    import platform
+
+    from accd_gym import arithmetic, trained
+    from accd_gym.evals.shipped import info
+
+    held = info(name)["held_out"]
+    if "steps" not in held:
+        raise ConfigError(f"invalid config: {name!r} has no per-episode record (run --recheck first)")
+    n = min(episodes, int(held["episodes"]))
+    eps = trained.held_out_episodes(name, n, num_envs=min(50, n))
+    bad = [(e.index, e.captured, e.steps, float(e.min_distance)) for e in eps
+           if (e.captured, e.steps, float(e.min_distance))
+           != (held["captured"][e.index] == "1", held["steps"][e.index], held["min_distance"][e.index])]
+    where = (f"python {platform.python_version()}, numpy {__import__('numpy').__version__}, arithmetic {arithmetic()}, "
+             f"OPENBLAS_CORETYPE={os.environ.get('OPENBLAS_CORETYPE', '-')}, {platform.machine()}")
+    print(f"{name}: {n - len(bad)} of {n} episodes as recorded (outcome, steps, miss distance) [{where}]")
+    for index, captured, steps, distance in bad[:10]:
+        print(f"  episode {index}: captured {captured}, {steps} steps, miss {distance!r}; recorded "
+              f"{held['captured'][index]}, {held['steps'][index]}, {held['min_distance'][index]!r}")
+    return 0 if not bad else 1
+
+
 def main(argv: list[str] | None = None) -> int:
     """Ships one run's newest checkpoint (or final model) under ``--name``, or re-records a shipped
     policy (``--recheck``); 0 on success."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--recheck", metavar="NAME", help="re-record shipped policy NAME's held-out row and check "
                     "episodes with the current code (no other option but --check)")
+    ap.add_argument("--verify", metavar="NAME", help="compare shipped policy NAME's first --episodes held-out "
+                    "episodes with the per-episode record of --recheck, to the last bit")
+    ap.add_argument("--episodes", type=int, default=500, help="episodes for --verify (default 500)")
     ap.add_argument("--name", help="the shipped policy's name (a folder name)")
     ap.add_argument("--run", help="the training run folder (run.json, checkpoints/)")
     ap.add_argument("--results", help="results JSON with {tier: {key: {captured: '0101..'}}}, or a benchmark folder")
@@ -137,6 +176,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--check", type=int, default=8, help="held-out episodes to run and store (default 8)")
     ap.add_argument("--replace", action="store_true", help="replace a shipped policy of that name")
     args = ap.parse_args(argv)
+    if args.verify is not None:
+        return verify(args.verify, args.episodes)
     if args.recheck is not None:
         if any(v is not None for v in (args.name, args.run, args.results, args.key)) or args.replace:
             ap.error("--recheck takes no other option but --check")

@@ -29,7 +29,9 @@ def test_catalog_lists_the_shipped_policies_and_their_metadata():
         held = doc["held_out"]
         assert held["episodes"] == len(held["captured"]) == 500
         assert held["captures"] == held["captured"].count("1")
-        assert held["captures"] >= held["lqr_captures"]  # recorded: at least the LQR's count
+        # The LQR's outcomes on the same episodes, and every episode's length and miss distance.
+        assert len(held["lqr_captured"]) == 500 and held["lqr_captures"] == held["lqr_captured"].count("1")
+        assert len(held["steps"]) == len(held["min_distance"]) == 500
         folder = trained.policy_dir(name)
         sizes = {f.name: f.stat().st_size for f in folder.iterdir()}
         assert set(sizes) == {"final_model.zip", "vecnormalize.pkl", "run.json", "policy.json", "network.npz"}
