@@ -153,7 +153,9 @@ impl Equilibrium {
                     snapshot: s.snapshot,
                     steps: s.steps,
                 },
-                None => settle_open_loop(config, &mut || false).map_err(|e| unsettled(config, e))?,
+                None => {
+                    settle_open_loop(config, &mut || false).map_err(|e| unsettled(config, e))?
+                }
             };
         Equilibrium::place(config, settled, &mut || false)
     }
