@@ -21,8 +21,10 @@ estimate or iterate, falls back to the LQR's command for that step; :attr:`MpcPo
 counts the constrained solves, the unconverged ones and the non-finite ones. Every row is stepped in fixed-order arithmetic with the GIL released:
 the same bits whatever the batch size or CPU.
 
-Defaults: see :class:`MpcTuning` and ``training/mpc_tuning.json`` (chosen on validation wake
-seeds only).
+Defaults (:class:`MpcTuning`): set by hand, ADMM's ``rho`` from a comparison of unconverged
+solves on four training-seed episodes; ``training/mpc_tuning.json`` (``scripts/tune_mpc.py``, on
+validation wake seeds only) records the horizon of 20 against the LQR: 47 of 50 precision
+episodes captured (the LQR 47), 44 of 50 hard (the LQR 47). No horizon sweep is recorded yet.
 """
 
 from __future__ import annotations

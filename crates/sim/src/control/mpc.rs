@@ -383,10 +383,10 @@ impl MpcPlan {
         self.kall.mul_vec_into(&s.e0, &mut s.v);
         // Bounds: the flap rows, then the velocity rows (offsets moved into the bounds).
         for k in 0..self.horizon {
-            for j in 0..ACT_DIM {
+            for (j, u) in u_ss.iter().enumerate() {
                 let i = ACT_DIM * k + j;
-                s.lo[i] = -1.0 - u_ss[j];
-                s.hi[i] = 1.0 - u_ss[j];
+                s.lo[i] = -1.0 - u;
+                s.hi[i] = 1.0 - u;
                 s.active[i] = true;
             }
         }
