@@ -36,7 +36,7 @@ from typing import Any, Mapping, Optional
 import numpy as np
 
 from accd_gym import _core
-from accd_gym.control.lqr import LqrDesign, LqrPolicy, LqrTuning, _design_key, _plant_key, default_tuning
+from accd_gym.control.lqr import LqrDesign, LqrPolicy, LqrTuning, design_key, plant_key, default_tuning
 from accd_gym.envs.config import valid_config
 from accd_gym.errors import ConfigError
 
@@ -100,10 +100,10 @@ _CONFIGS: dict[tuple[str, LqrTuning], tuple[LqrDesign, MpcParts]] = {}
 
 
 def _design(cfg: "_core.EnvConfig", tuning: LqrTuning) -> tuple[LqrDesign, MpcParts]:
-    key = (_design_key(cfg), tuning)
+    key = (design_key(cfg), tuning)
     if key not in _CONFIGS:
         lin = _core.linearize(cfg)
-        plant = (_plant_key(lin), tuning)
+        plant = (plant_key(lin), tuning)
         if plant not in _PLANTS:
             d = _core.lqr_design(lin, [float(getattr(tuning, f.name)) for f in fields(LqrTuning)])
             design = LqrDesign(tuning=tuning, f=d.f, g=d.g, h=d.h, l=d.l, k=d.k, k_ff=d.k_ff, y_trim=d.y_trim,
