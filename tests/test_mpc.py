@@ -115,3 +115,15 @@ def test_it_flies_episodes_and_reports_its_solves(precision):
     stats = policy.stats
     assert stats["steps"] > 0 and stats["fallbacks"] + stats["inexact"] + stats["constrained"] <= stats["steps"]
     assert stats["fallbacks"] == 0, stats
+
+
+def test_it_serves_as_a_residual_base(precision):
+    """``residual="mpc"``: a zero correction flies the MPC's commands."""
+    from accd_gym.envs.vector import InAirCaptureVectorEnv
+
+    env = InAirCaptureVectorEnv(num_envs=2, residual={"base": "mpc", "observe_base": True}, **precision)
+    obs, _ = env.reset(seed=4)
+    for _ in range(5):
+        obs, _, terminated, truncated, _ = env.step(np.zeros((2, 4), dtype=np.float32))
+    assert np.all(np.isfinite(obs)) and not np.any(terminated | truncated)
+    env.close()
