@@ -59,8 +59,8 @@ def bang_bang():
 
 
 def test_every_built_in_controller_is_a_policy_and_pickles_alike():
-    assert list(CONTROLLERS) == ["zero", "random", "guidance", "lqr"]
-    assert registry.residual_bases() == ["guidance", "lqr"]
+    assert list(CONTROLLERS) == ["zero", "random", "guidance", "lqr", "mpc"]
+    assert registry.residual_bases() == ["guidance", "lqr", "mpc"]
     kinds = {"zero": ZeroPolicy, "random": RandomPolicy, "guidance": GuidancePolicy, "lqr": LqrPolicy}
     obs = np.random.default_rng(1).uniform(-1, 1, (3, 25)).astype(np.float32)
     for name, cls in kinds.items():
@@ -90,7 +90,7 @@ def test_unknown_and_clashing_names_are_config_errors_naming_the_registry():
     for bad in ("a/b", "x.json", ""):
         with pytest.raises(ConfigError, match="controller name"):
             register_controller(Controller(bad, lambda seed, config: ZeroPolicy(), "bad"))
-    assert list(CONTROLLERS) == ["zero", "random", "guidance", "lqr"]
+    assert list(CONTROLLERS) == ["zero", "random", "guidance", "lqr", "mpc"]
 
 
 def test_a_registered_controller_runs_everywhere_a_policy_is_taken(bang_bang, capsys):

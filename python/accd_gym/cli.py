@@ -392,7 +392,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_train)
     p = sub.add_parser("evaluate", help="evaluate policies on held-out wake seeds: JSON, plots, markdown")
     p.add_argument("--policy", action="append", required=True,
-                   help="a baseline (zero, random, guidance, lqr), a shipped trained policy (accd_gym.trained) or a trained model "
+                   help="a baseline (zero, random, guidance, lqr, mpc), a shipped trained policy (accd_gym.trained) or a trained model "
                         "(run folder or .zip); repeatable")
     p.add_argument("--episodes", type=_positive("--episodes"), default=100, help="episodes per policy (default 100)")
     p.add_argument("--out", type=_path("--out"), default="runs/eval", help="output folder (default: runs/eval)")
@@ -412,7 +412,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_evaluate)
     p = sub.add_parser("replay", help="record episodes of a policy: .npz, a self-contained 3D replay page each, MP4")
-    p.add_argument("--policy", required=True, help="a baseline (zero, random, guidance, lqr), a shipped trained policy (accd_gym.trained) or a trained model")
+    p.add_argument("--policy", required=True, help="a baseline (zero, random, guidance, lqr, mpc), a shipped trained policy (accd_gym.trained) or a trained model")
     p.add_argument("--episodes", type=_positive("--episodes"), default=1, help="episodes (default 1)")
     p.add_argument("--out", type=_path("--out"), default="runs/replay", help="output folder (default: runs/replay)")
     p.add_argument("--seed", type=_seed, default=None,
@@ -452,7 +452,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=_benchmark)
     p = sub.add_parser("rollout", help="run a policy for a few episodes headless and print a summary")
-    p.add_argument("--policy", required=True, help="a baseline (zero, random, guidance, lqr), a shipped trained policy (accd_gym.trained) or a trained model")
+    p.add_argument("--policy", required=True, help="a baseline (zero, random, guidance, lqr, mpc), a shipped trained policy (accd_gym.trained) or a trained model")
     p.add_argument("--episodes", type=_positive("--episodes"), default=8, help="episodes (default 8)")
     p.add_argument("--seed", type=_seed, default=0, help="base seed (training wake seeds are drawn from it)")
     p.add_argument("--num-envs", type=_positive("--num-envs"), default=8, help="parallel episodes (default 8)")

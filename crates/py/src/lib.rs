@@ -27,6 +27,7 @@ mod errors;
 mod infos;
 mod linearize;
 mod lqr;
+mod mpc;
 mod signals;
 mod tether;
 
@@ -48,6 +49,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<lqr::PyLqrDesign>()?;
     m.add_class::<lqr::PyLqrFilter>()?;
     m.add_function(wrap_pyfunction!(lqr::lqr_design, m)?)?;
+    m.add_class::<mpc::PyMpc>()?;
     m.add_function(wrap_pyfunction!(capture::mix_flaps, m)?)?;
     m.add_function(wrap_pyfunction!(capture::default_aero_table_json, m)?)?;
     m.add_function(wrap_pyfunction!(tether::tether_config, m)?)?;

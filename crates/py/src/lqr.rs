@@ -20,11 +20,11 @@ use pyo3::prelude::*;
 use crate::errors::{raise, IntoPy, Kind};
 use crate::linearize::PyLinearization;
 
-fn to_py<'py>(py: Python<'py>, m: &Matrix) -> Bound<'py, PyArray2<f64>> {
+pub(crate) fn to_py<'py>(py: Python<'py>, m: &Matrix) -> Bound<'py, PyArray2<f64>> {
     Array2::from_shape_fn((m.rows(), m.cols()), |(i, j)| m[(i, j)]).into_pyarray(py)
 }
 
-fn from_py(a: &PyReadonlyArray2<'_, f64>) -> Matrix {
+pub(crate) fn from_py(a: &PyReadonlyArray2<'_, f64>) -> Matrix {
     let v = a.as_array();
     Matrix::from_fn(v.nrows(), v.ncols(), |i, j| v[(i, j)])
 }
@@ -73,6 +73,21 @@ impl PyLqrDesign {
     #[getter]
     fn k_ff<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
         to_py(py, &self.inner.k_ff)
+    }
+    /// The LQR's state weight ``Q`` (n x n).
+    #[getter]
+    fn q<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        to_py(py, &self.inner.q)
+    }
+    /// The reference's steady state per unit of ``w_y, w_z, r_y, r_z`` (n x 4).
+    #[getter]
+    fn x_ss<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        to_py(py, &self.inner.x_ss)
+    }
+    /// The reference's steady command per unit of ``w_y, w_z, r_y, r_z`` (4 x 4).
+    #[getter]
+    fn u_ss<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        to_py(py, &self.inner.u_ss)
     }
     /// The measured observation at the trim (24).
     #[getter]
@@ -139,7 +154,7 @@ pub struct PyLqrFilter {
     states: Vec<FilterState>,
 }
 
-fn check_shape(name: &str, got: &[usize], want: &[usize]) -> PyResult<()> {
+pub(crate) fn check_shape(name: &str, got: &[usize], want: &[usize]) -> PyResult<()> {
     if got != want {
         return Err(raise(
             Kind::State,

@@ -196,7 +196,7 @@ _PLANT_DESIGNS: dict[tuple[str, LqrTuning], LqrDesign] = {}
 _PLANT_ARRAYS = ("a", "b", "c", "e", "steps", "trim_observation")
 
 
-def _plant_key(lin: Any) -> str:
+def plant_key(lin: Any) -> str:
     """SHA-256 of everything :func:`design` reads of ``lin``: equal keys, equal designs."""
     h = hashlib.sha256()
     for name in _PLANT_ARRAYS:
@@ -208,7 +208,7 @@ def _plant_key(lin: Any) -> str:
     return h.hexdigest()
 
 
-def _design_key(cfg: "_core.EnvConfig") -> str:
+def design_key(cfg: "_core.EnvConfig") -> str:
     """The configuration's JSON without what does not change the plant (wake seeds)."""
     doc = json.loads(cfg.to_json())
     doc.pop("wake_seed", None)
@@ -260,10 +260,10 @@ class LqrPolicy:
         else:
             cfg = valid_config(config, **overrides)
         t = tuning if isinstance(tuning, LqrTuning) else (LqrTuning.from_mapping(tuning) if tuning else default_tuning())
-        key = (_design_key(cfg), t)
+        key = (design_key(cfg), t)
         if key not in _DESIGNS:
             lin = _core.linearize(cfg)
-            plant = (_plant_key(lin), t)
+            plant = (plant_key(lin), t)
             if plant not in _PLANT_DESIGNS:
                 _PLANT_DESIGNS[plant] = design(lin, t)
             _DESIGNS[key] = _PLANT_DESIGNS[plant]
@@ -372,5 +372,5 @@ def lqr_from_tuning(path: str, config: Any = None) -> LqrPolicy:
     return policy
 
 
-__all__ = ["LqrDesign", "LqrPolicy", "LqrTuning", "blas_kernels", "default_tuning", "design", "is_lqr_tuning",
-           "linearize", "lqr_from_tuning"]
+__all__ = ["LqrDesign", "LqrPolicy", "LqrTuning", "blas_kernels", "default_tuning", "design", "design_key",
+           "is_lqr_tuning", "linearize", "lqr_from_tuning", "plant_key"]

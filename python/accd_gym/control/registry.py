@@ -21,6 +21,7 @@ import numpy as np
 
 from accd_gym.control.baselines import GuidancePolicy, RandomPolicy, ZeroPolicy
 from accd_gym.control.lqr import LqrPolicy
+from accd_gym.control.mpc import MpcPolicy
 from accd_gym.errors import ConfigError
 
 
@@ -110,5 +111,8 @@ register_controller(Controller("guidance", lambda seed, config: GuidancePolicy()
                                residual_base=True))
 register_controller(Controller("lqr", lambda seed, config: LqrPolicy.for_config(config),
                                "LQR with a Kalman filter, designed for the env's configuration", residual_base=True))
+register_controller(Controller("mpc", lambda seed, config: MpcPolicy.for_config(config),
+                               "linear MPC on the LQR's Kalman filter, flap and closing-speed constraints",
+                               residual_base=True))
 
 __all__ = ["CONTROLLERS", "Controller", "Policy", "make_controller", "register_controller", "residual_bases"]

@@ -331,8 +331,8 @@ def options_markdown() -> str:
         "| `residual` | `None` | None, a base name, or a dict of the keys below | residual control: the flap command sent "
         "is `clip(u_base + scale * clip(a, -1, 1), -1, 1)`; a zero action reproduces the base controller's "
         "episodes bit for bit |",
-        "| `residual.base` | `'lqr'` | `'lqr'`, `'guidance'` | the base controller: the LQR with its Kalman "
-        "filter designed for the env's configuration, or the tuned guidance controller; it reads the "
+        "| `residual.base` | `'lqr'` | `'lqr'`, `'guidance'`, `'mpc'` | the base controller: the LQR with its Kalman "
+        "filter designed for the env's configuration, the tuned guidance controller, or the MPC on the LQR's filter; it reads the "
         "observations the agent gets, restarts with each episode and is told the command sent |",
         f"| `residual.scale` | `0.3` | (0, {SCALE_MAX:g}] | the bound of the correction, flap-limit units |",
         "| `residual.observe_base` | `True` | true, false | append the base command to the observation |",

@@ -647,7 +647,7 @@ def summarize(cfg: dict[str, Any], results: list[dict[str, Any]], baselines: dic
                 continue
             k, n = int(sum(rec["captured"])), len(rec["captured"])
             miss, ttc = _medians(rec)
-            rows[name] = {"kind": "classical" if name in ("guidance", "lqr") else "trivial", "rate": k / n,
+            rows[name] = {"kind": "classical" if name in ("guidance", "lqr", "mpc") else "trivial", "rate": k / n,
                           "failures": failures([rec]),
                           "ci95": list(wilson_interval(k, n)), "miss_median_m": miss, "capture_time_median_s": ttc}
         if "lqr" in rows:  # the learned methods relative to the LQR (LQR = 1.0)
@@ -659,7 +659,7 @@ def summarize(cfg: dict[str, Any], results: list[dict[str, Any]], baselines: dic
                     row["p_improvement_over_lqr"] = probability_of_improvement(row["rates"], [lqr_rate])
         comparison = None
         learned = [(float(np.mean(r["episodes"]["captured"])), r) for r in runs]
-        classical = [(rows[b]["rate"], b) for b in ("guidance", "lqr") if b in rows]
+        classical = [(rows[b]["rate"], b) for b in ("guidance", "lqr", "mpc") if b in rows]
         if learned and classical:
             best_rate, best = max(learned, key=lambda x: x[0])
             c_rate, c_name = max(classical, key=lambda x: x[0])

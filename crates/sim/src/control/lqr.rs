@@ -190,6 +190,12 @@ pub struct LqrDesign {
     pub k: Matrix,
     /// The reference gain `K_ff` (4 x 4: per `w_y`, `w_z`, `r_y`, `r_z`).
     pub k_ff: Matrix,
+    /// The LQR's state weight `Q` (n x n).
+    pub q: Matrix,
+    /// The reference's steady state `dx_ss` per unit of `w_y`, `w_z`, `r_y`, `r_z` (n x 4).
+    pub x_ss: Matrix,
+    /// The reference's steady command `u_ss` per unit of `w_y`, `w_z`, `r_y`, `r_z` (4 x 4).
+    pub u_ss: Matrix,
     /// The measured observation at the trim, `y*_m`.
     pub y_trim: [f64; MEASURED_DIM],
     /// The LQR's Riccati solution and how it was found.
@@ -396,6 +402,9 @@ pub fn design(lin: &Linearization, tuning: &LqrTuning) -> Result<LqrDesign> {
         l,
         k,
         k_ff,
+        q,
+        x_ss,
+        u_ss,
         y_trim,
         lqr,
         filter,

@@ -1,13 +1,16 @@
 //! Classical controllers designed on the linearized plant ([`crate::task::linearize`]): the LQR
-//! baseline with its steady-state Kalman filter.
+//! baseline with its steady-state Kalman filter, and the MPC baseline on the same filter.
 //!
 //! * [`matrix`]: dense matrices whose every operation runs in one fixed order of floating-point
 //!   operations (no BLAS, no run-time kernel choice): the same bits on every CPU.
 //! * [`riccati`]: the discrete algebraic Riccati equation by the structured doubling algorithm.
 //! * [`lqr`]: the design (LQR gain, Kalman gain, offset-free reference) of one configuration.
 //! * [`filter`]: the per-step work (predict, update, control law) of one env.
+//! * [`mpc`]: the MPC baseline, a condensed QP on the filter's estimate with the flap limits and
+//!   the closing-speed limit as constraints.
 
 pub mod filter;
 pub mod lqr;
 pub mod matrix;
+pub mod mpc;
 pub mod riccati;

@@ -1,0 +1,269 @@
+//! `accd_gym._core.Mpc`: the MPC baseline's per-step work ([`accd_sim::control::mpc`]) for
+//! `accd_gym.control.mpc.MpcPolicy`.
+//!
+//! `Mpc` owns the LQR filter state of every env of a batch (the estimate the MPC plans from) and
+//! steps them with the GIL released, on the calling thread, row after row: each row's
+//! arithmetic depends on nothing but its own inputs, so the results are the same bits whatever
+//! the batch size. The interface is `LqrFilter`'s, plus the solve counts.
+
+use std::sync::Arc;
+
+use accd_sim::control::filter::{FilterState, LqrFilter};
+use accd_sim::control::lqr::MEASURED_DIM;
+use accd_sim::control::mpc::{CaptureLimits, Mpc, MpcStats, MpcTuning};
+use accd_sim::{ACT_DIM, OBS_DIM};
+use numpy::ndarray::{Array1, Array2};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::prelude::*;
+
+use crate::errors::IntoPy;
+use crate::lqr::{check_shape, from_py};
+
+/// The MPC of one LQR design with the filter state of every env of a batch (see the module
+/// docs of ``accd_sim::control::mpc``).
+#[pyclass(name = "Mpc", module = "accd_gym._core")]
+pub struct PyMpc {
+    mpc: Arc<Mpc>,
+    states: Vec<FilterState>,
+    stats: MpcStats,
+}
+
+#[pymethods]
+impl PyMpc {
+    /// The MPC of an LQR design's matrices (``n`` plant states; ``f``, ``g``, ``h``, ``l``,
+    /// ``k``, ``k_ff``, ``y_trim`` as ``LqrFilter``'s; ``q``, ``p`` the LQR's weight and Riccati
+    /// solution, ``x_ss``, ``u_ss`` its reference), ``r_flap``, the agent step ``dt``, the
+    /// settings ``(horizon, speed_margin, window, slack_weight, rho, iterations)`` and the
+    /// capture limits ``(max_closing_speed, approach_speed)``. ``ConfigError`` naming the field
+    /// for a bad value (a zero horizon among them).
+    #[new]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        n: usize,
+        f: PyReadonlyArray2<'_, f64>,
+        g: PyReadonlyArray2<'_, f64>,
+        h: PyReadonlyArray2<'_, f64>,
+        l: PyReadonlyArray2<'_, f64>,
+        k: PyReadonlyArray2<'_, f64>,
+        k_ff: PyReadonlyArray2<'_, f64>,
+        y_trim: PyReadonlyArray1<'_, f64>,
+        q: PyReadonlyArray2<'_, f64>,
+        p: PyReadonlyArray2<'_, f64>,
+        x_ss: PyReadonlyArray2<'_, f64>,
+        u_ss: PyReadonlyArray2<'_, f64>,
+        r_flap: f64,
+        dt: f64,
+        settings: (usize, f64, f64, f64, f64, usize),
+        limits: (f64, f64),
+    ) -> PyResult<Self> {
+        let (horizon, speed_margin, window, slack_weight, rho, iterations) = settings;
+        let tuning = MpcTuning::new(horizon, speed_margin, window, slack_weight, rho, iterations)
+            .py_err()?;
+        let y = y_trim.as_array();
+        check_shape("y_trim", y.shape(), &[MEASURED_DIM])?;
+        let mut yt = [0.0; MEASURED_DIM];
+        for (o, v) in yt.iter_mut().zip(y.iter()) {
+            *o = *v;
+        }
+        let (f, g, h) = (from_py(&f), from_py(&g), from_py(&h));
+        let filter = LqrFilter::from_parts(
+            n,
+            &f,
+            &g,
+            &h,
+            &from_py(&l),
+            &from_py(&k),
+            &from_py(&k_ff),
+            yt,
+        )
+        .py_err()?;
+        let (q, p, x_ss, u_ss) = (from_py(&q), from_py(&p), from_py(&x_ss), from_py(&u_ss));
+        let limits = CaptureLimits {
+            max_closing_speed: limits.0,
+            approach_speed: limits.1,
+        };
+        let mpc = py
+            .detach(|| {
+                Mpc::new(
+                    filter, &f, &g, &h, &q, r_flap, &p, &x_ss, &u_ss, dt, tuning, limits,
+                )
+            })
+            .py_err()?;
+        Ok(Self {
+            mpc: Arc::new(mpc),
+            states: Vec::new(),
+            stats: MpcStats::default(),
+        })
+    }
+
+    /// Number of envs whose state it holds (0 before the first ``step``).
+    #[getter]
+    fn num_envs(&self) -> usize {
+        self.states.len()
+    }
+
+    /// Observer states ``nz``.
+    #[getter]
+    fn nz(&self) -> usize {
+        self.mpc.filter().nz()
+    }
+
+    /// The horizon in agent steps.
+    #[getter]
+    fn horizon(&self) -> usize {
+        self.mpc.plan().horizon()
+    }
+
+    /// ``(steps, constrained, inexact, fallbacks)`` since construction: rows stepped, rows
+    /// solved with active constraints, rows whose solve reached the iteration limit, rows whose
+    /// solve failed and that got the LQR's command.
+    #[getter]
+    fn stats(&self) -> (u64, u64, u64, u64) {
+        (
+            self.stats.steps,
+            self.stats.constrained,
+            self.stats.inexact,
+            self.stats.fallbacks,
+        )
+    }
+
+    /// Flap commands (N, 4) float32 in [-1, 1] for observations (N, 25) float64, as
+    /// ``LqrFilter.step`` (``rows``: the envs computed; ``advance=False``: a look-ahead that
+    /// keeps every state and count).
+    #[pyo3(signature = (obs, rows = None, advance = true))]
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        obs: PyReadonlyArray2<'_, f64>,
+        rows: Option<PyReadonlyArray1<'_, bool>>,
+        advance: bool,
+    ) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let view = obs.as_array();
+        let n = view.nrows();
+        check_shape("obs", view.shape(), &[n, OBS_DIM])?;
+        let mask: Vec<bool> = match rows {
+            None => vec![true; n],
+            Some(m) => {
+                let m = m.as_array();
+                check_shape("rows", m.shape(), &[n])?;
+                m.to_vec()
+            }
+        };
+        if self.states.len() != n {
+            self.states = (0..n).map(|_| self.mpc.filter().new_state()).collect();
+        }
+        let mut flat = vec![[0.0_f64; OBS_DIM]; n];
+        for (o, r) in flat.iter_mut().zip(view.rows()) {
+            for (a, b) in o.iter_mut().zip(r.iter()) {
+                *a = *b;
+            }
+        }
+        let mut out = vec![[0.0_f32; ACT_DIM]; n];
+        let mpc = &*self.mpc;
+        let mut look_ahead;
+        let mut stats = self.stats;
+        let states = if advance {
+            &mut self.states
+        } else {
+            look_ahead = self.states.clone();
+            &mut look_ahead
+        };
+        py.detach(|| {
+            let mut scratch = mpc.plan().new_scratch();
+            mpc.step_rows(states, &flat, &mask, &mut out, &mut scratch, &mut stats)
+        })
+        .py_err()?;
+        if advance {
+            self.stats = stats;
+        }
+        let arr = Array2::from_shape_fn((n, ACT_DIM), |(i, j)| out[i][j]);
+        Ok(arr.into_pyarray(py))
+    }
+
+    /// Restarts the estimates of the envs in ``mask`` (all when None).
+    #[pyo3(signature = (mask = None))]
+    fn restart(&mut self, mask: Option<PyReadonlyArray1<'_, bool>>) -> PyResult<()> {
+        match mask {
+            None => self.states.iter_mut().for_each(|s| s.fresh = true),
+            Some(m) => {
+                let m = m.as_array();
+                check_shape("mask", m.shape(), &[self.states.len()])?;
+                for (s, r) in self.states.iter_mut().zip(m.iter()) {
+                    if *r {
+                        s.fresh = true;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Adds ``offset`` (N, 4; flap-limit units) to the command each env's next prediction uses.
+    fn sent(&mut self, offset: PyReadonlyArray2<'_, f64>) -> PyResult<()> {
+        let v = offset.as_array();
+        check_shape("offset", v.shape(), &[self.states.len(), ACT_DIM])?;
+        for (s, r) in self.states.iter_mut().zip(v.rows()) {
+            for (u, d) in s.u.iter_mut().zip(r.iter()) {
+                *u += *d;
+            }
+        }
+        Ok(())
+    }
+
+    /// The state of every env: ``z`` (N, nz), ``u`` (N, 4), ``fresh`` (N,) (copies). The MPC
+    /// keeps nothing else between steps (each solve starts from the unconstrained optimum).
+    #[allow(clippy::type_complexity)]
+    fn get_state<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> (
+        Bound<'py, PyArray2<f64>>,
+        Bound<'py, PyArray2<f64>>,
+        Bound<'py, PyArray1<bool>>,
+    ) {
+        let rows = self.states.len();
+        let nz = self.mpc.filter().nz();
+        let z = Array2::from_shape_fn((rows, nz), |(i, j)| self.states[i].z[j]);
+        let u = Array2::from_shape_fn((rows, ACT_DIM), |(i, j)| self.states[i].u[j]);
+        let fresh = Array1::from_shape_fn(rows, |i| self.states[i].fresh);
+        (
+            z.into_pyarray(py),
+            u.into_pyarray(py),
+            fresh.into_pyarray(py),
+        )
+    }
+
+    /// Restores a state of ``get_state`` (``StateError`` for shapes that do not fit).
+    fn set_state(
+        &mut self,
+        z: PyReadonlyArray2<'_, f64>,
+        u: PyReadonlyArray2<'_, f64>,
+        fresh: PyReadonlyArray1<'_, bool>,
+    ) -> PyResult<()> {
+        let (z, u, fresh) = (z.as_array(), u.as_array(), fresh.as_array());
+        let rows = z.nrows();
+        check_shape("z", z.shape(), &[rows, self.mpc.filter().nz()])?;
+        check_shape("u", u.shape(), &[rows, ACT_DIM])?;
+        check_shape("fresh", fresh.shape(), &[rows])?;
+        let mut states = Vec::with_capacity(rows);
+        for i in 0..rows {
+            let mut s = self.mpc.filter().new_state();
+            for (a, b) in s.z.iter_mut().zip(z.row(i).iter()) {
+                *a = *b;
+            }
+            for (a, b) in s.u.iter_mut().zip(u.row(i).iter()) {
+                *a = *b;
+            }
+            s.fresh = fresh[i];
+            states.push(s);
+        }
+        self.states = states;
+        Ok(())
+    }
+
+    /// Forgets every env's state (the next ``step`` starts afresh).
+    fn clear(&mut self) {
+        self.states.clear();
+    }
+}
