@@ -1,4 +1,4 @@
-"""Rewrites the generated sections of README.md and docs/environment.md from the declarations in
+"""Rewrites the generated sections of README.md, docs/environment.md and docs/datasets.md from the declarations in
 code. A section is marked ``<!-- generated: accd_gym.module.function() -->`` ...
 ``<!-- end generated -->``; the name is the function that makes it. Run it after changing a
 declaration (a configuration field, the observation table, the reward terms, the episode end, a
@@ -12,7 +12,7 @@ from accd_gym.envs.tables import regenerate
 ROOT = Path(__file__).resolve().parents[1]
 check = "--check" in sys.argv[1:]
 stale = []
-for path in (ROOT / "README.md", ROOT / "docs" / "environment.md"):
+for path in (ROOT / "README.md", ROOT / "docs" / "environment.md", ROOT / "docs" / "datasets.md"):
     text = path.read_text()
     new = regenerate(text, str(path))
     if new != text:

@@ -6,13 +6,18 @@ network exported as plain arrays (network.npz, scripts/export_networks.py) and p
 its metadata (tier, algorithm, seed, steps, source run) and the recorded held-out
 result (per-episode capture outcomes, from a benchmark folder or a results JSON).
 
-    python scripts/ship_policies.py --name residual_sac_hard --run bench/runs/hard_residual_sac_seed3 \
-        --results bench --key hard_residual_sac_seed3 [--check 8]
+    python scripts/ship_policies.py --name residual_sac_hard --results bench --tier hard \
+        --method residual_sac [--check 8]
 
-``--results`` is a benchmark folder (``accd-gym benchmark --out DIR``) with ``--key`` the
-benchmark's run name: the recorded outcomes are those of ``DIR/runs/KEY/result.json`` and the
-LQR's those of the same folder's baseline. It may instead be a JSON file of the form
-``{tier: {KEY: {"captured": "0101.."}, "lqr": {...}, "base_seed": ...}}``.
+``--results`` is a benchmark folder (``accd-gym benchmark --out DIR``): the run shipped is the
+one the benchmark chooses for ``--method`` on ``--tier`` on the validation episodes
+(:func:`accd_gym.evals.benchmark.chosen_run`: the highest validation capture rate; the held-out
+episodes play no part), its training run ``DIR/runs/KEY`` (or ``--run``); the recorded held-out
+outcomes are those of ``DIR/runs/KEY/result.json`` and the LQR's those of the same folder's
+baseline. policy.json records the choice (validation rates of every candidate), so it can be
+recomputed from the folder. ``--results`` may instead be a JSON file of the form
+``{tier: {KEY: {"captured": "0101.."}, "lqr": {...}, "base_seed": ...}}`` with ``--key`` and
+``--run`` naming the run (a choice made elsewhere).
 
 ``--check K`` runs the shipped policy on its first K held-out episodes and stores each one's
 outcome, steps and miss distance in policy.json (tests/test_trained_policies.py compares them)
@@ -170,19 +175,25 @@ def main(argv: list[str] | None = None) -> int:
                     "episodes with the per-episode record of --recheck, to the last bit")
     ap.add_argument("--episodes", type=int, default=500, help="episodes for --verify (default 500)")
     ap.add_argument("--name", help="the shipped policy's name (a folder name)")
-    ap.add_argument("--run", help="the training run folder (run.json, checkpoints/)")
-    ap.add_argument("--results", help="results JSON with {tier: {key: {captured: '0101..'}}}, or a benchmark folder")
-    ap.add_argument("--key", help="the run's entry in --results (e.g. residual_ppo_s2, or a benchmark run's name)")
+    ap.add_argument("--run", help="the training run folder (run.json, checkpoints/); default with a benchmark "
+                    "folder: its chosen run's")
+    ap.add_argument("--results",
+                    help="results JSON with {tier: {key: {captured: '0101..'}}}, or a benchmark folder")
+    ap.add_argument("--key", help="the run's entry in a results JSON (e.g. residual_ppo_s2); with a benchmark "
+                    "folder it must be the run chosen on the validation episodes")
+    ap.add_argument("--tier", help="with a benchmark folder: the tier of the run to choose")
+    ap.add_argument("--method", help="with a benchmark folder: the method (e.g. residual_sac) whose run to choose")
     ap.add_argument("--check", type=int, default=8, help="held-out episodes to run and store (default 8)")
     ap.add_argument("--replace", action="store_true", help="replace a shipped policy of that name")
     args = ap.parse_args(argv)
     if args.verify is not None:
         return verify(args.verify, args.episodes)
     if args.recheck is not None:
-        if any(v is not None for v in (args.name, args.run, args.results, args.key)) or args.replace:
+        if any(v is not None for v in (args.name, args.run, args.results, args.key, args.tier, args.method)) \
+                or args.replace:
             ap.error("--recheck takes no other option but --check")
         return recheck(args.recheck, args.check)
-    missing = [f"--{k}" for k in ("name", "run", "results", "key") if getattr(args, k) is None]
+    missing = [f"--{k}" for k in ("name", "results") if getattr(args, k) is None]
     if missing:
         ap.error(f"the following arguments are required: {', '.join(missing)}")
 
@@ -191,6 +202,23 @@ def main(argv: list[str] | None = None) -> int:
 
     if not args.name.replace("_", "").isalnum():
         raise ConfigError(f"invalid config: --name {args.name!r} is outside the allowed range [A-Za-z0-9_]+")
+    from_benchmark = Path(args.results).is_dir()
+    selection = None
+    if from_benchmark:
+        from accd_gym.evals.benchmark import chosen_run
+
+        if not args.tier or not args.method:
+            raise ConfigError("invalid config: a benchmark folder as --results needs --tier and --method (the run is "
+                              "chosen on its validation episodes)")
+        selection = chosen_run(Path(args.results), args.tier, args.method)
+        if args.key is not None and args.key != selection["name"]:
+            raise ConfigError(f"invalid config: --key {args.key!r} is not the run chosen on the validation episodes "
+                              f"({selection['name']!r}, validation rates {selection['candidates']})")
+        args.key = selection["name"]
+        if args.run is None:
+            args.run = str(Path(args.results) / "runs" / args.key)
+    elif args.key is None or args.run is None:
+        raise ConfigError("invalid config: a results JSON as --results needs --key and --run")
     run = Path(args.run)
     meta = read_user_json(run / "run.json", "run summary")
     tier = meta["config"]["env"].get("tier")
@@ -201,7 +229,6 @@ def main(argv: list[str] | None = None) -> int:
         if ckpt is None:
             raise ConfigError(f"invalid config: --run {str(run)!r} has no final model and no checkpoint")
         model_path, stats_path, steps = ckpt["model"], ckpt["vecnormalize"], ckpt["steps"]
-    from_benchmark = Path(args.results).is_dir()
     results = benchmark_results(Path(args.results), args.key) if from_benchmark else read_user_json(args.results, "results")
     if tier not in results or args.key not in results[tier]:
         raise ConfigError(f"invalid config: --key {args.key!r} is not in {args.results!r}[{tier!r}] "
@@ -223,6 +250,11 @@ def main(argv: list[str] | None = None) -> int:
                        else str(run.resolve().relative_to(ROOT)) if run.resolve().is_relative_to(ROOT) else str(run)),
         "source_checkpoint": model_path.name,
         "env": meta["config"]["env"],
+        # How the run was chosen: on the benchmark's validation episodes (None: chosen elsewhere).
+        "selection": None if selection is None else {
+            "on": "validation episodes", "method": args.method, "chosen": selection["name"],
+            "validation_rate": selection["validation_rate"], "validation_episodes": selection["validation_episodes"],
+            "candidates": selection["candidates"]},
         "held_out": {
             "results": "docs/benchmark.md" if from_benchmark else args.results,
             "key": args.key,

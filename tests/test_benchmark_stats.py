@@ -5,7 +5,23 @@ from __future__ import annotations
 
 import pytest
 
-from accd_gym.evals.benchmark import probability_of_improvement, report_markdown, target
+from accd_gym.evals.benchmark import choose_method, choose_run, probability_of_improvement, report_markdown, target as _target
+
+
+def _validation_as_held_out(eps):
+    """Validation records equal to the held-out ones, grouped by method (run names
+    ``<tier>_<method>_seed<k>``): for tests of the verdict, not of the choice."""
+    out = {}
+    for tier, runs in eps.items():
+        for name, captured in runs.items():
+            if name != "lqr":
+                method = name[len(tier) + 1:].rsplit("_seed", 1)[0]
+                out.setdefault(tier, {}).setdefault(method, {})[name] = captured
+    return out
+
+
+def target(tiers, eps, validation=None):
+    return _target(tiers, eps, _validation_as_held_out(eps) if validation is None else validation)
 
 
 def test_probability_of_improvement_counts_ties_as_one_half():
@@ -40,6 +56,7 @@ def test_target_is_read_from_the_numbers():
     tiers["hard"] = _tiers([0.95, 0.70], 0.90, [0.70, 0.95])
     tiers["hard"]["policies"]["residual_sac"] = {"kind": "learned", "rates": [0.96, 0.95], "iqm": 0.955,
                                                  "ci95": [0.93, 0.97]}
+    eps["hard"].update(hard_residual_sac_seed0=better, hard_residual_sac_seed1=better)
     t = target(tiers, eps)
     assert not t["tiers"]["hard"]["spread_ok"] and not t["met"]
     assert t["tiers"]["hard"]["method"] == "residual_sac" and t["tiers"]["hard"]["widest_spread_method"] == "ppo"
@@ -87,7 +104,7 @@ def test_report_has_a_target_section_only_with_its_numbers():
     assert "## Target" in md and "Target not met on these runs:" in md and "| hard | PPO 100.0 %" in md
     assert "| 0.0 points, PPO (yes) |" in md
     # why it is not met, with the numbers: 2 episodes cannot make p < 0.05
-    assert "- no tier's best run captures significantly more than the LQR (smallest p: hard, 1)." in md
+    assert "- no tier's chosen run captures significantly more than the LQR (smallest p: hard, 1)." in md
     doc["target"] = target({"hard": _tiers([1.0, 0.5], 0.5, [0.5, 1.0])},
                            {"hard": {"lqr": lqr, "hard_ppo_seed0": [True, True], "hard_ppo_seed1": [True, False]}})
     assert "- hard: PPO's seeds spread by 50.0 points, 30.0 more than the 20 allowed." in report_markdown(doc)
@@ -128,3 +145,52 @@ def test_episodes_record_the_closing_speeds_from_their_trajectory():
         k = int(np.argmin(np.linalg.norm(p, axis=1)))
         assert e.closest_speed == pytest.approx(np.linalg.norm(p[k] - p[k - 1]) / dt)
         assert 0 < e.closest_speed < 50
+
+
+def test_the_choice_is_made_on_validation_episodes_and_never_reads_held_out_results():
+    """Held-out records that would choose another run and method are given beside validation
+    records: the choice follows the validation records alone."""
+    lqr = [True] * 90 + [False] * 10
+    held_out = {"hard": {"lqr": lqr,
+                         "hard_ppo_seed0": [True] * 100,                 # best on held-out
+                         "hard_ppo_seed1": [True] * 90 + [False] * 10,
+                         "hard_sac_seed0": [True] * 99 + [False]}}
+    validation = {"hard": {"ppo": {"hard_ppo_seed0": [True] * 80 + [False] * 20,
+                                   "hard_ppo_seed1": [True] * 95 + [False] * 5},   # best on validation
+                           "sac": {"hard_sac_seed0": [True] * 70 + [False] * 30}}}
+    tiers = {"hard": {"policies": {"ppo": {"kind": "learned", "rates": [1.0, 0.9], "iqm": 0.95, "ci95": [0.9, 1.0]},
+                                   "sac": {"kind": "learned", "rates": [0.99], "iqm": 0.99, "ci95": [0.97, 1.0]},
+                                   "lqr": {"kind": "classical", "rate": 0.9}}}}
+    v = _target(tiers, held_out, validation)["tiers"]["hard"]
+    assert v["method"] == "ppo" and v["best_run"] == "hard_ppo_seed1"
+    # the comparison is reported on the held-out episodes of the chosen run
+    assert (v["only_learned"], v["only_lqr"]) == (0, 0)
+    assert choose_run(validation["hard"]["ppo"]) == "hard_ppo_seed1"
+    assert choose_method(validation["hard"]) == "ppo"
+    # a held-out record in the place of a validation one would choose otherwise: the choice reads
+    # what it is given and nothing else
+    assert choose_run({k: held_out["hard"][k] for k in ("hard_ppo_seed0", "hard_ppo_seed1")}) == "hard_ppo_seed0"
+
+
+def test_summarize_chooses_the_mcnemar_pair_on_validation_episodes():
+    from accd_gym.evals.benchmark import summarize
+
+    def result(seed, held_out, validation):
+        return {"job": {"tier": "hard", "algo": "ppo", "seed": seed}, "name": f"hard_ppo_seed{seed}",
+                "train_wall_s": 1.0, "steps_per_s": 1.0,
+                "episodes": {"captured": held_out, "min_distance": [0.1] * 4, "capture_time": [1.0] * 4},
+                "validation": {"captured": validation}}
+
+    def baseline(held_out, validation):
+        return {"captured": held_out, "min_distance": [0.1] * 4, "capture_time": [1.0] * 4,
+                "outcome": ["captured"] * 4, "validation": {"captured": validation}}
+
+    results = [result(0, [True] * 4, [True, False, False, False]), result(1, [True, True, False, False], [True] * 4)]
+    baselines = {"hard": {"lqr": baseline([True, True, True, False], [True, False, False, False]),
+                          "guidance": baseline([False] * 4, [True, True, False, False])}}
+    cfg = {"tiers": ["hard"], "learners": {"ppo": {}}}
+    t = summarize(cfg, results, baselines)["hard"]
+    m = t["mcnemar"]
+    assert (m["learned"], m["classical"]) == ("hard_ppo_seed1", "guidance")
+    assert t["policies"]["ppo"]["chosen_run"] == "hard_ppo_seed1"
+    assert (m["learned_rate"], m["classical_rate"]) == (0.5, 0.0)  # reported on the held-out episodes

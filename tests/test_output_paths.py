@@ -302,3 +302,20 @@ rec.save(path)
 fig.savefig(f, format="png")
 """
     assert writes_outside_the_writer(fine, "example") == []
+
+
+#: Library calls that write their own files, each allowed in one module only, with the reason.
+#: The module checks the output folder (``files.writable_folder``) before any work.
+LIBRARY_WRITERS = {
+    # Minari writes a dataset's files (its HDF5 episodes and metadata) into its dataset root
+    # itself: the Farama format is Minari's to write, not ours to reimplement.
+    "create_dataset_from_buffers": "evals/datasets.py",
+}
+
+
+def test_library_writers_are_called_only_where_allowed_after_the_folder_check():
+    for call, allowed in LIBRARY_WRITERS.items():
+        users = sorted(str(p.relative_to(PACKAGE_DIR)) for p in PACKAGE_DIR.rglob("*.py") if f"{call}(" in p.read_text())
+        assert users == [allowed], f"{call} called in {users}, allowed only in {allowed}"
+        source = (PACKAGE_DIR / allowed).read_text()
+        assert source.index("files.writable_folder(") < source.index(f"{call}("), f"{allowed} checks its folder first"

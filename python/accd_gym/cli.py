@@ -353,6 +353,23 @@ def _rollout(args: argparse.Namespace) -> int:
     return 0
 
 
+def _dataset(args: argparse.Namespace) -> int:
+    # deferred: start-up time (a command imports only what it runs)
+    from accd_gym.evals import datasets
+
+    try:
+        # deferred: minari is the optional dataset extra; checked before any episode runs
+        import minari  # noqa: F401
+    except ModuleNotFoundError as e:
+        raise _usage(f"`accd-gym dataset` needs the dataset extra ({e}): pip install 'accd-gym[dataset]'") from None
+    done = datasets.record_dataset(args.policy, args.tier, args.episodes, args.out, seed=args.seed,
+                                   true_observation=args.true_observation, num_envs=args.num_envs,
+                                   num_threads=args.num_threads)
+    print(f"wrote Minari dataset {done['id']}: {done['episodes']} episodes, {done['steps']} steps, in {done['path']} "
+          f"(load it with MINARI_DATASETS_PATH={Path(args.out).resolve()} and minari.load_dataset({done['id']!r}))")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``accd-gym`` and its subcommands."""
     parser = _Parser(prog="accd-gym", description="accd-gym: In-Air Capturing simulation tools.")
@@ -465,6 +482,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="also print every episode's metrics as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_rollout)
+    p = sub.add_parser("dataset", help="record episodes of a policy on training wake seeds as a Minari dataset (offline RL, imitation)")
+    p.add_argument("--policy", required=True, help="a baseline (lqr, guidance, ...), a shipped trained policy (accd_gym.trained) or a trained model")
+    p.add_argument("--tier", required=True, choices=list(TIERS), help="the benchmark tier the episodes run on")
+    p.add_argument("--episodes", type=_positive("--episodes"), default=100, help="episodes (default 100)")
+    p.add_argument("--out", type=_path("--out"), default="runs/datasets",
+                   help="Minari dataset root the dataset is written into (default: runs/datasets)")
+    p.add_argument("--seed", type=_seed, default=0, help="base seed of the episodes' initial conditions and RLV motion (default 0)")
+    p.add_argument("--true-observation", action="store_true",
+                   help="also store the noise-free, delay-free observation of every step in infos['true_obs']")
+    p.add_argument("--num-envs", type=_positive("--num-envs"), default=16, help="parallel episodes (default 16)")
+    p.add_argument("--num-threads", type=_nonnegative("--num-threads"), default=0,
+                   help="threads stepping the envs (default 0: one per core)")
+    p.set_defaults(func=_dataset)
     return parser
 
 

@@ -185,6 +185,9 @@ struct Slot {
     /// Why the episode that ended in the last step diverged, kept past a same-step autoreset
     /// (which starts the next episode at once); not part of the saved state.
     final_divergence: Option<String>,
+    /// The true observation of the episode that ended in the last step (same-step autoreset,
+    /// with true observations kept: [`BatchEnv::set_true_observation`]); not saved.
+    final_true_obs: [f32; OBS_DIM],
     /// A step of the batch was interrupted while this env's episode may have been part-way
     /// through it: the env refuses steps and saves until it is reset or restored.
     interrupted: bool,
@@ -308,6 +311,7 @@ impl BatchEnv {
                 index: 0,
                 pending_reset: false,
                 final_divergence: None,
+                final_true_obs: [0.0; OBS_DIM],
                 interrupted: false,
             });
         }
@@ -392,6 +396,41 @@ impl BatchEnv {
     pub fn episode_mut(&mut self, i: usize) -> Result<&mut Episode> {
         self.check_index(i)?;
         Ok(&mut self.slots[i].episode)
+    }
+
+    /// Keeps (`on`) or drops every env's true observation ([`Episode::set_true_observation`]):
+    /// noise-free and delay-free, scaled like the observation. Off, nothing of it is computed.
+    pub fn set_true_observation(&mut self, on: bool) {
+        for slot in &mut self.slots {
+            slot.episode.set_true_observation(on);
+        }
+    }
+
+    /// Writes every env's true observation of its latest state into `out` (`N * OBS_DIM`).
+    pub fn true_observations(&self, out: &mut [f32]) -> Result<()> {
+        self.write_true(out, |slot| slot.episode.true_observation().copied())
+    }
+
+    /// Writes every env's true observation of the episode that ended in the last step into
+    /// `out` (`N * OBS_DIM`; same-step autoreset, rows of envs whose episode ended in the last
+    /// step, the others' rows hold stale values).
+    pub fn final_true_observations(&self, out: &mut [f32]) -> Result<()> {
+        self.write_true(out, |slot| {
+            slot.episode.true_observation().map(|_| slot.final_true_obs)
+        })
+    }
+
+    fn write_true(
+        &self,
+        out: &mut [f32],
+        row: impl Fn(&Slot) -> Option<[f32; OBS_DIM]>,
+    ) -> Result<()> {
+        check_len("true_obs", out.len(), self.slots.len() * OBS_DIM)?;
+        for (slot, chunk) in self.slots.iter().zip(out.chunks_exact_mut(OBS_DIM)) {
+            let values = row(slot).ok_or(BatchError::TrueObservationOff)?;
+            chunk.copy_from_slice(&values);
+        }
+        Ok(())
     }
 
     /// Why env `i`'s episode that ended in the last step (same-step autoreset) diverged, or
@@ -940,6 +979,9 @@ impl RowStepper<'_> {
                 Autoreset::NextStep | Autoreset::Disabled => slot.pending_reset = true,
                 Autoreset::SameStep => {
                     row.final_obs.copy_from_slice(row.obs);
+                    if let Some(true_obs) = slot.episode.true_observation() {
+                        slot.final_true_obs = *true_obs;
+                    }
                     if o.diverged {
                         slot.final_divergence = slot.episode.divergence().map(str::to_owned);
                     }

@@ -39,6 +39,9 @@ pub enum BatchError {
         /// Found.
         found: usize,
     },
+    /// True observations were read from a batch that does not keep them.
+    #[error("true observations are off: enable them first (the env option true_observation=True)")]
+    TrueObservationOff,
     /// One env failed.
     #[error("env {env}: {source}")]
     Env {

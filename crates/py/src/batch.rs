@@ -512,6 +512,30 @@ impl PyBatchEnv {
         Ok(d)
     }
 
+    /// Keeps (``on``) or drops every env's true observation: what perfect sensors would
+    /// observe (noise-free, delay-free), scaled like the observation; off by default, and
+    /// nothing of it is computed while off.
+    fn set_true_observation(&mut self, on: bool) {
+        self.inner.set_true_observation(on);
+    }
+
+    /// Every env's true observation of its latest state, (num_envs, 25) float32 (StateError
+    /// while true observations are off).
+    fn true_observations<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let mut out = vec![0.0f32; self.inner.num_envs() * OBS_DIM];
+        self.inner.true_observations(&mut out).py_err()?;
+        rows_to_py(py, out)
+    }
+
+    /// Every env's true observation of the episode that ended in the last step, (num_envs, 25)
+    /// float32 (``"same_step"`` autoreset; the rows of envs whose episode did not end are
+    /// stale).
+    fn final_true_observations<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let mut out = vec![0.0f32; self.inner.num_envs() * OBS_DIM];
+        self.inner.final_true_observations(&mut out).py_err()?;
+        rows_to_py(py, out)
+    }
+
     /// Why env ``i``'s episode diverged, or None.
     fn divergence(&self, i: usize) -> PyResult<Option<String>> {
         Ok(self
@@ -644,4 +668,10 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
         (HELD_OUT_WAKE_SEEDS.start, HELD_OUT_WAKE_SEEDS.end),
     )?;
     Ok(())
+}
+
+/// `values` (`N * OBS_DIM`) as an (N, OBS_DIM) array.
+fn rows_to_py(py: Python<'_>, values: Vec<f32>) -> PyResult<Bound<'_, PyArray2<f32>>> {
+    let n = values.len() / OBS_DIM;
+    PyArray1::from_vec(py, values).reshape([n, OBS_DIM])
 }

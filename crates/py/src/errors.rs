@@ -110,7 +110,8 @@ impl ToPy for BatchError {
             BatchError::Action { .. }
             | BatchError::Shape { .. }
             | BatchError::ResetNeeded { .. }
-            | BatchError::Interrupted { .. } => Some(Kind::State),
+            | BatchError::Interrupted { .. }
+            | BatchError::TrueObservationOff => Some(Kind::State),
             BatchError::Env { source, .. } => source.kind(),
             BatchError::Threads(_) => Some(Kind::Simulation),
             BatchError::Internal(_) => None,

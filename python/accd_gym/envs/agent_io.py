@@ -9,8 +9,12 @@ keys, and by the wrapper :class:`AgentInterface` around a single env:
   e.g. ``residual={"base": "lqr", "scale": 0.3}``.
 * ``history`` (:mod:`accd_gym.envs.history`): ``history=k`` appends the last ``k`` observations and
   flap commands sent.
+* ``true_observation``: ``True`` adds the true observation to ``info["true_obs"]``: the 25 values
+  perfect sensors would give (noise-free, delay-free; scaled like the observation), for teachers
+  and critics that may see the true state. It equals the observation without ``sensors.enabled``.
+  The agent's observation does not change; off, nothing of it is computed.
 
-Both are off by default, and then the envs are exactly the plain task. They are not part of
+All are off by default, and then the envs are exactly the plain task. They are not part of
 the physics configuration (``env.config``); the envs keep them in :attr:`agent_options`, pickles
 and ``get_state()`` carry them and their state (the base controller's filter, the history).
 In a training config they go into ``env`` beside the configuration keys
@@ -36,24 +40,26 @@ from accd_gym.envs.residual import SCALE_MAX, BaseController, ResidualOptions
 from accd_gym.envs.task import ACT_DIM, OBS_BOUND, OBS_DIM, OBSERVATION_TABLE, check_actions
 
 #: The env arguments of this module (never configuration keys).
-AGENT_KEYS = ("residual", "history")
+AGENT_KEYS = ("residual", "history", "true_observation")
 
 
 @dataclass(frozen=True)
 class AgentOptions:
-    """The ``residual`` and ``history`` env options, validated."""
+    """The ``residual``, ``history`` and ``true_observation`` env options, validated."""
 
     residual: Optional[ResidualOptions] = None
     history: int = 0
+    true_observation: bool = False
 
     @classmethod
-    def parse(cls, residual: Any = None, history: Any = None) -> "AgentOptions":
+    def parse(cls, residual: Any = None, history: Any = None, true_observation: Any = None) -> "AgentOptions":
         """From the env arguments (ConfigError naming the field, the value and the range)."""
-        return cls(ResidualOptions.parse(residual), parse_history(history))
+        return cls(ResidualOptions.parse(residual), parse_history(history), parse_true_observation(true_observation))
 
     @property
     def enabled(self) -> bool:
-        """Whether either option is on (else the env is the plain task)."""
+        """Whether residual control or history is on (what :class:`AgentIO` keeps state for;
+        ``true_observation`` only adds an info key)."""
         return self.residual is not None or self.history > 0
 
     def to_dict(self) -> dict[str, Any]:
@@ -63,6 +69,8 @@ class AgentOptions:
             out["residual"] = self.residual.to_dict()
         if self.history:
             out["history"] = self.history
+        if self.true_observation:
+            out["true_observation"] = True
         return out
 
     def observation_names(self) -> list[str]:
@@ -89,6 +97,15 @@ class AgentOptions:
             parts.append(np.ones(self.history * ACT_DIM, dtype=np.float32))
         high = np.concatenate(parts)
         return spaces.Box(-high, high, dtype=np.float32)
+
+
+def parse_true_observation(value: Any) -> bool:
+    """The ``true_observation`` option: None or a bool (ConfigError naming the value otherwise)."""
+    if value is None:
+        return False
+    if not isinstance(value, (bool, np.bool_)):
+        raise ConfigError(f"invalid config: `true_observation` = {value!r} is outside the allowed range true or false")
+    return bool(value)
 
 
 def split_agent_options(config: Mapping[str, Any]) -> tuple[AgentOptions, dict[str, Any]]:
@@ -337,6 +354,9 @@ def options_markdown() -> str:
         f"| `residual.scale` | `0.3` | (0, {SCALE_MAX:g}] | the bound of the correction, flap-limit units |",
         "| `residual.observe_base` | `True` | true, false | append the base command to the observation |",
         f"| `history` | `0` | [0, {HISTORY_MAX}] | append the last `k` observations and flap commands sent |",
+        "| `true_observation` | `False` | true, false | add `info[\"true_obs\"]`: the 25 values perfect sensors "
+        "would give (noise-free, delay-free), scaled like the observation; the observation itself without "
+        "`sensors.enabled`; the agent's observation is unchanged |",
     ]
     return "\n".join(rows)
 
@@ -362,4 +382,5 @@ def physics_config(config: Optional[Any]) -> Any:
 
 
 __all__ = ["AGENT_KEYS", "AGENT_STATE_MAGIC", "AgentIO", "AgentInterface", "AgentOptions", "agent_io_markdown",
-           "layout_markdown", "options_markdown", "physics_config", "split_agent_options"]
+           "layout_markdown", "options_markdown", "parse_true_observation", "physics_config",
+           "split_agent_options"]

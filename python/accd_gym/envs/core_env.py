@@ -42,16 +42,30 @@ class CoreEnvMixin:
         They are a function of the episode's wake seed alone."""
         return self._core.episode_parameters(self._env_index(i))
 
-    def _reset_info(self, i: int, wake_seed: int) -> dict[str, Any]:
+    def _reset_info(self, i: int, wake_seed: int, true_obs: Optional[np.ndarray] = None) -> dict[str, Any]:
         """The info of env ``i``'s episode as the single env's ``reset`` reports it, for the
-        episode's ``wake_seed``: ``wake_seed``, and with randomized physics ``parameters`` (the
-        drawn parameters, :meth:`episode_parameters`). The one place the reset info is built:
-        every env class reports these keys."""
+        episode's ``wake_seed``: ``wake_seed``, with randomized physics ``parameters`` (the
+        drawn parameters, :meth:`episode_parameters`), and with ``true_observation`` the row
+        ``i`` of ``true_obs`` (:meth:`_true_observations`) as ``true_obs``. The one place the
+        reset info is built: every env class reports these keys."""
         info: dict[str, Any] = {"wake_seed": int(wake_seed)}
         parameters = self._core.episode_parameters(int(i))
         if parameters is not None:
             info["parameters"] = parameters
+        if true_obs is not None:
+            info["true_obs"] = true_obs[int(i)].copy()
         return info
+
+    def true_observations(self) -> np.ndarray:
+        """Every env's true observation of its current state ((num_envs, 25) float32): what
+        perfect sensors would observe, noise-free and delay-free, scaled like the observation.
+        Needs the ``true_observation=True`` env option (StateError otherwise)."""
+        return self._core.true_observations()
+
+    def _true_observations(self) -> Optional[np.ndarray]:
+        """Every env's true observation ((num_envs, 25) float32) with the ``true_observation``
+        env option, else None (and nothing is computed)."""
+        return self._core.true_observations() if self.agent_options.true_observation else None
 
     def true_boom_relative(self) -> np.ndarray:
         """The boom tip minus the capture point of every env at its current state, (num_envs, 3) m,

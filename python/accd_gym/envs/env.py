@@ -117,6 +117,8 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
     ``render_mode``: ``"rgb_array"`` (side and top views, off-screen) or ``"human"`` (a window);
     ``residual``, ``history``: residual control on a base controller and observation history
     (:mod:`accd_gym.envs.agent_io`; off by default; they change the observation's layout);
+    ``true_observation=True``: ``info["true_obs"]`` in ``reset`` and ``step``, the noise-free,
+    delay-free observation (:mod:`accd_gym.envs.agent_io`; off by default);
     ``**config``: the configuration keys below (e.g. ``capture_window=60.0``,
     ``tether="uhmwpe-300m-24mm"``, ``wake={"enabled": False}``): a section takes a dict of its
     keys (merged with the defaults), ``tether`` also a preset name. Unknown keys and values
@@ -157,6 +159,8 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
         self._config = json.loads(valid.to_json())
         self.metadata = dict(self.metadata, render_fps=1.0 / self._config["agent_step"])
         self._core = _core.BatchEnv(valid, 1, random_seed(), "next_step", 1)
+        if self.agent_options.true_observation:
+            self._core.set_true_observation(True)
         self._agent_io = AgentIO.create(self.agent_options, self._config, 1)
         self.observation_space = observation_space() if self._agent_io is None else self._agent_io.observation_space
         self.action_space = action_space()
@@ -177,7 +181,7 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
         obs, wake = self._reset_core(seed, options)
         if self._agent_io is not None:
             obs = self._agent_io.begin(obs)
-        info = self._reset_info(0, wake[0])
+        info = self._reset_info(0, wake[0], self._true_observations())
         if self.render_mode == "human":
             self.render()
         return obs[0].copy(), info
@@ -197,6 +201,8 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
         out_info = info_dicts(info, wake)[0]
         if out_info["diverged"]:
             out_info["divergence"] = self._core.divergence(0)
+        if self.agent_options.true_observation:
+            out_info["true_obs"] = self._core.true_observations()[0]
         if self.render_mode == "human":
             self.render()
         return obs[0].copy(), float(reward[0]), term, trunc, out_info

@@ -67,6 +67,11 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
     env options of :mod:`accd_gym.envs.agent_io`; ``terminal_observation`` is then the agent's
     observation of the ended episode's last state.
 
+    True observation (``true_observation=True``; off by default): every info has ``true_obs``,
+    the noise-free, delay-free observation (:mod:`accd_gym.envs.agent_io`); for an ended episode
+    it is its last step's (beside ``terminal_observation``) and ``reset_infos[i]["true_obs"]``
+    is the new episode's first.
+
     Arguments besides ``num_envs``, ``seed``, ``num_threads``, ``copy``, ``render_mode``, ``residual`` and
     ``history``: the
     configuration keys (as for the single env), a section a dict of its keys, ``tether`` also a
@@ -102,6 +107,8 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         self._config = json.loads(valid.to_json())
         base = random_seed(n) if seed is None else check_base_seed(seed, n)
         self._core = _core.BatchEnv(valid, n, base, "same_step", threads)
+        if self.agent_options.true_observation:
+            self._core.set_true_observation(True)
         self._agent_io = AgentIO.create(self.agent_options, self._config, self._core.num_envs)
         self._actions: Optional[np.ndarray] = None
         self._base_seed: Optional[int] = None if seed is None else base
@@ -138,7 +145,8 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
             obs = self._agent_io.begin(obs)
         self._pending_options = {}
         self._base_seed = None
-        self.reset_infos = [self._reset_info(i, w) for i, w in enumerate(wake.tolist())]
+        true_obs = self._true_observations()
+        self.reset_infos = [self._reset_info(i, w, true_obs) for i, w in enumerate(wake.tolist())]
         return obs.copy() if self.copy else obs
 
     def step_async(self, actions: np.ndarray) -> None:
@@ -160,9 +168,14 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
             infos[i]["divergence"] = self._core.final_divergence(int(i))
         for d, time_limit in zip(infos, (truncated & ~terminated).tolist()):
             d["TimeLimit.truncated"] = time_limit
+        true_obs = self._true_observations()
+        if true_obs is not None:
+            final_true = self._core.final_true_observations() if np.count_nonzero(dones) else None
+            for i, d in enumerate(infos):
+                d["true_obs"] = (final_true if dones[i] else true_obs)[i].copy()
         for i in np.flatnonzero(dones):
             infos[i]["terminal_observation"] = final_obs[i].copy()
-            self.reset_infos[i] = self._reset_info(int(i), self._core.episode_seeds(int(i))["wake"])
+            self.reset_infos[i] = self._reset_info(int(i), self._core.episode_seeds(int(i))["wake"], true_obs)
         # (The rewards' conversion and the dones are new arrays already.)
         return (obs.copy() if self.copy else obs), reward.astype(np.float32), dones, infos
 

@@ -114,6 +114,12 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
     observations too). The observation then has the layout given there and in
     ``docs/environment.md``; the arrays are new each step.
 
+    **True observation** (``true_observation=True``; off by default): ``infos["true_obs"]``
+    ((num_envs, 25) float32, mask ``_true_obs``) is every env's noise-free, delay-free
+    observation of the state its returned observation describes (:mod:`accd_gym.envs.agent_io`),
+    in ``reset`` for the envs it reset; with ``SAME_STEP``, ``final_info["true_obs"]`` is the
+    ended episodes' last.
+
     **Arguments** besides ``num_envs``, ``seed``, ``num_threads``, ``autoreset_mode``,
     ``copy``, ``render_mode``, ``max_episode_steps``, ``residual`` and ``history``: the configuration keys (as for the single env),
     a section a dict of its keys, ``tether`` also a preset name:
@@ -162,6 +168,8 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         self._randomized = bool(self._config["randomization"]["enabled"])
         check_max_episode_steps(max_episode_steps, self._config)
         self._core = _core.BatchEnv(valid, n, random_seed(n), _MODES[mode], threads)
+        if self.agent_options.true_observation:
+            self._core.set_true_observation(True)
         self.num_envs = self._core.num_envs
         self._agent_io = AgentIO.create(self.agent_options, self._config, self.num_envs)
         self.render_mode = render_mode
@@ -215,6 +223,11 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         wake_seed = wake.astype(np.int64)
         wake_seed[~selected] = 0
         infos = self._add_parameters({"wake_seed": wake_seed, "_wake_seed": selected}, selected)
+        true_obs = self._true_observations()
+        if true_obs is not None:
+            true_obs[~selected] = 0
+            infos["true_obs"] = true_obs
+            infos["_true_obs"] = selected.copy()
         return (obs.copy() if self.copy else obs), infos
 
     def start_episode(self, i: int, seed: int, wake_seed: Optional[int] = None) -> np.ndarray:
@@ -310,8 +323,17 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
             infos["_final_obs"] = done.copy()
             infos["final_info"] = self._step_infos(info, wake.astype(np.int64), done, ended=True)
             infos["_final_info"] = done.copy()
+            if self.agent_options.true_observation:
+                final_true = self._core.final_true_observations()
+                final_true[stepped] = 0
+                infos["final_info"]["true_obs"] = final_true
+                infos["final_info"]["_true_obs"] = done.copy()
         infos["wake_seed"] = wake_seed
         infos["_wake_seed"] = np.ones(self.num_envs, dtype=bool)
+        true_obs = self._true_observations()
+        if true_obs is not None:
+            infos["true_obs"] = true_obs
+            infos["_true_obs"] = np.ones(self.num_envs, dtype=bool)
         if self._randomized and mode != AutoresetMode.DISABLED:
             self._add_parameters(infos, ~stepped)
         if self.copy:

@@ -7,7 +7,9 @@ trained with several seeds, every baseline, the same held-out episodes, one repo
    (``train_config``, e.g. training/ppo.json) with the tier as its env and the job's seed, trained
    for ``timesteps`` on training wake seeds, then evaluated on the tier's first ``episodes``
    held-out episodes (episode k: seed 20240607 + k, held-out wake seed k, so every policy of a
-   tier meets the same episodes). Jobs run one after the other in this process, or, with
+   tier meets the same episodes) and on its first ``validation_episodes`` validation episodes
+   (episode k: seed 7340033 + k, validation wake seed k: training wake seeds never drawn by
+   training). Jobs run one after the other in this process, or, with
    ``--ray ADDRESS`` (``"local"``, ``"auto"``, ``HOST:PORT``), as Ray tasks of ``cpus_per_job``
    CPUs each, placed wherever the cluster has room (the same machinery as ``evaluate --ray``),
    the longest first. Resumable: a finished job's result stays in ``OUT/runs/<job>/result.json``
@@ -18,15 +20,15 @@ trained with several seeds, every baseline, the same held-out episodes, one repo
    only some jobs; the report covers every finished job in ``OUT`` and lists the others under
    "Missing / unfinished runs". Ctrl+C: the training under way writes its checkpoint, the report
    is written from what is finished, exit code 130.
-2. **Baselines** (``zero``, ``random``, ``guidance``, ``lqr``) on the same episodes of every
-   tier; the LQR is designed for each tier's configuration. Each baseline's record is stored once
+2. **Baselines** (``zero``, ``random``, ``guidance``, ``lqr``) on the same held-out and
+   validation episodes of every tier; the LQR is designed for each tier's configuration. Each baseline's record is stored once
    in ``OUT/baselines`` and reused by a rerun while its key is unchanged.
 3. **Report** (``OUT/benchmark.json``, ``OUT/benchmark.md``, ``OUT/performance_profile.png``):
    per tier and policy the capture rate (learned: the interquartile mean over seeds with a 95 %
    stratified bootstrap interval, and every seed's rate; baselines: the rate with its Wilson
    interval), the median miss distance and time to capture, and the paired exact McNemar test
-   (:func:`accd_gym.evals.evaluation.mcnemar_exact`) of the best learned run against the best
-   classical baseline on the same episodes; the learned methods normalized by the LQR (LQR = 1.0)
+   (:func:`accd_gym.evals.evaluation.mcnemar_exact`) of the chosen learned run against the chosen
+   classical baseline on the same held-out episodes; the learned methods normalized by the LQR (LQR = 1.0)
    with rliable's probability of improvement over it (:func:`probability_of_improvement`); the
    Target section (:func:`target`); a performance profile over every (tier, seed) run.
    ``--docs`` also writes the report to docs/benchmark.md and the plot to docs/figures/.
@@ -35,28 +37,34 @@ trained with several seeds, every baseline, the same held-out episodes, one repo
 ``scipy.stats.trim_mean(x, 0.25)``). Interval: a two-level bootstrap stratified by seed: resample
 the seeds with replacement, then each resampled seed's episodes with replacement (drawn exactly as
 ``Binomial(n, rate) / n``), IQM of the resampled rates; 10,000 resamples, percentile interval, a
-fixed generator seed. "Best" learned run and classical baseline are chosen by their rate on the
-reported episodes themselves, so the McNemar p-value is that of a comparison picked after the
-fact (stated in the report).
+fixed generator seed.
+
+**Selection on validation episodes.** Every choice the report makes is made on the validation
+episodes alone (:func:`choose_run`, :func:`choose_method`): each method's chosen run (the one
+``scripts/ship_policies.py`` ships, recomputable from the benchmark folder with
+:func:`chosen_run`), the best learned method, run and classical baseline that the McNemar test
+and the Target section compare. The held-out episodes only report: a choice never sees them, so
+the p-values are those of comparisons fixed before the held-out episodes were looked at.
 
 Config (JSON object, every key optional; ``quick`` holds the overrides ``--quick`` applies):
 
-================ ===================================================================================
-key              meaning
-================ ===================================================================================
-tiers            tier names (default: all)
-learners         ``{"ppo": {"train_config", "seeds", "timesteps", "tiers"}, "sac": {...}}``;
-                 ``tiers`` limits an algorithm to some tiers (default: all); ``train_config`` a
-                 recipe, or ``{tier: recipe}`` (then its tiers by default); the recipe's env
-                 options (residual, history) are kept, its tier set to the job's
-baselines        baseline names (default ``["zero", "random", "guidance", "lqr"]``; unknown ones
-                 are refused)
-episodes         held-out episodes per tier (default 500)
-num_envs         evaluation batch (default 16)
-cpus_per_job     CPUs a Ray job reserves, also the threads stepping its envs and at most those of
-                 PyTorch in its gradient updates (default 1)
-quick            overrides for ``--quick`` (its ``learners`` are the quick run's only ones)
-================ ===================================================================================
+===================== ===================================================================================
+key                   meaning
+===================== ===================================================================================
+tiers                 tier names (default: all)
+learners              ``{"ppo": {"train_config", "seeds", "timesteps", "tiers"}, "sac": {...}}``;
+                      ``tiers`` limits an algorithm to some tiers (default: all); ``train_config`` a
+                      recipe, or ``{tier: recipe}`` (then its tiers by default); the recipe's env
+                      options (residual, history) are kept, its tier set to the job's
+baselines             baseline names (default ``["zero", "random", "guidance", "lqr"]``; unknown ones
+                      are refused)
+episodes              held-out episodes per tier (default 500)
+validation_episodes   validation episodes per tier, on which every choice is made (default 500)
+num_envs              evaluation batch (default 16)
+cpus_per_job          CPUs a Ray job reserves, also the threads stepping its envs and at most those of
+                      PyTorch in its gradient updates (default 1)
+quick                 overrides for ``--quick`` (its ``learners`` are the quick run's only ones)
+===================== ===================================================================================
 """
 
 from __future__ import annotations
@@ -76,9 +84,9 @@ from accd_gym.control.registry import CONTROLLERS
 from accd_gym.errors import ConfigError
 from accd_gym.evals.policies import load_policy
 from accd_gym.envs.tiers import merge, tier as _tier, TIERS
-from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS
+from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, VALIDATION_WAKE_SEEDS
 from accd_gym.envs.config import read_json_object
-from accd_gym.evals.episodes import run_episodes
+from accd_gym.evals.episodes import EVAL_BASE_SEED, VALIDATION_BASE_SEED, run_episodes
 from accd_gym import _core, files
 from accd_gym.learning import training
 from accd_gym.evals import distributed
@@ -95,6 +103,7 @@ DEFAULTS: dict[str, Any] = {
     },
     "baselines": ["zero", "random", "guidance", "lqr"],
     "episodes": 500,
+    "validation_episodes": 500,
     "num_envs": 16,
     "cpus_per_job": 1,
     "quick": {},
@@ -168,13 +177,16 @@ def validate_config(raw: Any, *, quick: bool = False, root: Optional[Path] = Non
         spec["train_config"] = resolved if isinstance(recipes, dict) else resolved[None]
     if not isinstance(cfg["baselines"], list) or [b for b in cfg["baselines"] if b not in CONTROLLERS]:
         raise ConfigError(f"invalid config: `baselines` = {cfg['baselines']!r} is outside the allowed values: a list of {list(CONTROLLERS)}")
-    for key, lo in (("episodes", 1), ("num_envs", 1), ("cpus_per_job", 1)):
+    for key, lo in (("episodes", 1), ("validation_episodes", 1), ("num_envs", 1), ("cpus_per_job", 1)):
         v = cfg[key]
         if not isinstance(v, int) or isinstance(v, bool) or v < lo:
             raise ConfigError(f"invalid config: `{key}` = {v!r} is outside the allowed range >= {lo}")
 
     if cfg["episodes"] > len(HELD_OUT_WAKE_SEEDS):
         raise ConfigError(f"invalid config: `episodes` = {cfg['episodes']} is outside the allowed range [1, {len(HELD_OUT_WAKE_SEEDS)}] (the held-out wake seeds)")
+    if cfg["validation_episodes"] > len(VALIDATION_WAKE_SEEDS):
+        raise ConfigError(f"invalid config: `validation_episodes` = {cfg['validation_episodes']} is outside the allowed "
+                          f"range [1, {len(VALIDATION_WAKE_SEEDS)}] (the validation wake seeds)")
     return cfg
 
 
@@ -270,12 +282,59 @@ def failures(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
             "capture_time_median_s": _median([r["capture_time"] for r in caught])}
 
 
-def evaluate_policy(policy: Any, tier: str, episodes: int, num_envs: int, num_threads: int = 0) -> dict[str, Any]:
-    """``policy`` on the tier's first ``episodes`` held-out episodes: the per-episode record."""
+def evaluate_policy(policy: Any, tier: str, episodes: int, num_envs: int, num_threads: int = 0, *,
+                    validation: bool = False) -> dict[str, Any]:
+    """``policy`` on the tier's first ``episodes`` held-out episodes (``validation``: validation
+    episodes, seed :data:`~accd_gym.evals.episodes.VALIDATION_BASE_SEED` + k and validation wake
+    seed k): the per-episode record."""
 
-    eps = run_episodes(policy, episodes, wake_seeds=list(HELD_OUT_WAKE_SEEDS[:episodes]), num_envs=num_envs,
+    wake, seed = (VALIDATION_WAKE_SEEDS, VALIDATION_BASE_SEED) if validation else (HELD_OUT_WAKE_SEEDS, EVAL_BASE_SEED)
+    eps = run_episodes(policy, episodes, seed=seed, wake_seeds=list(wake[:episodes]), num_envs=num_envs,
                        num_threads=num_threads, config={"tier": tier})
     return _episode_record(eps)
+
+
+def validation_rate(captured: Sequence[bool]) -> float:
+    """The capture rate of a validation record's ``captured`` list."""
+    if not len(captured):
+        raise ConfigError("invalid config: a validation record without episodes cannot choose a run")
+    return float(np.mean(np.asarray(captured, dtype=bool)))
+
+
+def choose_run(validation: dict[str, Sequence[bool]]) -> str:
+    """The run (or baseline) with the highest capture rate on its validation episodes
+    (``{name: captured}``), ties to the greatest name. The one way the benchmark and
+    ``scripts/ship_policies.py`` choose a run: it is given validation records alone."""
+    if not validation:
+        raise ConfigError("invalid config: no validation records to choose a run from")
+    return max(validation, key=lambda k: (validation_rate(validation[k]), k))
+
+
+def choose_method(validation: dict[str, dict[str, Sequence[bool]]]) -> str:
+    """The method (``{method: {run: captured}}``, validation episodes) whose runs' validation
+    rates have the highest IQM, ties to the greatest name."""
+    if not validation or not all(validation.values()):
+        raise ConfigError("invalid config: no validation records to choose a method from")
+    return max(validation, key=lambda m: (iqm([validation_rate(c) for c in validation[m].values()]), m))
+
+
+def chosen_run(folder: str | Path, tier: str, algo: str) -> dict[str, Any]:
+    """The run of method ``algo`` on ``tier`` that a finished benchmark folder (``accd-gym
+    benchmark --out``) chooses (:func:`choose_run` over the runs' stored validation records):
+    ``{"name", "validation_rate", "validation_episodes", "candidates": {name: rate}}``.
+    ConfigError naming the folder when it has no such run with a validation record."""
+    runs: dict[str, Sequence[bool]] = {}
+    for path in sorted((Path(folder) / "runs").glob(f"{tier}_{algo}_seed*/{RESULT_FILE}")):
+        result = read_json_object(path, "benchmark result").get("result", {})
+        job = result.get("job", {})
+        if job.get("tier") == tier and job.get("algo") == algo and "validation" in result:
+            runs[result["name"]] = result["validation"]["captured"]
+    if not runs:
+        raise ConfigError(f"invalid config: benchmark folder {folder} has no finished {algo} run on {tier} with a "
+                          "validation record (rerun `accd-gym benchmark` into it)")
+    name = choose_run(runs)
+    return {"name": name, "validation_rate": validation_rate(runs[name]), "validation_episodes": len(runs[name]),
+            "candidates": {k: validation_rate(v) for k, v in sorted(runs.items())}}
 
 
 #: A finished job's result in its run folder: what a rerun of the benchmark into the same
@@ -305,15 +364,18 @@ def build_digest() -> str:
     return h.hexdigest()
 
 
-def job_key(job: Job, episodes: int, num_envs: int) -> dict[str, Any]:
+def job_key(job: Job, episodes: int, num_envs: int, validation_episodes: Optional[int] = None) -> dict[str, Any]:
     """What a job's result depends on: the job, the training config's bytes (SHA-256), the tier's
-    configuration, the code (:func:`build_digest`), the evaluation's episodes and batch size. A
-    stored result with another key is not reused."""
+    configuration, the code (:func:`build_digest`), the evaluation's held-out and validation
+    episodes (``validation_episodes`` None: as many as ``episodes``) and batch size. A stored
+    result with another key is not reused."""
     # The recipe by its name and bytes, not its path: a benchmark folder stays valid for a moved
     # or freshly cloned checkout.
     return {"job": {**job.__dict__, "train_config": Path(job.train_config).name},
             "train_config_sha256": _sha256(job.train_config),
-            "tier_config": _tier(job.tier).config(), "build": build_digest(), "episodes": episodes, "num_envs": num_envs}
+            "tier_config": _tier(job.tier).config(), "build": build_digest(), "episodes": episodes,
+            "validation_episodes": episodes if validation_episodes is None else validation_episodes,
+            "num_envs": num_envs}
 
 
 def _sha256(path: str | Path) -> str:
@@ -349,9 +411,11 @@ def _stored_result(run: Path, key: dict[str, Any]) -> Optional[dict[str, Any]]:
     return stored
 
 
-def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int = 0) -> dict[str, Any]:
-    """Trains ``job`` into ``out/runs/<name>`` and evaluates it: its metrics and episode record
-    (also ``out/runs/<name>/result.json``).
+def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int = 0,
+            validation_episodes: Optional[int] = None) -> dict[str, Any]:
+    """Trains ``job`` into ``out/runs/<name>`` and evaluates it: its metrics and episode records
+    on the held-out and the validation episodes (``validation_episodes``; None: as many as
+    ``episodes``; also ``out/runs/<name>/result.json``).
 
     Resumable: a job whose run folder holds a result of the same :func:`job_key` is not run again
     (``"reused": true``); a finished training of the same config whose stored evaluation has
@@ -360,7 +424,7 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
     else starts the run afresh."""
 
     run = Path(out) / "runs" / job.name
-    key = job_key(job, episodes, num_envs)
+    key = job_key(job, episodes, num_envs, validation_episodes)
     stored = _stored_result(run, key)
     if stored is not None:
         return stored["result"] | {"reused": True}
@@ -385,13 +449,17 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
     if meta["status"] == "interrupted":  # Ctrl+C: its checkpoint is written; a rerun resumes it
         raise KeyboardInterrupt(f"{job.name}: training interrupted at {meta['timesteps']} steps")
     t1 = time.perf_counter()
-    record = evaluate_policy(load_policy(str(run)), job.tier, episodes, num_envs, num_threads)
+    policy = load_policy(str(run))
+    record = evaluate_policy(policy, job.tier, episodes, num_envs, num_threads)
+    validation = evaluate_policy(policy, job.tier, episodes if validation_episodes is None else validation_episodes,
+                                 num_envs, num_threads, validation=True)
     result = {"job": job.__dict__, "name": job.name, "status": meta["status"], "timesteps": meta["timesteps"],
               # The run's own training time (every resumed part, whenever it ran): a run trained
               # by an earlier invocation is only evaluated now (trained_now False).
               "train_wall_s": meta.get("wall_time_s", 0.0), "trained_now": trained_now,
               "eval_wall_s": round(time.perf_counter() - t1, 2),
-              "steps_per_s": meta.get("steps_per_s"), "run": str(run), "episodes": record}
+              "steps_per_s": meta.get("steps_per_s"), "run": str(run), "episodes": record,
+              "validation": validation}
     if meta["status"] == "done":
         files.write_text(run / RESULT_FILE, json.dumps({"key": key, "result": result}))
     return result | {"reused": False}
@@ -440,7 +508,8 @@ def _run_jobs(todo: list[Job], cfg: dict[str, Any], out: Path, ray_address: Opti
         for i, job in enumerate(todo):
             progress(f"[{i + 1}/{len(todo)}] training {job.name} ({job.timesteps} steps)")
             try:
-                results.append(run_job(job, str(out), cfg["episodes"], cfg["num_envs"]))
+                results.append(run_job(job, str(out), cfg["episodes"], cfg["num_envs"],
+                                       validation_episodes=cfg["validation_episodes"]))
             except KeyboardInterrupt as e:
                 raise _Interrupted(results, str(e) or "SIGINT") from None
         return results
@@ -451,7 +520,8 @@ def _run_jobs(todo: list[Job], cfg: dict[str, Any], out: Path, ray_address: Opti
     # measured at 330 steps/s with one thread, a gradient step every 4 env steps) costs several
     # times a PPO job of more steps (3,800 steps/s).
     order = sorted(range(len(todo)), key=lambda i: ("sac" not in todo[i].algo, -todo[i].timesteps, i))
-    refs = [task.remote(todo[i], str(out), cfg["episodes"], cfg["num_envs"], cfg["cpus_per_job"]) for i in order]
+    refs = [task.remote(todo[i], str(out), cfg["episodes"], cfg["num_envs"], cfg["cpus_per_job"],
+                            cfg["validation_episodes"]) for i in order]
     done: dict[int, dict[str, Any]] = {}
     pending = dict(zip(refs, order))
     while pending:
@@ -509,11 +579,13 @@ def _run_status(run: Path) -> str:
 
 def _baseline_record(name: str, tier: str, config: dict[str, Any], out: Path,
                      progress: Callable[[str], None]) -> dict[str, Any]:
-    """Baseline ``name``'s episode record on the tier, stored once in ``out/baselines`` and reused
-    while its key (baseline, tier configuration, code, episodes, batch) is unchanged."""
+    """Baseline ``name``'s episode record on the tier's held-out episodes, with its record on the
+    validation episodes under ``"validation"``; stored once in ``out/baselines`` and reused while
+    its key (baseline, tier configuration, code, episodes, batch) is unchanged."""
 
     key = json.loads(json.dumps({"baseline": name, "tier_config": _tier(tier).config(), "build": build_digest(),
-                                 "episodes": config["episodes"], "num_envs": config["num_envs"]}))
+                                 "episodes": config["episodes"], "validation_episodes": config["validation_episodes"],
+                                 "num_envs": config["num_envs"]}))
     path = out / "baselines" / f"{tier}_{name}.json"
     try:
         stored = json.loads(path.read_text())
@@ -523,6 +595,8 @@ def _baseline_record(name: str, tier: str, config: dict[str, Any], out: Path,
         pass
     progress(f"baseline {name} on {tier}")
     record = evaluate_policy(_baseline_policy(name, tier), tier, config["episodes"], config["num_envs"])
+    record["validation"] = evaluate_policy(_baseline_policy(name, tier), tier, config["validation_episodes"],
+                                           config["num_envs"], validation=True)
     files.write_text(path, json.dumps({"key": key, "record": record}))
     return record
 
@@ -575,15 +649,19 @@ TARGET_ALPHA = 0.05
 TARGET_TIERS = ("precision", "hard")
 
 
-def target(tiers: dict[str, Any], episodes: dict[str, dict[str, Any]]) -> Optional[dict[str, Any]]:
-    """Whether a learned policy matches the LQR, per tier with an LQR and learned runs: the best
-    learned method (by IQM) at least the LQR (IQM >= LQR rate, its interval reaching it, the best
-    run not significantly worse by the paired exact McNemar), significantly better (best run,
-    p < :data:`TARGET_ALPHA`), and every learned method's seed spread at most
+def target(tiers: dict[str, Any], episodes: dict[str, dict[str, Any]],
+           validation: dict[str, dict[str, dict[str, Sequence[bool]]]]) -> Optional[dict[str, Any]]:
+    """Whether a learned policy matches the LQR, per tier with an LQR and learned runs: the
+    chosen learned method (:func:`choose_method` on the validation episodes) at least the LQR
+    (held-out IQM >= LQR rate, its interval reaching it, its chosen run not significantly worse
+    by the paired exact McNemar), significantly better (its chosen run, :func:`choose_run` on the
+    validation episodes, p < :data:`TARGET_ALPHA` on the held-out episodes), and every learned method's seed spread at most
     :data:`TARGET_MAX_SPREAD`. ``scored``: the tier is one of :data:`TARGET_TIERS` (every tier when
     none of them is there). ``met``: every scored tier at least the LQR, one of them significantly
     better, and no tier's spread too large (None without such a tier). ``episodes``: per tier,
-    ``{"lqr": captured, run name: captured}``."""
+    ``{"lqr": captured, run name: captured}`` on the held-out episodes (reported, never used to
+    choose); ``validation``: per tier, ``{method: {run name: captured}}`` on the validation
+    episodes (what the method and run are chosen by)."""
     out: dict[str, Any] = {}
     for tier, t in tiers.items():
         rows = t["policies"]
@@ -591,11 +669,13 @@ def target(tiers: dict[str, Any], episodes: dict[str, dict[str, Any]]) -> Option
         if "lqr" not in rows or not learned:
             continue
         lqr_rate = rows["lqr"]["rate"]
-        best_algo = max(learned, key=lambda k: learned[k]["iqm"])
+        chosen = {m: runs for m, runs in validation.get(tier, {}).items() if m in learned and runs}
+        if not chosen:
+            continue
+        best_algo = choose_method(chosen)
         best = learned[best_algo]
-        runs = {k: v for k, v in episodes[tier].items() if k != "lqr"}
-        best_run = max(runs, key=lambda k: (float(np.mean(runs[k])), k))
-        a, b = np.asarray(runs[best_run], dtype=bool), np.asarray(episodes[tier]["lqr"], dtype=bool)
+        best_run = choose_run(chosen[best_algo])
+        a, b = np.asarray(episodes[tier][best_run], dtype=bool), np.asarray(episodes[tier]["lqr"], dtype=bool)
         only_a, only_b = int(np.sum(a & ~b)), int(np.sum(~a & b))
         p = mcnemar_exact(only_a, only_b)
         spreads = {k: max(r["rates"]) - min(r["rates"]) for k, r in learned.items()}
@@ -623,8 +703,10 @@ def _medians(record: dict[str, Any]) -> tuple[float, Optional[float]]:
 
 
 def summarize(cfg: dict[str, Any], results: list[dict[str, Any]], baselines: dict[str, dict[str, Any]]) -> dict[str, Any]:
-    """The report's numbers per tier: learned algorithms (IQM, interval, per-seed rates),
-    baselines (rate, Wilson interval), medians, and the McNemar comparison."""
+    """The report's numbers per tier: learned algorithms (IQM, interval, per-seed rates, the run
+    chosen on the validation episodes), baselines (rate, Wilson interval), medians, and the
+    McNemar comparison of the learned run and the classical baseline chosen on the validation
+    episodes (:func:`choose_run`), on the held-out episodes."""
     tiers: dict[str, Any] = {}
     for tier in cfg["tiers"]:
         rows: dict[str, Any] = {}
@@ -638,7 +720,10 @@ def summarize(cfg: dict[str, Any], results: list[dict[str, Any]], baselines: dic
             lo, hi = stratified_bootstrap(caps)
             pooled = {k: sum((r["episodes"][k] for r in mine), []) for k in ("min_distance", "capture_time")}
             miss, ttc = _medians(pooled)
+            picked = choose_run({r["name"]: r["validation"]["captured"] for r in mine})
             rows[algo] = {"kind": "learned", "failures": failures([r["episodes"] for r in mine]),
+                          "chosen_run": picked,
+                          "validation_rates": [validation_rate(r["validation"]["captured"]) for r in mine],
                           "seeds": [r["job"]["seed"] for r in mine], "rates": rates,
                           "iqm": iqm(rates), "ci95": [lo, hi], "miss_median_m": miss, "capture_time_median_s": ttc,
                           "train_wall_s": [r["train_wall_s"] for r in mine], "steps_per_s": [r["steps_per_s"] for r in mine]}
@@ -648,6 +733,7 @@ def summarize(cfg: dict[str, Any], results: list[dict[str, Any]], baselines: dic
             k, n = int(sum(rec["captured"])), len(rec["captured"])
             miss, ttc = _medians(rec)
             rows[name] = {"kind": "classical" if name in ("guidance", "lqr", "mpc") else "trivial", "rate": k / n,
+                          "validation_rate": validation_rate(rec["validation"]["captured"]),
                           "failures": failures([rec]),
                           "ci95": list(wilson_interval(k, n)), "miss_median_m": miss, "capture_time_median_s": ttc}
         if "lqr" in rows:  # the learned methods relative to the LQR (LQR = 1.0)
@@ -658,15 +744,19 @@ def summarize(cfg: dict[str, Any], results: list[dict[str, Any]], baselines: dic
                                                                 row["ci95"][1] / lqr_rate]
                     row["p_improvement_over_lqr"] = probability_of_improvement(row["rates"], [lqr_rate])
         comparison = None
-        learned = [(float(np.mean(r["episodes"]["captured"])), r) for r in runs]
-        classical = [(rows[b]["rate"], b) for b in ("guidance", "lqr", "mpc") if b in rows]
-        if learned and classical:
-            best_rate, best = max(learned, key=lambda x: x[0])
-            c_rate, c_name = max(classical, key=lambda x: x[0])
+        classical = [b for b in ("guidance", "lqr", "mpc") if b in rows]
+        if runs and classical:
+            # Chosen on the validation episodes; compared on the held-out ones.
+            by_name = {r["name"]: r for r in runs}
+            best = by_name[choose_run({r["name"]: r["validation"]["captured"] for r in runs})]
+            c_name = choose_run({b: baselines[tier][b]["validation"]["captured"] for b in classical})
             a = np.asarray(best["episodes"]["captured"])
             b = np.asarray(baselines[tier][c_name]["captured"])
             only_a, only_b = int(np.sum(a & ~b)), int(np.sum(~a & b))
-            comparison = {"learned": best["name"], "learned_rate": best_rate, "classical": c_name, "classical_rate": c_rate,
+            comparison = {"learned": best["name"], "learned_rate": float(np.mean(a)), "classical": c_name,
+                          "classical_rate": rows[c_name]["rate"],
+                          "learned_validation_rate": validation_rate(best["validation"]["captured"]),
+                          "classical_validation_rate": rows[c_name]["validation_rate"],
                           "both": int(np.sum(a & b)), "only_learned": only_a, "only_classical": only_b,
                           "neither": int(np.sum(~a & ~b)), "p_value": mcnemar_exact(only_a, only_b)}
         tiers[tier] = {"policies": rows, "mcnemar": comparison}
@@ -746,12 +836,13 @@ def _target_markdown(t: Optional[dict[str, Any]]) -> list[str]:
     scored = [tier for tier, v in t["tiers"].items() if v["scored"]]
     lines = ["", "## Target", "",
              f"On the {' and '.join(scored)} tier{'s' if len(scored) > 1 else ''} a learned policy captures at least "
-             "as many held-out episodes as the LQR (IQM >= the LQR's rate, its interval reaching it, the best run not "
+             "as many held-out episodes as the LQR (IQM >= the LQR's rate, its interval reaching it, its chosen run not "
              "significantly worse by the paired exact McNemar), significantly more on at least one of them "
              f"(p < {TARGET_ALPHA}), and no learned method's seeds spread by more than {100 * TARGET_MAX_SPREAD:.0f} "
              "points on any tier. Tiers outside the target show their numbers with `-` for the two criteria that do "
-             "not apply to them.", "",
-             "| tier | best method (IQM) | LQR | best run: only learned / only LQR, p | at least the LQR | "
+             "not apply to them. The method and its run are chosen on the validation episodes (the method by the IQM "
+             "of its runs' validation rates, the run by its validation rate); the held-out episodes only report.", "",
+             "| tier | chosen method (held-out IQM) | LQR | chosen run: only learned / only LQR, p | at least the LQR | "
              "significantly more | largest seed spread (method) |", "|---|---|---|---|---|---|---|"]
     yes = {True: "yes", False: "no"}
     for tier, v in t["tiers"].items():
@@ -773,8 +864,8 @@ def _target_misses(t: dict[str, Any]) -> list[str]:
     out = []
     for tier, v in t["tiers"].items():
         if v["scored"] and not v["at_least_lqr"]:
-            out.append(f"{tier}: the best method, {method_label(v['method'])}, captures {_pct(v['iqm'])} (IQM, "
-                       f"interval up to {_pct(v['ci95'][1])}) against the LQR's {_pct(v['lqr_rate'])}; its best run "
+            out.append(f"{tier}: the chosen method, {method_label(v['method'])}, captures {_pct(v['iqm'])} (IQM, "
+                       f"interval up to {_pct(v['ci95'][1])}) against the LQR's {_pct(v['lqr_rate'])}; its chosen run "
                        f"{v['only_learned']} / {v['only_lqr']} episodes against the LQR, p = {v['p_value']:.3g}.")
         if not v["spread_ok"]:
             out.append(f"{tier}: {method_label(v['widest_spread_method'])}'s seeds spread by "
@@ -783,7 +874,7 @@ def _target_misses(t: dict[str, Any]) -> list[str]:
     scored = {tier: v for tier, v in t["tiers"].items() if v["scored"]}
     if not any(v["significantly_better"] for v in scored.values()):
         best = min(scored.items(), key=lambda kv: kv[1]["p_value"])
-        out.append(f"no tier's best run captures significantly more than the LQR (smallest p: {best[0]}, "
+        out.append(f"no tier's chosen run captures significantly more than the LQR (smallest p: {best[0]}, "
                    f"{best[1]['p_value']:.3g}).")
     return out
 
@@ -807,6 +898,11 @@ def report_markdown(doc: dict[str, Any]) -> str:
         f"Every policy of a tier meets the same {cfg['episodes']} held-out episodes (episode k: seed 20240607 + k, "
         f"held-out wake seed k). {learned}the rate with its Wilson 95 % interval. Miss distance: the smallest "
         "capture-point-to-boom distance of the episode; time to capture over captured episodes only.",
+        "",
+        f"Every choice is made on {cfg.get('validation_episodes', cfg['episodes'])} validation episodes per tier "
+        "(episode k: seed 7340033 + k, validation wake seed k, a training wake seed that training never draws): "
+        "each method's chosen run (the one a shipped policy is), the best learned method, run and classical "
+        "baseline that the McNemar tests and the Target section compare. The held-out episodes only report.",
     ]
     for tier, t in doc["tiers"].items():
         lines += ["", f"## {tier} (`{TIERS[tier].id}`)", "", TIERS[tier].summary + ".", "",
@@ -842,10 +938,11 @@ def report_markdown(doc: dict[str, Any]) -> str:
                       f"| {r['p_improvement_over_lqr']:.2f} |" for n, r in rel]
         m = t["mcnemar"]
         if m:
-            lines += ["", f"Best learned run `{m['learned']}` ({_pct(m['learned_rate'])}) vs best classical `{m['classical']}` "
-                      f"({_pct(m['classical_rate'])}), paired on the same episodes: both {m['both']}, learned only "
-                      f"{m['only_learned']}, classical only {m['only_classical']}, neither {m['neither']}; exact McNemar "
-                      f"p = {m['p_value']:.3g} (both picked as the best on these episodes)."]
+            lines += ["", f"Learned run `{m['learned']}` ({_pct(m['learned_rate'])}) vs classical `{m['classical']}` "
+                      f"({_pct(m['classical_rate'])}), both chosen as the best on the validation episodes "
+                      f"({_pct(m['learned_validation_rate'])} and {_pct(m['classical_validation_rate'])} there), paired "
+                      f"on the held-out episodes: both {m['both']}, learned only {m['only_learned']}, classical only "
+                      f"{m['only_classical']}, neither {m['neither']}; exact McNemar p = {m['p_value']:.3g}."]
     if doc.get("missing"):
         lines += ["", "## Missing / unfinished runs", "",
                   f"{len(doc['missing'])} of {len(doc['missing']) + len(doc['runs'])} training runs have no result "
@@ -891,7 +988,8 @@ def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] =
     results, missing = [], []
     for job in every:  # the report covers every finished run in OUT, chosen now or earlier
         if job.name not in by_name:
-            stored = _stored_result(out / "runs" / job.name, job_key(job, config["episodes"], config["num_envs"]))
+            stored = _stored_result(out / "runs" / job.name, job_key(job, config["episodes"], config["num_envs"],
+                                                                                   config["validation_episodes"]))
             if stored is not None:
                 by_name[job.name] = stored["result"] | {"reused": True}
         if job.name in by_name:
@@ -921,7 +1019,10 @@ def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] =
         "target": target(summary, {
             tier: {"lqr": baselines[tier]["lqr"]["captured"],
                    **{r["name"]: r["episodes"]["captured"] for r in results if r["job"]["tier"] == tier}}
-            for tier in config["tiers"] if baselines.get(tier, {}).get("lqr") is not None}),
+            for tier in config["tiers"] if baselines.get(tier, {}).get("lqr") is not None}, {
+            tier: {algo: {r["name"]: r["validation"]["captured"] for r in results
+                          if r["job"]["tier"] == tier and r["job"]["algo"] == algo} for algo in config["learners"]}
+            for tier in config["tiers"]}),
         "runs": [{k: v for k, v in r.items() if k != "episodes"} | {"capture_rate": float(np.mean(r["episodes"]["captured"]))}
                  for r in results],
         "profile": {"tau": taus.tolist(), **profile},
@@ -961,6 +1062,6 @@ def _cpus() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
-__all__ = ["DEFAULTS", "RESULT_FILE", "Job", "build_digest", "job_key", "jobs", "load_config", "validate_config", "run", "run_job", "evaluate_policy",
+__all__ = ["DEFAULTS", "RESULT_FILE", "Job", "choose_method", "choose_run", "chosen_run", "validation_rate", "build_digest", "job_key", "jobs", "load_config", "validate_config", "run", "run_job", "evaluate_policy",
            "stratified_bootstrap", "summarize", "performance_profile", "report_markdown", "iqm",
            "probability_of_improvement", "target", "selection", "CONFIG_FILE", "failures", "TARGET_MAX_SPREAD", "TARGET_ALPHA"]

@@ -109,6 +109,7 @@ def schedule_episodes(
     batch: int = 16,
     num_threads: int = 0,
     config: Optional[dict[str, Any]] = None,
+    true_observation: bool = False,
 ) -> Iterator[tuple[int, Any]]:
     """Runs the evaluation episodes ``episodes`` (distinct indices) of ``policy`` and yields
     ``(k, observer.ended(...))`` as each ends (in the order they end). The one episode loop of
@@ -126,6 +127,9 @@ def schedule_episodes(
     ``batch`` rows. The env runs the configuration's physics without the env options
     (``residual``, ``history``): those are the policy's (an :class:`SB3Policy` applies its run's).
     The policy is told of each start (:func:`start_policy_episodes`) with the episode index.
+    ``true_observation``: the env keeps the true observation (its env option of that name; the
+    observer reads it with ``env.true_observations()`` and in the step's ``infos``); the
+    episodes are the same.
     """
     wanted = sorted({int(k) for k in episodes})
     if not wanted:
@@ -135,7 +139,9 @@ def schedule_episodes(
     def wake_of(k: int) -> Optional[int]:
         return None if wake_seeds is None else int(wake_seeds[k])
 
-    env = InAirCaptureVectorEnv(batch, autoreset_mode="disabled", num_threads=num_threads, **physics_config(config))
+    options = {"true_observation": True} if true_observation else {}
+    env = InAirCaptureVectorEnv(batch, autoreset_mode="disabled", num_threads=num_threads, **physics_config(config),
+                                **options)
     pending = iter(wanted)
     ep_of = np.full(batch, -1)  # episode index each env runs; -1: a repeat whose result is dropped
     last = np.full(batch, wanted[0], dtype=np.int64)  # the last real episode each env ran (repeated when idle)

@@ -316,6 +316,10 @@ pub struct Episode {
     divergence: Option<String>,
     /// The sensor model of the observation (`sensors.enabled`), or none: the true state.
     sensors: Option<Sensors>,
+    /// The true observation (perfect sensors: noise-free, delay-free) of the latest state,
+    /// kept only when asked for ([`Episode::set_true_observation`]); the observation's own
+    /// path is unchanged without it.
+    true_obs: Option<[f32; OBS_DIM]>,
 }
 
 impl Episode {
@@ -359,6 +363,7 @@ impl Episode {
             done: false,
             divergence: None,
             sensors,
+            true_obs: None,
         };
         episode.reset(seeds)?;
         Ok(episode)
@@ -466,10 +471,64 @@ impl Episode {
             flap_limit: self.flap_limit,
             capture_window: self.config.capture_window,
         };
-        match &mut self.sensors {
+        let finite = match &mut self.sensors {
             Some(sensors) => observe_sensed(&inputs, sensors, &mut self.obs),
             None => observe(&inputs, &mut self.obs),
+        };
+        if finite {
+            if let Some(true_obs) = &mut self.true_obs {
+                match self.sensors {
+                    // The same quantities as the sensed observation, without the sensor model.
+                    Some(_) => {
+                        observe(&inputs, true_obs);
+                    }
+                    None => *true_obs = self.obs,
+                }
+            }
         }
+        finite
+    }
+
+    /// Keeps (`on`) or drops the true observation: what perfect sensors (noise-free,
+    /// delay-free) would observe, scaled like the observation. Switched on, it is computed at
+    /// once from the current state and then with every observation; it is the observation
+    /// itself without `sensors.enabled`. Nothing else of the episode changes.
+    pub fn set_true_observation(&mut self, on: bool) {
+        self.true_obs = on.then_some(self.obs);
+        if on {
+            self.refresh_true_observation();
+        }
+    }
+
+    /// Recomputes the kept true observation from the current state, if it is kept, the episode
+    /// has sensors and the state gives a finite observation (after a divergence it stays the
+    /// last good one).
+    fn refresh_true_observation(&mut self) {
+        let Some(true_obs) = &mut self.true_obs else {
+            return;
+        };
+        if self.sensors.is_none() {
+            *true_obs = self.obs;
+            return;
+        }
+        if let Ok(s) = self.sim.snapshot() {
+            let inputs = ObservationInputs {
+                snapshot: &s,
+                equilibrium: &self.equilibrium.position,
+                flap_limit: self.flap_limit,
+                capture_window: self.config.capture_window,
+            };
+            let mut fresh = [0.0; OBS_DIM];
+            if observe(&inputs, &mut fresh) {
+                *true_obs = fresh;
+            }
+        }
+    }
+
+    /// The true observation of the latest state (see [`Episode::set_true_observation`]), when
+    /// it is kept.
+    pub fn true_observation(&self) -> Option<&[f32; OBS_DIM]> {
+        self.true_obs.as_ref()
     }
 
     /// One agent step with `action` (four flap commands in [-1, 1], clipped). A non-finite
@@ -795,6 +854,7 @@ impl Episode {
         self.distance = state.distance;
         self.done = state.done;
         self.divergence = state.divergence;
+        self.refresh_true_observation();
         Ok(())
     }
 }

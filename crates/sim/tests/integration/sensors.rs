@@ -128,6 +128,61 @@ fn sensors_change_the_observation_only_never_the_physics() {
     }
 }
 
+/// The true observation of an episode with sensors is, bit for bit, the observation of the same
+/// episode (same seeds, same actions) without them, from the first observation on; keeping it
+/// changes nothing else (the sensed observations, the outcomes and the physics are those of the
+/// episode without it). Without sensors it is the observation itself.
+#[test]
+fn the_true_observation_is_the_observation_without_sensors() {
+    let (off, sensed) = (quick(SensorsConfig::default()), quick(on()));
+    for k in [1, 2] {
+        let mut truth = episode(&off, k);
+        let mut plain = episode(&sensed, k);
+        let mut kept = episode(&sensed, k);
+        kept.set_true_observation(true);
+        assert!(plain.true_observation().is_none());
+        let (_, expected) = run(&mut truth, 40);
+        let (plain_outcomes, plain_obs) = run(&mut plain, 40);
+        let mut true_obs = vec![kept.true_observation().unwrap().to_vec()];
+        let mut outcomes = Vec::new();
+        let mut obs = vec![kept.observation().to_vec()];
+        for s in 0..40 {
+            outcomes.push(kept.step(&action(s)).unwrap());
+            obs.push(kept.observation().to_vec());
+            true_obs.push(kept.true_observation().unwrap().to_vec());
+        }
+        let bits_of = |v: &[Vec<f32>]| -> Vec<Vec<u32>> {
+            v.iter()
+                .map(|o| o.iter().map(|x| x.to_bits()).collect())
+                .collect()
+        };
+        assert_eq!(bits_of(&true_obs), bits_of(&expected), "seed {k}");
+        assert_eq!(
+            bits_of(&obs),
+            bits_of(&plain_obs),
+            "seed {k}: the sensed observations"
+        );
+        assert_ne!(
+            obs, true_obs,
+            "seed {k}: the sensors change the observation"
+        );
+        for (p, q) in outcomes.iter().zip(&plain_outcomes) {
+            assert_eq!(bits(p), bits(q));
+        }
+        assert_eq!(
+            kept.state().sim,
+            truth.state().sim,
+            "seed {k}: the physics' state"
+        );
+    }
+    let mut bare = episode(&off, 3);
+    bare.set_true_observation(true);
+    for s in 0..10 {
+        bare.step(&action(s)).unwrap();
+        assert_eq!(bare.true_observation().unwrap(), bare.observation());
+    }
+}
+
 #[test]
 fn exact_sensors_show_the_true_state() {
     let (mut a, mut b) = (
