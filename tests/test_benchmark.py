@@ -239,7 +239,7 @@ def test_ctrl_c_stops_the_benchmark_and_reports_what_is_finished(tmp_path, monke
 
     monkeypatch.setattr(training, "train", interrupted)
     raw = json.loads((ROOT / "training" / "benchmark.json").read_text())
-    raw.update(tiers=["nominal"], baselines=["zero"], episodes=4,
+    raw.update(tiers=["nominal"], baselines=["zero"], episodes=4, validation_episodes=4,
                learners={"ppo": {"train_config": "training/ppo.json", "seeds": [0, 1], "timesteps": 4096}})
     cfg = benchmark.validate_config(raw, root=ROOT)
     doc = benchmark.run(cfg, tmp_path, progress=lambda _m: None)
@@ -305,7 +305,7 @@ def test_ctrl_c_on_the_command_exits_130_with_the_report_and_the_same_command_re
                                  "algo_kwargs": {"n_steps": 32, "batch_size": 64, "n_epochs": 1},
                                  "policy_kwargs": {"net_arch": [16, 16]}, "checkpoint_every": 256}))
     cfg = tmp_path / "benchmark.json"
-    cfg.write_text(json.dumps({"tiers": ["nominal"], "baselines": ["zero"], "episodes": 4, "num_envs": 4,
+    cfg.write_text(json.dumps({"tiers": ["nominal"], "baselines": ["zero"], "episodes": 4, "validation_episodes": 4, "num_envs": 4,
                                "learners": {"ppo": {"train_config": str(train), "seeds": [0], "timesteps": 10**7}}}))
     out = tmp_path / "out"
     rc, err = _interrupt_benchmark_at_a_checkpoint(cfg, out)

@@ -293,7 +293,7 @@ def test_benchmark_training_jobs_as_ray_tasks_equal_the_local_run(cluster, tmp_p
 
     cfg = benchmark.validate_config(
         {"tiers": ["precision"], "learners": {"ppo": {"train_config": "training/ppo.json", "seeds": [0, 1], "timesteps": 512}},
-         "baselines": ["zero"], "episodes": 4, "num_envs": 4}, root=ROOT)
+         "baselines": ["zero"], "episodes": 4, "validation_episodes": 4, "num_envs": 4}, root=ROOT)
     quiet = lambda message: None  # noqa: E731
     local = benchmark.run(cfg, tmp_path / "local", progress=quiet)
     remote = benchmark.run(cfg, tmp_path / "ray", ray_address="local", progress=quiet)
