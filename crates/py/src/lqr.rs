@@ -266,31 +266,12 @@ impl PyLqrFilter {
     /// initialises them.
     #[pyo3(signature = (mask = None))]
     fn restart(&mut self, mask: Option<PyReadonlyArray1<'_, bool>>) -> PyResult<()> {
-        match mask {
-            None => self.states.iter_mut().for_each(|s| s.fresh = true),
-            Some(m) => {
-                let m = m.as_array();
-                check_shape("mask", m.shape(), &[self.states.len()])?;
-                for (s, r) in self.states.iter_mut().zip(m.iter()) {
-                    if *r {
-                        s.fresh = true;
-                    }
-                }
-            }
-        }
-        Ok(())
+        restart_rows(&mut self.states, mask)
     }
 
     /// Adds ``offset`` (N, 4; flap-limit units) to the command each env's next prediction uses.
     fn sent(&mut self, offset: PyReadonlyArray2<'_, f64>) -> PyResult<()> {
-        let v = offset.as_array();
-        check_shape("offset", v.shape(), &[self.states.len(), ACT_DIM])?;
-        for (s, r) in self.states.iter_mut().zip(v.rows()) {
-            for (u, d) in s.u.iter_mut().zip(r.iter()) {
-                *u += *d;
-            }
-        }
-        Ok(())
+        add_sent(&mut self.states, offset)
     }
 
     /// The state of every env: ``z`` (N, nz), ``u`` (N, 4), ``fresh`` (N,) (copies).
@@ -303,16 +284,7 @@ impl PyLqrFilter {
         Bound<'py, PyArray2<f64>>,
         Bound<'py, PyArray1<bool>>,
     ) {
-        let rows = self.states.len();
-        let nz = self.filter.nz();
-        let z = Array2::from_shape_fn((rows, nz), |(i, j)| self.states[i].z[j]);
-        let u = Array2::from_shape_fn((rows, ACT_DIM), |(i, j)| self.states[i].u[j]);
-        let fresh = Array1::from_shape_fn(rows, |i| self.states[i].fresh);
-        (
-            z.into_pyarray(py),
-            u.into_pyarray(py),
-            fresh.into_pyarray(py),
-        )
+        states_to_arrays(py, &self.states, self.filter.nz())
     }
 
     /// Restores a state of ``get_state`` (``StateError`` for shapes that do not fit).
@@ -322,24 +294,7 @@ impl PyLqrFilter {
         u: PyReadonlyArray2<'_, f64>,
         fresh: PyReadonlyArray1<'_, bool>,
     ) -> PyResult<()> {
-        let (z, u, fresh) = (z.as_array(), u.as_array(), fresh.as_array());
-        let rows = z.nrows();
-        check_shape("z", z.shape(), &[rows, self.filter.nz()])?;
-        check_shape("u", u.shape(), &[rows, ACT_DIM])?;
-        check_shape("fresh", fresh.shape(), &[rows])?;
-        let mut states = Vec::with_capacity(rows);
-        for i in 0..rows {
-            let mut s = self.filter.new_state();
-            for (a, b) in s.z.iter_mut().zip(z.row(i).iter()) {
-                *a = *b;
-            }
-            for (a, b) in s.u.iter_mut().zip(u.row(i).iter()) {
-                *a = *b;
-            }
-            s.fresh = fresh[i];
-            states.push(s);
-        }
-        self.states = states;
+        self.states = states_from_arrays(&self.filter, z, u, fresh)?;
         Ok(())
     }
 
@@ -347,4 +302,89 @@ impl PyLqrFilter {
     fn clear(&mut self) {
         self.states.clear();
     }
+}
+
+/// Marks the envs in ``mask`` (all when None) to restart: their next observation initialises them.
+pub(crate) fn restart_rows(
+    states: &mut [FilterState],
+    mask: Option<PyReadonlyArray1<'_, bool>>,
+) -> PyResult<()> {
+    match mask {
+        None => states.iter_mut().for_each(|s| s.fresh = true),
+        Some(m) => {
+            let m = m.as_array();
+            check_shape("mask", m.shape(), &[states.len()])?;
+            for (s, r) in states.iter_mut().zip(m.iter()) {
+                if *r {
+                    s.fresh = true;
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Adds ``offset`` (N, 4; flap-limit units) to the command each env's next prediction uses.
+pub(crate) fn add_sent(
+    states: &mut [FilterState],
+    offset: PyReadonlyArray2<'_, f64>,
+) -> PyResult<()> {
+    let v = offset.as_array();
+    check_shape("offset", v.shape(), &[states.len(), ACT_DIM])?;
+    for (s, r) in states.iter_mut().zip(v.rows()) {
+        for (u, d) in s.u.iter_mut().zip(r.iter()) {
+            *u += *d;
+        }
+    }
+    Ok(())
+}
+
+/// The rows' filter states as ``z`` (N, nz), ``u`` (N, 4), ``fresh`` (N,) (copies).
+#[allow(clippy::type_complexity)]
+pub(crate) fn states_to_arrays<'py>(
+    py: Python<'py>,
+    states: &[FilterState],
+    nz: usize,
+) -> (
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray1<bool>>,
+) {
+    let rows = states.len();
+    let z = Array2::from_shape_fn((rows, nz), |(i, j)| states[i].z[j]);
+    let u = Array2::from_shape_fn((rows, ACT_DIM), |(i, j)| states[i].u[j]);
+    let fresh = Array1::from_shape_fn(rows, |i| states[i].fresh);
+    (
+        z.into_pyarray(py),
+        u.into_pyarray(py),
+        fresh.into_pyarray(py),
+    )
+}
+
+/// The filter states of [`states_to_arrays`]'s arrays (``StateError`` for shapes that do not
+/// fit ``filter``).
+pub(crate) fn states_from_arrays(
+    filter: &LqrFilter,
+    z: PyReadonlyArray2<'_, f64>,
+    u: PyReadonlyArray2<'_, f64>,
+    fresh: PyReadonlyArray1<'_, bool>,
+) -> PyResult<Vec<FilterState>> {
+    let (z, u, fresh) = (z.as_array(), u.as_array(), fresh.as_array());
+    let rows = z.nrows();
+    check_shape("z", z.shape(), &[rows, filter.nz()])?;
+    check_shape("u", u.shape(), &[rows, ACT_DIM])?;
+    check_shape("fresh", fresh.shape(), &[rows])?;
+    let mut states = Vec::with_capacity(rows);
+    for i in 0..rows {
+        let mut s = filter.new_state();
+        for (a, b) in s.z.iter_mut().zip(z.row(i).iter()) {
+            *a = *b;
+        }
+        for (a, b) in s.u.iter_mut().zip(u.row(i).iter()) {
+            *a = *b;
+        }
+        s.fresh = fresh[i];
+        states.push(s);
+    }
+    Ok(states)
 }

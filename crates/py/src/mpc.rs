@@ -12,12 +12,14 @@ use accd_sim::control::filter::{FilterState, LqrFilter};
 use accd_sim::control::lqr::MEASURED_DIM;
 use accd_sim::control::mpc::{CaptureLimits, Mpc, MpcStats, MpcTuning};
 use accd_sim::{ACT_DIM, OBS_DIM};
-use numpy::ndarray::{Array1, Array2};
+use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 
 use crate::errors::IntoPy;
-use crate::lqr::{check_shape, from_py};
+use crate::lqr::{
+    add_sent, check_shape, from_py, restart_rows, states_from_arrays, states_to_arrays,
+};
 
 /// The MPC of one LQR design with the filter state of every env of a batch (see the module
 /// docs of ``accd_sim::control::mpc``).
@@ -184,31 +186,12 @@ impl PyMpc {
     /// Restarts the estimates of the envs in ``mask`` (all when None).
     #[pyo3(signature = (mask = None))]
     fn restart(&mut self, mask: Option<PyReadonlyArray1<'_, bool>>) -> PyResult<()> {
-        match mask {
-            None => self.states.iter_mut().for_each(|s| s.fresh = true),
-            Some(m) => {
-                let m = m.as_array();
-                check_shape("mask", m.shape(), &[self.states.len()])?;
-                for (s, r) in self.states.iter_mut().zip(m.iter()) {
-                    if *r {
-                        s.fresh = true;
-                    }
-                }
-            }
-        }
-        Ok(())
+        restart_rows(&mut self.states, mask)
     }
 
     /// Adds ``offset`` (N, 4; flap-limit units) to the command each env's next prediction uses.
     fn sent(&mut self, offset: PyReadonlyArray2<'_, f64>) -> PyResult<()> {
-        let v = offset.as_array();
-        check_shape("offset", v.shape(), &[self.states.len(), ACT_DIM])?;
-        for (s, r) in self.states.iter_mut().zip(v.rows()) {
-            for (u, d) in s.u.iter_mut().zip(r.iter()) {
-                *u += *d;
-            }
-        }
-        Ok(())
+        add_sent(&mut self.states, offset)
     }
 
     /// The state of every env: ``z`` (N, nz), ``u`` (N, 4), ``fresh`` (N,) (copies). The MPC
@@ -222,16 +205,7 @@ impl PyMpc {
         Bound<'py, PyArray2<f64>>,
         Bound<'py, PyArray1<bool>>,
     ) {
-        let rows = self.states.len();
-        let nz = self.mpc.filter().nz();
-        let z = Array2::from_shape_fn((rows, nz), |(i, j)| self.states[i].z[j]);
-        let u = Array2::from_shape_fn((rows, ACT_DIM), |(i, j)| self.states[i].u[j]);
-        let fresh = Array1::from_shape_fn(rows, |i| self.states[i].fresh);
-        (
-            z.into_pyarray(py),
-            u.into_pyarray(py),
-            fresh.into_pyarray(py),
-        )
+        states_to_arrays(py, &self.states, self.mpc.filter().nz())
     }
 
     /// Restores a state of ``get_state`` (``StateError`` for shapes that do not fit).
@@ -241,24 +215,7 @@ impl PyMpc {
         u: PyReadonlyArray2<'_, f64>,
         fresh: PyReadonlyArray1<'_, bool>,
     ) -> PyResult<()> {
-        let (z, u, fresh) = (z.as_array(), u.as_array(), fresh.as_array());
-        let rows = z.nrows();
-        check_shape("z", z.shape(), &[rows, self.mpc.filter().nz()])?;
-        check_shape("u", u.shape(), &[rows, ACT_DIM])?;
-        check_shape("fresh", fresh.shape(), &[rows])?;
-        let mut states = Vec::with_capacity(rows);
-        for i in 0..rows {
-            let mut s = self.mpc.filter().new_state();
-            for (a, b) in s.z.iter_mut().zip(z.row(i).iter()) {
-                *a = *b;
-            }
-            for (a, b) in s.u.iter_mut().zip(u.row(i).iter()) {
-                *a = *b;
-            }
-            s.fresh = fresh[i];
-            states.push(s);
-        }
-        self.states = states;
+        self.states = states_from_arrays(self.mpc.filter(), z, u, fresh)?;
         Ok(())
     }
 

@@ -296,6 +296,63 @@ class AgentIO:
 AGENT_STATE_MAGIC = b"ACCDAGIO"
 
 
+
+class PolicyAgentIO:
+    """The env options on a policy's side: a policy trained with ``residual``/``history`` runs on
+    the plain env by keeping, per env, what the env kept in training (the base controller, the
+    history). One :class:`AgentIO` per batch size; a new batch size starts every env afresh.
+    Shared by the policies that run trained networks (stable-baselines3 models, exported
+    networks)."""
+
+    def __init__(self, options: AgentOptions, config: Mapping[str, Any]) -> None:
+        self.options = options
+        self._config = config
+        self._io: Optional[AgentIO] = None
+        self._started: Optional[np.ndarray] = None
+
+    def observation(self, obs: np.ndarray) -> np.ndarray:
+        """The observations the network was trained on for raw observations ``obs`` (N, 25),
+        advancing the per-env state."""
+        if obs.ndim != 2:
+            raise ValueError(f"observations have shape {obs.shape}, expected (N, 25)")
+        if self._io is None or self._io.num_envs != obs.shape[0]:
+            self._io = AgentIO(self.options, self._config, obs.shape[0])
+            self._started = None
+            return self._io.begin(obs)
+        started, self._started = self._started, None
+        return self._io.advance(obs, started)[0]
+
+    def command(self, actions: np.ndarray) -> np.ndarray:
+        """The flap commands for the network's ``actions`` (unchanged without residual control)."""
+        return actions if self._io is None else self._io.command(actions)
+
+    def reset(self, mask: Optional[np.ndarray] = None) -> None:
+        """The envs ``mask`` selects (all when None) start new episodes: their base controller and
+        history restart at the next :meth:`observation`."""
+        if self._io is None:
+            return
+        rows = np.ones(self._io.num_envs, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+        if rows.shape != (self._io.num_envs,):
+            self._io = None  # another batch: every env starts afresh
+            return
+        self._started = rows if self._started is None else (self._started | rows)
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        """The per-env state (:meth:`AgentIO.get_state`), empty before the first observation."""
+        return {} if self._io is None else self._io.get_state()
+
+    def set_state(self, state: Mapping[str, np.ndarray]) -> None:
+        """Restores a state of :meth:`get_state` (of a batch of the same size)."""
+        if not state:
+            self._io = None
+            self._started = None
+            return
+        n = int(np.shape(state["cur"])[0])
+        if self._io is None or self._io.num_envs != n:
+            self._io = AgentIO(self.options, self._config, n)
+        self._io.set_state(state)
+        self._started = None
+
 class AgentInterface(gym.Wrapper):
     """Residual control and observation history around a single env (``InAirCaptureEnv``, or
     ``gymnasium.make`` of a registered id): the same as passing ``residual``/``history`` to the

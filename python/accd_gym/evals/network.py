@@ -34,11 +34,11 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any, Mapping, Optional
 
 import numpy as np
 
-from accd_gym.envs.agent_io import AgentIO, physics_config, split_agent_options
+from accd_gym.envs.agent_io import PolicyAgentIO, physics_config, split_agent_options
 from accd_gym.errors import ConfigError
 
 #: The file name of an exported network in a shipped policy's folder.
@@ -236,37 +236,27 @@ class NetworkPolicy:
                               f"({self.network.obs_dim},), its env options {self.agent_options.to_dict() or 'none'} "
                               f"give {expected}")
         self._config = physics_config(config)
-        self._io: Any = None
-        self._started: Optional[np.ndarray] = None
+        self._agent = PolicyAgentIO(self.agent_options, self._config)
 
     def predict(self, obs: Any) -> np.ndarray:
         """Deterministic flap commands (N, 4) for raw observations (N, 25) (with residual/history
         options: augmented, and the actions made commands, as the env did in training)."""
         o = np.asarray(obs, dtype=np.float32)
         if self.agent_options.enabled:
-            o = self._agent_observation(o)
+            o = self._agent.observation(o)
         actions = np.clip(self.network.actions(o), -1.0, 1.0)
-        return actions if self._io is None else self._io.command(actions)
-
-    def _agent_observation(self, obs: np.ndarray) -> np.ndarray:
-        """The observations the network was trained on, advancing the per-env agent state (a new
-        batch size starts every env afresh)."""
-        if obs.ndim != 2:
-            raise ValueError(f"observations have shape {obs.shape}, expected (N, 25)")
-        if self._io is None or self._io.num_envs != obs.shape[0]:
-            self._io = AgentIO(self.agent_options, self._config, obs.shape[0])
-            self._started = None
-            return self._io.begin(obs)
-        started, self._started = self._started, None
-        return self._io.advance(obs, started)[0]
+        return self._agent.command(actions)
 
     def reset(self, mask: Optional[np.ndarray] = None) -> None:
         """The envs ``mask`` selects (all when None) start new episodes: their base controller and
         history restart at the next :meth:`predict` (nothing to do without env options)."""
-        if self._io is None:
-            return
-        rows = np.ones(self._io.num_envs, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
-        if rows.shape != (self._io.num_envs,):
-            self._io = None  # another batch: every env starts afresh
-            return
-        self._started = rows if self._started is None else (self._started | rows)
+        self._agent.reset(mask)
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        """The per-env agent state (the base controller, the history), empty without env options
+        or before the first :meth:`predict`."""
+        return self._agent.get_state()
+
+    def set_state(self, state: Mapping[str, np.ndarray]) -> None:
+        """Restores a state of :meth:`get_state` (of a batch of the same size)."""
+        self._agent.set_state(state)

@@ -17,7 +17,7 @@ import numpy as np
 from accd_gym.control.baselines import guidance_from_tuning
 from accd_gym.control.lqr import is_lqr_tuning, lqr_from_tuning
 from accd_gym.control.registry import CONTROLLERS, Policy, make_controller
-from accd_gym.envs.agent_io import AgentIO, AgentOptions, physics_config, split_agent_options
+from accd_gym.envs.agent_io import AgentOptions, PolicyAgentIO, physics_config, split_agent_options
 from accd_gym.errors import ConfigError
 from accd_gym.evals.network import NetworkPolicy
 from accd_gym.evals.shipped import available, is_trained, policy_dir
@@ -91,8 +91,7 @@ class SB3Policy:
         self._device = device
         self.agent_options = _agent_options_of(model_path)
         self._config = physics_config(config)
-        self._io: Any = None
-        self._started: Optional[np.ndarray] = None
+        self._agent = PolicyAgentIO(self.agent_options, self._config)
         self._model_path = str(model_path)
         self._stats_path = str(stats_path)
         self._model_bytes = model_path.read_bytes()
@@ -136,53 +135,28 @@ class SB3Policy:
         the env did in training)."""
         o = np.asarray(obs, dtype=np.float32)
         if self.agent_options.enabled:
-            o = self._agent_observation(o)
+            o = self._agent.observation(o)
         if self.normalizer is not None and self.normalizer.norm_obs:
             o = self.normalizer.normalize_obs(o)
         actions, _ = self.model.predict(o, deterministic=True)
         actions = np.clip(np.asarray(actions, dtype=np.float32), -1.0, 1.0)
-        return actions if self._io is None else self._io.command(actions)
-
-    def _agent_observation(self, obs: np.ndarray) -> np.ndarray:
-        """The observations the model was trained on, advancing the per-env agent state (a new
-        batch size starts every env afresh)."""
-        if obs.ndim != 2:
-            raise ValueError(f"observations have shape {obs.shape}, expected (N, 25)")
-        if self._io is None or self._io.num_envs != obs.shape[0]:
-            self._io = AgentIO(self.agent_options, self._config, obs.shape[0])
-            self._started = None
-            return self._io.begin(obs)
-        started, self._started = self._started, None
-        return self._io.advance(obs, started)[0]
+        return self._agent.command(actions)
 
     def reset(self, mask: Optional[np.ndarray] = None) -> None:
         """The envs ``mask`` selects (all when None) start new episodes: their base controller and
         history restart at the next :meth:`predict` (nothing to do without env options)."""
-        if self._io is None:
-            return
-        rows = np.ones(self._io.num_envs, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
-        if rows.shape != (self._io.num_envs,):
-            self._io = None  # another batch: every env starts afresh
-            return
-        self._started = rows if self._started is None else (self._started | rows)
+        self._agent.reset(mask)
 
     def get_state(self) -> dict[str, np.ndarray]:
         """The per-env agent state of a model trained with env options (the base controller, the
         history; :meth:`accd_gym.envs.agent_io.AgentIO.get_state`), empty without them or before
         the first :meth:`predict`."""
-        return {} if self._io is None else self._io.get_state()
+        return self._agent.get_state()
 
     def set_state(self, state: Mapping[str, np.ndarray]) -> None:
         """Restores a state of :meth:`get_state` (of a batch of the same size)."""
-        if not state:
-            self._io = None
-            self._started = None
-            return
-        n = int(np.shape(state["cur"])[0])
-        if self._io is None or self._io.num_envs != n:
-            self._io = AgentIO(self.agent_options, self._config, n)
-        self._io.set_state(state)
-        self._started = None
+        self._agent.set_state(state)
+
 
 def _run_status(run: Path) -> str:
     """The ``status`` of a run folder's run.json ("unknown" without one or with a damaged one)."""
