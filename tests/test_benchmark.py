@@ -88,7 +88,9 @@ def test_quick_benchmark_runs_the_whole_pipeline(tmp_path, monkeypatch):
     for tier in cfg["tiers"]:
         rows = doc["tiers"][tier]["policies"]
         assert "ppo" in rows and len(rows["ppo"]["rates"]) == 2
-        assert {"zero", "random", "guidance"} <= set(rows)
+        assert {"zero", "random", "guidance", "lqr", "mpc"} <= set(rows)
+        best = doc["tiers"][tier]["best"]
+        assert best["classical"] in ("guidance", "lqr", "mpc") and best["standalone"] == "ppo" and best["hybrid"] is None
         lo, hi = rows["ppo"]["ci95"]
         assert 0.0 <= lo <= hi <= 1.0
         assert f"## {tier} " in report
@@ -107,7 +109,8 @@ def test_quick_benchmark_runs_the_whole_pipeline(tmp_path, monkeypatch):
     again = benchmark.evaluate_policy(ZeroPolicy(), "nominal", cfg["episodes"], cfg["num_envs"])
     assert again["captured"] == zero
     assert "wall time" in report and doc["wall_time_s"] > 0
-    assert "closing speed at capture" in report and "Relative to the LQR" in report
+    assert "closing speed at capture" in report and "Relative to the best classical controller" in report
+    assert "## Summary" in report and "| best classical | best hybrid (IQM) | best standalone (IQM) |" in report
     assert not any(r["reused"] for r in doc["runs"])
 
     # Resumable: a rerun into the same folder reuses every finished job (training is not called)

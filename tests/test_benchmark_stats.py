@@ -20,8 +20,8 @@ def _validation_as_held_out(eps):
     return out
 
 
-def target(tiers, eps, validation=None):
-    return _target(tiers, eps, _validation_as_held_out(eps) if validation is None else validation)
+def target(tiers, eps, validation=None, **kw):
+    return _target(tiers, eps, _validation_as_held_out(eps) if validation is None else validation, **kw)
 
 
 def test_probability_of_improvement_counts_ties_as_one_half():
@@ -49,7 +49,7 @@ def test_target_is_read_from_the_numbers():
     t = target(tiers, eps)
     assert t["tiers"]["precision"]["significantly_better"] and t["tiers"]["precision"]["best_run"] == "precision_ppo_seed0"
     assert t["tiers"]["precision"]["p_value"] == pytest.approx(2 * 0.5 ** 8)
-    assert t["tiers"]["hard"]["at_least_lqr"] and not t["tiers"]["hard"]["significantly_better"]
+    assert t["tiers"]["hard"]["at_least_classical"] and not t["tiers"]["hard"]["significantly_better"]
     assert t["met"]
     # a learned method whose seeds spread by more than 20 points fails the target, even beside a
     # better method of the same tier; the verdict names it
@@ -63,7 +63,7 @@ def test_target_is_read_from_the_numbers():
     assert t["tiers"]["hard"]["max_seed_spread"] == pytest.approx(0.25)
     # below the LQR with an interval that does not reach it fails too
     tiers["hard"] = _tiers([0.80, 0.80], 0.90, [0.76, 0.84])
-    assert not target(tiers, eps)["tiers"]["hard"]["at_least_lqr"]
+    assert not target(tiers, eps)["tiers"]["hard"]["at_least_classical"]
 
 
 def test_the_target_scores_the_precision_and_hard_tiers_and_the_spread_on_every_tier():
@@ -75,7 +75,7 @@ def test_the_target_scores_the_precision_and_hard_tiers_and_the_spread_on_every_
            "precision": {"lqr": lqr, "precision_ppo_seed0": better}, "hard": {"lqr": lqr, "hard_ppo_seed0": lqr}}
     t = target(tiers, eps)
     # one episode short of a perfect LQR on the nominal tier: shown, not scored
-    assert not t["tiers"]["nominal"]["at_least_lqr"] and not t["tiers"]["nominal"]["scored"]
+    assert not t["tiers"]["nominal"]["at_least_classical"] and not t["tiers"]["nominal"]["scored"]
     assert t["tiers"]["precision"]["scored"] and t["tiers"]["hard"]["scored"] and t["met"]
     md = _target_report(t)
     assert "On the precision and hard tiers" in md and "| nominal | PPO 99.0 %" in md and "| - | - |" in md
@@ -104,7 +104,7 @@ def test_report_has_a_target_section_only_with_its_numbers():
     assert "## Target" in md and "Target not met on these runs:" in md and "| hard | PPO 100.0 %" in md
     assert "| 0.0 points, PPO (yes) |" in md
     # why it is not met, with the numbers: 2 episodes cannot make p < 0.05
-    assert "- no tier's chosen run captures significantly more than the LQR (smallest p: hard, 1)." in md
+    assert "- no tier's chosen run captures significantly more than the best classical controller (smallest p: hard, 1)." in md
     doc["target"] = target({"hard": _tiers([1.0, 0.5], 0.5, [0.5, 1.0])},
                            {"hard": {"lqr": lqr, "hard_ppo_seed0": [True, True], "hard_ppo_seed1": [True, False]}})
     assert "- hard: PPO's seeds spread by 50.0 points, 30.0 more than the 20 allowed." in report_markdown(doc)
@@ -164,7 +164,7 @@ def test_the_choice_is_made_on_validation_episodes_and_never_reads_held_out_resu
     v = _target(tiers, held_out, validation)["tiers"]["hard"]
     assert v["method"] == "ppo" and v["best_run"] == "hard_ppo_seed1"
     # the comparison is reported on the held-out episodes of the chosen run
-    assert (v["only_learned"], v["only_lqr"]) == (0, 0)
+    assert (v["only_learned"], v["only_classical"]) == (0, 0)
     assert choose_run(validation["hard"]["ppo"]) == "hard_ppo_seed1"
     assert choose_method(validation["hard"]) == "ppo"
     # a held-out record in the place of a validation one would choose otherwise: the choice reads
@@ -194,3 +194,128 @@ def test_summarize_chooses_the_mcnemar_pair_on_validation_episodes():
     assert (m["learned"], m["classical"]) == ("hard_ppo_seed1", "guidance")
     assert t["policies"]["ppo"]["chosen_run"] == "hard_ppo_seed1"
     assert (m["learned_rate"], m["classical_rate"]) == (0.5, 0.0)  # reported on the held-out episodes
+
+
+def _family_tiers(standalone_rates, hybrid_rates, lqr_rate):
+    def row(rates, family):
+        return {"kind": "learned", "family": family, "rates": rates, "iqm": sorted(rates)[len(rates) // 2],
+                "ci95": [min(rates), max(rates)]}
+    return {"policies": {"dagger": row(standalone_rates, "standalone"), "residual_sac": row(hybrid_rates, "hybrid"),
+                         "lqr": {"kind": "classical", "rate": lqr_rate}, "mpc": {"kind": "classical", "rate": 0.5}},
+            "best": {"classical": "lqr", "hybrid": "residual_sac", "standalone": "dagger"}}
+
+
+def test_the_standalone_target_needs_significance_the_hybrid_level_and_a_10_point_spread():
+    lqr = [True] * 90 + [False] * 10
+    better = [True] * 98 + [False] * 2                       # 8 gained over the LQR: p = 2 * 0.5**8
+    eps = {"hard": {"lqr": lqr, "mpc": [True] * 50 + [False] * 50, "hard_dagger_seed0": better,
+                    "hard_dagger_seed1": better, "hard_dagger_seed2": better,
+                    "hard_residual_sac_seed0": lqr, "hard_residual_sac_seed1": lqr}}
+    tiers = {"hard": _family_tiers([0.98, 0.97, 0.98], [0.96, 0.95], 0.90)}
+    t = target(tiers, eps, family="standalone")
+    v = t["tiers"]["hard"]
+    assert t["met"] and v["method"] == "dagger" and v["classical"] == "lqr" and v["hybrid_method"] == "residual_sac"
+    assert v["significantly_better"] and v["above_classical"] and v["at_least_hybrid"] and v["spread_ok"]
+    assert t["max_spread"] == pytest.approx(0.10)
+    # below the hybrid's IQM fails, and says by how much
+    tiers = {"hard": _family_tiers([0.94, 0.94, 0.94], [0.96, 0.95], 0.90)}
+    t = target(tiers, eps, family="standalone")
+    assert not t["met"] and not t["tiers"]["hard"]["at_least_hybrid"]
+    assert "- hard: DAgger's IQM 94.0 % is below the best hybrid method, residual SAC, at 96.0 %." in _target_report_lines(t)
+    # 11 points between seeds fails the standalone spread (10), though it passes the benchmark's (20)
+    tiers = {"hard": _family_tiers([0.98, 0.97, 0.87], [0.96, 0.95], 0.90)}
+    assert not target(tiers, eps, family="standalone")["tiers"]["hard"]["spread_ok"]
+    assert target(tiers, eps)["tiers"]["hard"]["spread_ok"]
+    # the hybrid family alone never counts for the standalone target
+    only_hybrid = {"hard": {"policies": {k: v for k, v in _family_tiers([0.9], [0.96, 0.95], 0.9)["policies"].items()
+                                         if k != "dagger"}}}
+    assert target(only_hybrid, eps, family="standalone") is None
+
+
+def _target_report_lines(t):
+    return _target_report(t).splitlines()
+
+
+def test_the_reference_is_the_best_classical_controller_chosen_on_validation():
+    """With an MPC beside the LQR, the verdict is read against the controller the validation
+    episodes chose, on the held-out episodes."""
+    lqr = [True] * 90 + [False] * 10
+    mpc = [True] * 95 + [False] * 5
+    better = [True] * 98 + [False] * 2
+    tiers = {"hard": {"policies": {"ppo": {"kind": "learned", "family": "standalone", "rates": [0.98], "iqm": 0.98,
+                                           "ci95": [0.96, 0.99]},
+                                   "lqr": {"kind": "classical", "rate": 0.90}, "mpc": {"kind": "classical", "rate": 0.95}},
+                      "best": {"classical": "mpc"}}}
+    v = target(tiers, {"hard": {"lqr": lqr, "mpc": mpc, "hard_ppo_seed0": better}})["tiers"]["hard"]
+    assert (v["classical"], v["classical_rate"], v["only_learned"], v["only_classical"]) == ("mpc", 0.95, 3, 0)
+    assert not v["significantly_better"]  # 3 / 0: p = 0.25
+
+
+def _recipe(tmp_path, name, env):
+    import json
+
+    path = tmp_path / f"{name}.json"
+    path.write_text(json.dumps({"algo": "ppo", "env": env}))
+    return str(path)
+
+
+def test_summarize_names_families_the_best_of_each_and_normalizes_by_the_best_classical(tmp_path):
+    from accd_gym.evals.benchmark import learner_family, summarize
+
+    def result(algo, seed, held_out, validation):
+        return {"job": {"tier": "hard", "algo": algo, "seed": seed}, "name": f"hard_{algo}_seed{seed}",
+                "train_wall_s": 1.0, "steps_per_s": 1.0,
+                "episodes": {"captured": held_out, "min_distance": [0.1] * 4, "capture_time": [1.0] * 4},
+                "validation": {"captured": validation}}
+
+    def baseline(held_out, validation):
+        return {"captured": held_out, "min_distance": [0.1] * 4, "capture_time": [1.0] * 4,
+                "outcome": ["captured"] * 4, "validation": {"captured": validation}}
+
+    hybrid = {"train_config": {"hard": _recipe(tmp_path, "r", {"residual": {"base": "lqr", "scale": 0.3}})}}
+    plain = {"train_config": _recipe(tmp_path, "p", {"history": 4})}
+    assert (learner_family(hybrid), learner_family(plain), learner_family({})) == ("hybrid", "standalone", "standalone")
+    cfg = {"tiers": ["hard"], "learners": {"residual_sac": hybrid, "ppo": plain, "dagger": plain}}
+    results = [result("residual_sac", 0, [True] * 4, [True] * 4),
+               result("ppo", 0, [True] * 4, [True, False, False, False]),        # best held-out, worse validation
+               result("dagger", 0, [True, True, False, False], [True, True, True, False])]
+    baselines = {"hard": {"lqr": baseline([True, True, True, False], [True, True, False, False]),
+                          "mpc": baseline([True, True, False, False], [True, True, True, False]),
+                          "zero": baseline([False] * 4, [True] * 4)}}           # trivial: never the classical choice
+    t = summarize(cfg, results, baselines)["hard"]
+    assert t["best"] == {"classical": "mpc", "hybrid": "residual_sac", "standalone": "dagger"}
+    assert t["policies"]["residual_sac"]["family"] == "hybrid" and t["policies"]["dagger"]["family"] == "standalone"
+    assert t["policies"]["zero"]["kind"] == "trivial"
+    # relative to the MPC's held-out rate 0.5
+    assert t["policies"]["dagger"]["vs_classical"][0] == pytest.approx(0.5 / 0.5)
+    assert t["policies"]["ppo"]["vs_classical"][0] == pytest.approx(1.0 / 0.5)
+    assert t["mcnemar"]["classical"] == "mpc"
+
+
+def test_the_readme_table_is_written_between_its_markers_and_only_there(tmp_path):
+    from accd_gym.errors import ConfigError
+    from accd_gym.evals.benchmark import README_BEGIN, README_END, readme_table, write_readme_table
+
+    row = lambda iqm, fam: {"kind": "learned", "family": fam, "rates": [iqm] * 5, "iqm": iqm, "ci95": [iqm, iqm]}  # noqa: E731
+    doc = {"tiers": {"hard": {"policies": {"lqr": {"kind": "classical", "rate": 0.938},
+                                           "mpc": {"kind": "classical", "rate": 0.95},
+                                           "zero": {"kind": "trivial", "rate": 0.0},
+                                           "residual_sac": row(0.959, "hybrid"), "dagger": row(0.94, "standalone")},
+                              "best": {"classical": "mpc", "hybrid": "residual_sac", "standalone": "dagger"}},
+                     "nominal": {"policies": {"lqr": {"kind": "classical", "rate": 1.0},
+                                              "mpc": {"kind": "classical", "rate": 1.0},
+                                              "zero": {"kind": "trivial", "rate": 0.134}},
+                                 "best": {"classical": "mpc", "hybrid": None, "standalone": None}}}}
+    table = readme_table(doc)
+    assert "best hybrid, IQM of 5 seeds" in table and "(`lqr`)" in table and "(`mpc`)" in table
+    assert "| hard | 93.8 % | 95.0 % | 95.9 % (residual SAC) | 94.0 % (DAgger) | 0.0 % |" in table
+    assert "| nominal | 100.0 % | 100.0 % | - | - | 13.4 % |" in table and "neutral flaps throughout (`zero`)" in table
+    readme = tmp_path / "README.md"
+    readme.write_text(f"# x\n\n{README_BEGIN}\nold table\n{README_END}\n\nafter\n")
+    write_readme_table(readme, doc)
+    text = readme.read_text()
+    assert "old table" not in text and table in text and text.startswith("# x\n") and text.endswith("after\n")
+    readme.write_text("no markers\n")
+    with pytest.raises(ConfigError, match="has no block between"):
+        write_readme_table(readme, doc)
+    assert readme.read_text() == "no markers\n"

@@ -124,11 +124,13 @@ def _benchmark(args: argparse.Namespace) -> int:
     command = ("accd-gym benchmark" + (f" --config {args.config}" if args.config != "training/benchmark.json" else "")
                + (" --quick" if args.quick else "") + (f" --ray {args.ray}" if args.ray else ""))
     progress = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True))
+    readme = Path(args.readme) if args.readme else None
     doc = benchmark.run(cfg, args.out, ray_address=args.ray, docs=docs, command=command, progress=progress,
-                        chosen=chosen)
+                        chosen=chosen, readme=readme)
     print((Path(args.out) / "benchmark.md").read_text())
     print(f"wrote {Path(args.out) / 'benchmark.json'}, benchmark.md, performance_profile.png, episodes.json"
-          + (f"; {docs / 'benchmark.md'}" if docs else "") + f" (wall time {doc['wall_time_s']:.0f} s)")
+          + (f"; {docs / 'benchmark.md'}" if docs else "") + (f"; the table of {readme}" if readme else "")
+          + f" (wall time {doc['wall_time_s']:.0f} s)")
     if doc.get("interrupted"):
         print(f"accd-gym: benchmark interrupted ({doc['interrupted']}); the report covers the finished runs; "
               f"run the same command again to resume", file=sys.stderr)
@@ -464,6 +466,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--algos", metavar="A,B", help="run only these algorithms' jobs")
     p.add_argument("--seeds", metavar="0,1", help="run only these seeds' jobs")
     p.add_argument("--docs", type=_path("--docs"), metavar="FOLDER", help="also write FOLDER/benchmark.md and FOLDER/figures/benchmark_profile.png")
+    p.add_argument("--readme", type=_path("--readme"), metavar="FILE", help="also rewrite the results table of FILE (a README) between its benchmark-table markers")
     p.add_argument("--ray", nargs="?", const="local", metavar="ADDRESS",
                    help="run the training jobs as Ray tasks: 'local' (default), 'auto' or HOST:PORT (needs the ray extra)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")

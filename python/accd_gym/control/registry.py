@@ -66,13 +66,17 @@ class Controller:
     (overrides, a validated ``accd_gym._core.EnvConfig`` or None for the defaults; a model-based
     controller is designed for its physics) with ``seed`` for any random draws. ``residual_base``:
     whether it may serve as the residual env option's base controller (deterministic, with its
-    state in :meth:`Policy.get_state`). ``summary``: one line for listings and errors.
+    state in :meth:`Policy.get_state`). ``classical``: a control design that the benchmark sets
+    learned policies against (its best classical controller per tier is chosen among these), as
+    opposed to a trivial reference such as neutral or random flaps. ``summary``: one line for
+    listings and errors.
     """
 
     name: str
     make: Callable[[int, Any], Policy]
     summary: str
     residual_base: bool = False
+    classical: bool = False
 
 
 #: Registered controllers by name, in registration order.
@@ -108,11 +112,12 @@ def residual_bases() -> list[str]:
 register_controller(Controller("zero", lambda seed, config: ZeroPolicy(), "neutral flaps throughout"))
 register_controller(Controller("random", lambda seed, config: RandomPolicy(seed), "uniform random flaps"))
 register_controller(Controller("guidance", lambda seed, config: GuidancePolicy(), "cascaded PID guidance",
-                               residual_base=True))
+                               residual_base=True, classical=True))
 register_controller(Controller("lqr", lambda seed, config: LqrPolicy.for_config(config),
-                               "LQR with a Kalman filter, designed for the env's configuration", residual_base=True))
+                               "LQR with a Kalman filter, designed for the env's configuration", residual_base=True,
+                               classical=True))
 register_controller(Controller("mpc", lambda seed, config: MpcPolicy.for_config(config),
                                "linear MPC on the LQR's Kalman filter, flap and closing-speed constraints",
-                               residual_base=True))
+                               residual_base=True, classical=True))
 
 __all__ = ["CONTROLLERS", "Controller", "Policy", "make_controller", "register_controller", "residual_bases"]

@@ -20,18 +20,23 @@ trained with several seeds, every baseline, the same held-out episodes, one repo
    only some jobs; the report covers every finished job in ``OUT`` and lists the others under
    "Missing / unfinished runs". Ctrl+C: the training under way writes its checkpoint, the report
    is written from what is finished, exit code 130.
-2. **Baselines** (``zero``, ``random``, ``guidance``, ``lqr``) on the same held-out and
-   validation episodes of every tier; the LQR is designed for each tier's configuration. Each baseline's record is stored once
+2. **Baselines** (the config's ``baselines``: trivial references such as ``zero`` and ``random``, and
+   the classical controllers ``guidance``, ``lqr`` and ``mpc``) on the same held-out and
+   validation episodes of every tier; the LQR and MPC are designed for each tier's configuration. Each baseline's record is stored once
    in ``OUT/baselines`` and reused by a rerun while its key is unchanged.
 3. **Report** (``OUT/benchmark.json``, ``OUT/benchmark.md``, ``OUT/performance_profile.png``):
    per tier and policy the capture rate (learned: the interquartile mean over seeds with a 95 %
    stratified bootstrap interval, and every seed's rate; baselines: the rate with its Wilson
    interval), the median miss distance and time to capture, and the paired exact McNemar test
    (:func:`accd_gym.evals.evaluation.mcnemar_exact`) of the chosen learned run against the chosen
-   classical baseline on the same held-out episodes; the learned methods normalized by the LQR (LQR = 1.0)
-   with rliable's probability of improvement over it (:func:`probability_of_improvement`); the
-   Target section (:func:`target`); a performance profile over every (tier, seed) run.
-   ``--docs`` also writes the report to docs/benchmark.md and the plot to docs/figures/.
+   classical baseline on the same held-out episodes; a summary of the best classical controller,
+   the best hybrid method (a learned correction of a classical controller's command) and the best
+   standalone learned method per tier (:func:`summarize`, chosen on the validation episodes); the
+   learned methods normalized by the best classical controller (= 1.0) with rliable's probability
+   of improvement over it (:func:`probability_of_improvement`); the two Target sections
+   (:func:`target`: any learned method, and a standalone one); a performance profile over every
+   (tier, seed) run. ``--docs`` also writes the report to docs/benchmark.md and the plot to
+   docs/figures/; ``--readme`` rewrites the README's results table (:func:`write_readme_table`).
 
 **Statistics.** IQM: the mean of the middle half of the seeds' rates (rliable's IQM,
 ``scipy.stats.trim_mean(x, 0.25)``). Interval: a two-level bootstrap stratified by seed: resample
@@ -643,74 +648,126 @@ def probability_of_improvement(x: Sequence[float], y: Sequence[float]) -> float:
 #: (rate points) and the significance level of the paired McNemar test.
 TARGET_MAX_SPREAD = 0.20
 TARGET_ALPHA = 0.05
-#: The tiers on which a learned policy is to match or beat the LQR: the realistic ones, where the
-#: LQR misses episodes (on the others it captures all or nearly all, so a learned policy can at
-#: best tie it). A config without either scores every tier with learned runs.
+#: The standalone target's largest seed spread of the chosen standalone method (rate points).
+STANDALONE_MAX_SPREAD = 0.10
+#: The tiers on which a learned policy is to match or beat the best classical controller: the
+#: realistic ones, where the classical controllers miss episodes (on the others the LQR captures
+#: all or nearly all, so a learned policy can at best tie it). A config without either scores
+#: every tier with learned runs.
 TARGET_TIERS = ("precision", "hard")
 
 
 def target(tiers: dict[str, Any], episodes: dict[str, dict[str, Any]],
-           validation: dict[str, dict[str, dict[str, Sequence[bool]]]]) -> Optional[dict[str, Any]]:
-    """Whether a learned policy matches the LQR, per tier with an LQR and learned runs: the
-    chosen learned method (:func:`choose_method` on the validation episodes) at least the LQR
-    (held-out IQM >= LQR rate, its interval reaching it, its chosen run not significantly worse
-    by the paired exact McNemar), significantly better (its chosen run, :func:`choose_run` on the
-    validation episodes, p < :data:`TARGET_ALPHA` on the held-out episodes), and every learned method's seed spread at most
-    :data:`TARGET_MAX_SPREAD`. ``scored``: the tier is one of :data:`TARGET_TIERS` (every tier when
-    none of them is there). ``met``: every scored tier at least the LQR, one of them significantly
-    better, and no tier's spread too large (None without such a tier). ``episodes``: per tier,
-    ``{"lqr": captured, run name: captured}`` on the held-out episodes (reported, never used to
-    choose); ``validation``: per tier, ``{method: {run name: captured}}`` on the validation
-    episodes (what the method and run are chosen by)."""
+           validation: dict[str, dict[str, dict[str, Sequence[bool]]]], *, family: Optional[str] = None) -> Optional[dict[str, Any]]:
+    """Whether a learned policy beats the best classical controller, per tier with one and with
+    learned runs.
+
+    The reference is the tier's best classical controller (``tiers[tier]["best"]["classical"]``
+    from :func:`summarize`, chosen on the validation episodes; the LQR where the numbers name
+    none). ``family`` None (the benchmark's target): the chosen learned method of any family
+    (:func:`choose_method` on the validation episodes) at least the reference (held-out IQM >= its
+    rate, the interval reaching it, the chosen run not significantly worse by the paired exact
+    McNemar), significantly better on one scored tier (its chosen run, :func:`choose_run` on the
+    validation episodes, p < :data:`TARGET_ALPHA` on the held-out episodes), and every learned
+    method's seed spread at most :data:`TARGET_MAX_SPREAD`. ``family="standalone"`` (a network alone
+    at run time): only standalone methods compete, and on every scored tier the chosen one must
+    capture significantly more than the reference (p < :data:`TARGET_ALPHA`, IQM above its rate),
+    at least as many as the chosen hybrid method (IQM), with its seeds within
+    :data:`STANDALONE_MAX_SPREAD`.
+
+    ``scored``: the tier is one of :data:`TARGET_TIERS` (every tier when none of them is there).
+    ``episodes``: per tier, ``{baseline or run name: captured}`` on the held-out episodes (reported,
+    never used to choose); ``validation``: per tier, ``{method: {run name: captured}}`` on the
+    validation episodes (what the method and run are chosen by)."""
+    standalone = family == "standalone"
+    max_spread = STANDALONE_MAX_SPREAD if standalone else TARGET_MAX_SPREAD
     out: dict[str, Any] = {}
     for tier, t in tiers.items():
         rows = t["policies"]
-        learned = {k: r for k, r in rows.items() if r["kind"] == "learned"}
-        if "lqr" not in rows or not learned:
+        ref = (t.get("best") or {}).get("classical") or "lqr"
+        learned = {k: r for k, r in rows.items()
+                   if r["kind"] == "learned" and (family is None or r.get("family", "standalone") == family)}
+        if ref not in rows or ref not in episodes.get(tier, {}) or not learned:
             continue
-        lqr_rate = rows["lqr"]["rate"]
+        ref_rate = rows[ref]["rate"]
         chosen = {m: runs for m, runs in validation.get(tier, {}).items() if m in learned and runs}
         if not chosen:
             continue
         best_algo = choose_method(chosen)
         best = learned[best_algo]
         best_run = choose_run(chosen[best_algo])
-        a, b = np.asarray(episodes[tier][best_run], dtype=bool), np.asarray(episodes[tier]["lqr"], dtype=bool)
+        a, b = np.asarray(episodes[tier][best_run], dtype=bool), np.asarray(episodes[tier][ref], dtype=bool)
         only_a, only_b = int(np.sum(a & ~b)), int(np.sum(~a & b))
         p = mcnemar_exact(only_a, only_b)
-        spreads = {k: max(r["rates"]) - min(r["rates"]) for k, r in learned.items()}
+        spreads = {k: max(r["rates"]) - min(r["rates"]) for k, r in learned.items() if not standalone or k == best_algo}
         widest = max(spreads, key=lambda k: (spreads[k], k))
         spread = spreads[widest]
-        at_least = (best["iqm"] >= lqr_rate and best["ci95"][1] >= lqr_rate
+        at_least = (best["iqm"] >= ref_rate and best["ci95"][1] >= ref_rate
                     and not (only_b > only_a and p < TARGET_ALPHA))
-        out[tier] = {"method": best_algo, "iqm": best["iqm"], "ci95": best["ci95"], "lqr_rate": lqr_rate,
-                     "best_run": best_run, "only_learned": only_a, "only_lqr": only_b, "p_value": p,
-                     "at_least_lqr": bool(at_least), "significantly_better": bool(only_a > only_b and p < TARGET_ALPHA),
-                     "max_seed_spread": spread, "widest_spread_method": widest,
-                     "spread_ok": bool(spread <= TARGET_MAX_SPREAD)}
+        v = {"method": best_algo, "iqm": best["iqm"], "ci95": best["ci95"], "classical": ref, "classical_rate": ref_rate,
+             "best_run": best_run, "only_learned": only_a, "only_classical": only_b, "p_value": p,
+             "at_least_classical": bool(at_least), "above_classical": bool(best["iqm"] > ref_rate),
+             "significantly_better": bool(only_a > only_b and p < TARGET_ALPHA),
+             "max_seed_spread": spread, "widest_spread_method": widest, "spread_ok": bool(spread <= max_spread)}
+        if standalone:
+            hybrid = {m: runs for m, runs in validation.get(tier, {}).items()
+                      if runs and rows.get(m, {}).get("kind") == "learned" and rows[m].get("family") == "hybrid"}
+            h = choose_method(hybrid) if hybrid else None
+            v |= {"hybrid_method": h, "hybrid_iqm": None if h is None else rows[h]["iqm"],
+                  "at_least_hybrid": bool(h is None or best["iqm"] >= rows[h]["iqm"])}
+        out[tier] = v
     if not out:
         return None
     scored = [t for t in out if t in TARGET_TIERS] or list(out)
     for tier, v in out.items():
         v["scored"] = tier in scored
-    met = (all(out[t]["at_least_lqr"] for t in scored) and any(out[t]["significantly_better"] for t in scored)
-           and all(v["spread_ok"] for v in out.values()))
-    return {"tiers": out, "met": bool(met)}
+    if standalone:
+        met = all(out[t]["significantly_better"] and out[t]["above_classical"] and out[t]["at_least_hybrid"]
+                  and out[t]["spread_ok"] for t in scored)
+    else:
+        met = (all(out[t]["at_least_classical"] for t in scored) and any(out[t]["significantly_better"] for t in scored)
+               and all(v["spread_ok"] for v in out.values()))
+    return {"tiers": out, "met": bool(met), "family": family, "max_spread": max_spread}
 
 
 def _medians(record: dict[str, Any]) -> tuple[float, Optional[float]]:
     return float(np.median(record["min_distance"])), _median(record["capture_time"])
 
 
+def learner_family(spec: dict[str, Any]) -> str:
+    """``"hybrid"`` for a learner whose recipe (any tier's) runs on a residual base (the env option
+    ``residual``: at run time the policy corrects a classical controller's command),
+    ``"standalone"`` otherwise (a network alone at run time, whatever taught it)."""
+    recipes = spec.get("train_config")
+    paths = list(recipes.values()) if isinstance(recipes, dict) else [recipes] if recipes else []
+    for path in paths:
+        env = read_json_object(path, "train_config (training config)").get("env") or {}
+        if isinstance(env, dict) and env.get("residual"):
+            return "hybrid"
+    return "standalone"
+
+
+def is_classical(name: str) -> bool:
+    """A baseline the learned policies are set against (the registry's ``classical`` flag)."""
+    return name in CONTROLLERS and CONTROLLERS[name].classical
+
+
+#: The learner families of the report's summary, in its column order.
+FAMILIES = ("hybrid", "standalone")
+
+
 def summarize(cfg: dict[str, Any], results: list[dict[str, Any]], baselines: dict[str, dict[str, Any]]) -> dict[str, Any]:
-    """The report's numbers per tier: learned algorithms (IQM, interval, per-seed rates, the run
-    chosen on the validation episodes), baselines (rate, Wilson interval), medians, and the
-    McNemar comparison of the learned run and the classical baseline chosen on the validation
-    episodes (:func:`choose_run`), on the held-out episodes."""
+    """The report's numbers per tier: learned algorithms (family, IQM, interval, per-seed rates,
+    the run chosen on the validation episodes), baselines (rate, Wilson interval), medians; the
+    best classical controller, the best hybrid and the best standalone learned method, each chosen
+    on the validation episodes (``best``); every learned method relative to that classical
+    controller; and the McNemar comparison of the learned run and the classical baseline chosen on
+    the validation episodes (:func:`choose_run`), on the held-out episodes."""
     tiers: dict[str, Any] = {}
     for tier in cfg["tiers"]:
         rows: dict[str, Any] = {}
         runs = [r for r in results if r["job"]["tier"] == tier]
+        by_method: dict[str, dict[str, Sequence[bool]]] = {}
         for algo in cfg["learners"]:
             mine = sorted((r for r in runs if r["job"]["algo"] == algo), key=lambda r: r["job"]["seed"])
             if not mine:
@@ -720,9 +777,10 @@ def summarize(cfg: dict[str, Any], results: list[dict[str, Any]], baselines: dic
             lo, hi = stratified_bootstrap(caps)
             pooled = {k: sum((r["episodes"][k] for r in mine), []) for k in ("min_distance", "capture_time")}
             miss, ttc = _medians(pooled)
-            picked = choose_run({r["name"]: r["validation"]["captured"] for r in mine})
-            rows[algo] = {"kind": "learned", "failures": failures([r["episodes"] for r in mine]),
-                          "chosen_run": picked,
+            by_method[algo] = {r["name"]: r["validation"]["captured"] for r in mine}
+            rows[algo] = {"kind": "learned", "family": learner_family(cfg["learners"][algo]),
+                          "failures": failures([r["episodes"] for r in mine]),
+                          "chosen_run": choose_run(by_method[algo]),
                           "validation_rates": [validation_rate(r["validation"]["captured"]) for r in mine],
                           "seeds": [r["job"]["seed"] for r in mine], "rates": rates,
                           "iqm": iqm(rates), "ci95": [lo, hi], "miss_median_m": miss, "capture_time_median_s": ttc,
@@ -732,34 +790,38 @@ def summarize(cfg: dict[str, Any], results: list[dict[str, Any]], baselines: dic
                 continue
             k, n = int(sum(rec["captured"])), len(rec["captured"])
             miss, ttc = _medians(rec)
-            rows[name] = {"kind": "classical" if name in ("guidance", "lqr", "mpc") else "trivial", "rate": k / n,
+            rows[name] = {"kind": "classical" if is_classical(name) else "trivial", "rate": k / n,
                           "validation_rate": validation_rate(rec["validation"]["captured"]),
                           "failures": failures([rec]),
                           "ci95": list(wilson_interval(k, n)), "miss_median_m": miss, "capture_time_median_s": ttc}
-        if "lqr" in rows:  # the learned methods relative to the LQR (LQR = 1.0)
-            lqr_rate = rows["lqr"]["rate"]
+        classical = [b for b, row in rows.items() if row["kind"] == "classical"]
+        # Every choice on the validation episodes; reported on the held-out ones.
+        best_classical = (choose_run({b: baselines[tier][b]["validation"]["captured"] for b in classical})
+                          if classical else None)
+        best = {"classical": best_classical}
+        for family in FAMILIES:
+            mine = {m: v for m, v in by_method.items() if rows[m]["family"] == family}
+            best[family] = choose_method(mine) if mine else None
+        if best_classical is not None:  # the learned methods relative to the best classical controller
+            ref = rows[best_classical]["rate"]
             for row in rows.values():
                 if row["kind"] == "learned":
-                    row["vs_lqr"] = None if lqr_rate == 0 else [row["iqm"] / lqr_rate, row["ci95"][0] / lqr_rate,
-                                                                row["ci95"][1] / lqr_rate]
-                    row["p_improvement_over_lqr"] = probability_of_improvement(row["rates"], [lqr_rate])
+                    row["vs_classical"] = None if ref == 0 else [row["iqm"] / ref, row["ci95"][0] / ref, row["ci95"][1] / ref]
+                    row["p_improvement_over_classical"] = probability_of_improvement(row["rates"], [ref])
         comparison = None
-        classical = [b for b in ("guidance", "lqr", "mpc") if b in rows]
-        if runs and classical:
-            # Chosen on the validation episodes; compared on the held-out ones.
+        if runs and best_classical is not None:
             by_name = {r["name"]: r for r in runs}
-            best = by_name[choose_run({r["name"]: r["validation"]["captured"] for r in runs})]
-            c_name = choose_run({b: baselines[tier][b]["validation"]["captured"] for b in classical})
-            a = np.asarray(best["episodes"]["captured"])
-            b = np.asarray(baselines[tier][c_name]["captured"])
+            chosen = by_name[choose_run({r["name"]: r["validation"]["captured"] for r in runs})]
+            a = np.asarray(chosen["episodes"]["captured"])
+            b = np.asarray(baselines[tier][best_classical]["captured"])
             only_a, only_b = int(np.sum(a & ~b)), int(np.sum(~a & b))
-            comparison = {"learned": best["name"], "learned_rate": float(np.mean(a)), "classical": c_name,
-                          "classical_rate": rows[c_name]["rate"],
-                          "learned_validation_rate": validation_rate(best["validation"]["captured"]),
-                          "classical_validation_rate": rows[c_name]["validation_rate"],
+            comparison = {"learned": chosen["name"], "learned_rate": float(np.mean(a)), "classical": best_classical,
+                          "classical_rate": rows[best_classical]["rate"],
+                          "learned_validation_rate": validation_rate(chosen["validation"]["captured"]),
+                          "classical_validation_rate": rows[best_classical]["validation_rate"],
                           "both": int(np.sum(a & b)), "only_learned": only_a, "only_classical": only_b,
                           "neither": int(np.sum(~a & ~b)), "p_value": mcnemar_exact(only_a, only_b)}
-        tiers[tier] = {"policies": rows, "mcnemar": comparison}
+        tiers[tier] = {"policies": rows, "best": best, "mcnemar": comparison}
     return tiers
 
 
@@ -803,12 +865,14 @@ def _pct(x: float) -> str:
     return f"{100 * x:.1f} %"
 
 
-_ALGORITHM_WORDS = frozenset({"ppo", "sac", "tqc", "td3", "a2c", "ddpg", "dqn", "trpo", "crossq"})
+_ALGORITHM_WORDS = frozenset({"ppo", "sac", "tqc", "td3", "a2c", "ddpg", "dqn", "trpo", "crossq", "bc"})
+_SPELLED = {"dagger": "DAgger"}
 
 
 def method_label(algo: str) -> str:
-    """A learner's name as the report prints it: ``residual_sac`` -> ``residual SAC``, ``ppo`` -> ``PPO``."""
-    return " ".join(w.upper() if w in _ALGORITHM_WORDS else w for w in algo.split("_"))
+    """A learner's name as the report prints it: ``residual_sac`` -> ``residual SAC``, ``ppo`` ->
+    ``PPO``, ``dagger_ppo`` -> ``DAgger PPO``."""
+    return " ".join(_SPELLED.get(w, w.upper() if w in _ALGORITHM_WORDS else w) for w in algo.split("_"))
 
 
 def _reuse_note(doc: dict[str, Any]) -> str:
@@ -830,29 +894,50 @@ def _reuse_note(doc: dict[str, Any]) -> str:
 
 
 def _target_markdown(t: Optional[dict[str, Any]]) -> list[str]:
-    """The report's Target section from :func:`target`'s numbers (nothing without them)."""
+    """A Target section from :func:`target`'s numbers (nothing without them): the benchmark's
+    target (any learned method) or the standalone one (``t["family"]``)."""
     if not t:
         return []
+    standalone = t.get("family") == "standalone"
     scored = [tier for tier, v in t["tiers"].items() if v["scored"]]
-    lines = ["", "## Target", "",
-             f"On the {' and '.join(scored)} tier{'s' if len(scored) > 1 else ''} a learned policy captures at least "
-             "as many held-out episodes as the LQR (IQM >= the LQR's rate, its interval reaching it, its chosen run not "
-             "significantly worse by the paired exact McNemar), significantly more on at least one of them "
-             f"(p < {TARGET_ALPHA}), and no learned method's seeds spread by more than {100 * TARGET_MAX_SPREAD:.0f} "
-             "points on any tier. Tiers outside the target show their numbers with `-` for the two criteria that do "
-             "not apply to them. The method and its run are chosen on the validation episodes (the method by the IQM "
-             "of its runs' validation rates, the run by its validation rate); the held-out episodes only report.", "",
-             "| tier | chosen method (held-out IQM) | LQR | chosen run: only learned / only LQR, p | at least the LQR | "
-             "significantly more | largest seed spread (method) |", "|---|---|---|---|---|---|---|"]
+    where = f"On the {' and '.join(scored)} tier{'s' if len(scored) > 1 else ''}"
+    spread = f"{100 * t.get('max_spread', TARGET_MAX_SPREAD):.0f} points"
+    if standalone:
+        lines = ["", "## Target: a standalone learned policy", "",
+                 f"{where} a standalone learned policy (a network alone at run time) captures significantly more "
+                 "held-out episodes than the best classical controller (its chosen run by the paired exact McNemar, "
+                 f"p < {TARGET_ALPHA}, and the IQM of its seeds above the controller's rate), at least as many as the "
+                 f"best hybrid (residual) method (IQM), with its seeds within {spread}."]
+    else:
+        lines = ["", "## Target", "",
+                 f"{where} a learned policy captures at least as many held-out episodes as the best classical "
+                 "controller (IQM >= its rate, the interval reaching it, the chosen run not significantly worse by the "
+                 "paired exact McNemar), significantly more on at least one of them "
+                 f"(p < {TARGET_ALPHA}), and no learned method's seeds spread by more than {spread} on any tier."]
+    lines[-1] += (" Tiers outside the target show their numbers with `-` for the criteria that do not apply to them. "
+                  "The method and its run, and the classical controller, are chosen on the validation episodes (a "
+                  "method by the IQM of its runs' validation rates, a run or controller by its validation rate); the "
+                  "held-out episodes only report.")
+    head = ("| tier | chosen method (held-out IQM) | best classical | chosen run: only learned / only classical, p | "
+            + ("significantly more, IQM above | best hybrid (IQM) | at least the hybrid | seed spread |"
+               if standalone else "at least the classical | significantly more | largest seed spread (method) |"))
+    lines += ["", head, "|" + "---|" * head.count(" | ") + "---|"]
     yes = {True: "yes", False: "no"}
     for tier, v in t["tiers"].items():
-        at_least, better = ((yes[v["at_least_lqr"]], yes[v["significantly_better"]]) if v["scored"]
-                            else ("-", "-"))
-        lines.append(f"| {tier} | {method_label(v['method'])} {_pct(v['iqm'])} ({_pct(v['ci95'][0])} - {_pct(v['ci95'][1])}) "
-                     f"| {_pct(v['lqr_rate'])} | `{v['best_run']}`: {v['only_learned']} / {v['only_lqr']}, "
-                     f"p = {v['p_value']:.3g} | {at_least} | {better} "
-                     f"| {100 * v['max_seed_spread']:.1f} points, {method_label(v['widest_spread_method'])} "
-                     f"({yes[v['spread_ok']]}) |")
+        row = (f"| {tier} | {method_label(v['method'])} {_pct(v['iqm'])} ({_pct(v['ci95'][0])} - {_pct(v['ci95'][1])}) "
+               f"| {v['classical']} {_pct(v['classical_rate'])} | `{v['best_run']}`: {v['only_learned']} / "
+               f"{v['only_classical']}, p = {v['p_value']:.3g} ")
+        if standalone:
+            hybrid = "-" if v["hybrid_method"] is None else f"{method_label(v['hybrid_method'])} {_pct(v['hybrid_iqm'])}"
+            more = yes[v["significantly_better"] and v["above_classical"]] if v["scored"] else "-"
+            row += (f"| {more} | {hybrid} | {yes[v['at_least_hybrid']] if v['scored'] else '-'} "
+                    f"| {100 * v['max_seed_spread']:.1f} points ({yes[v['spread_ok']]}) |")
+        else:
+            at_least, better = ((yes[v["at_least_classical"]], yes[v["significantly_better"]]) if v["scored"]
+                                else ("-", "-"))
+            row += (f"| {at_least} | {better} | {100 * v['max_seed_spread']:.1f} points, "
+                    f"{method_label(v['widest_spread_method'])} ({yes[v['spread_ok']]}) |")
+        lines.append(row)
     lines += ["", f"Target {'met' if t['met'] else 'not met'} on these runs" + ("." if t["met"] else ":")]
     if not t["met"]:
         lines += [""] + [f"- {reason}" for reason in _target_misses(t)]
@@ -862,21 +947,113 @@ def _target_markdown(t: Optional[dict[str, Any]]) -> list[str]:
 def _target_misses(t: dict[str, Any]) -> list[str]:
     """The criteria a :func:`target` verdict misses, with the numbers by which it misses them."""
     out = []
+    standalone = t.get("family") == "standalone"
+    limit = t.get("max_spread", TARGET_MAX_SPREAD)
     for tier, v in t["tiers"].items():
-        if v["scored"] and not v["at_least_lqr"]:
+        against = (f"its chosen run {v['only_learned']} / {v['only_classical']} episodes against the "
+                   f"{v['classical']}, p = {v['p_value']:.3g}")
+        if v["scored"] and not standalone and not v["at_least_classical"]:
             out.append(f"{tier}: the chosen method, {method_label(v['method'])}, captures {_pct(v['iqm'])} (IQM, "
-                       f"interval up to {_pct(v['ci95'][1])}) against the LQR's {_pct(v['lqr_rate'])}; its chosen run "
-                       f"{v['only_learned']} / {v['only_lqr']} episodes against the LQR, p = {v['p_value']:.3g}.")
-        if not v["spread_ok"]:
+                       f"interval up to {_pct(v['ci95'][1])}) against the {v['classical']}'s {_pct(v['classical_rate'])}; "
+                       f"{against}.")
+        if v["scored"] and standalone and not (v["significantly_better"] and v["above_classical"]):
+            out.append(f"{tier}: the chosen standalone method, {method_label(v['method'])}, captures {_pct(v['iqm'])} "
+                       f"(IQM, {_pct(v['ci95'][0])} - {_pct(v['ci95'][1])}) against the {v['classical']}'s "
+                       f"{_pct(v['classical_rate'])}; {against}.")
+        if v["scored"] and standalone and not v["at_least_hybrid"]:
+            out.append(f"{tier}: {method_label(v['method'])}'s IQM {_pct(v['iqm'])} is below the best hybrid method, "
+                       f"{method_label(v['hybrid_method'])}, at {_pct(v['hybrid_iqm'])}.")
+        if not v["spread_ok"] and (v["scored"] or not standalone):
             out.append(f"{tier}: {method_label(v['widest_spread_method'])}'s seeds spread by "
-                       f"{100 * v['max_seed_spread']:.1f} points, {100 * (v['max_seed_spread'] - TARGET_MAX_SPREAD):.1f} "
-                       f"more than the {100 * TARGET_MAX_SPREAD:.0f} allowed.")
+                       f"{100 * v['max_seed_spread']:.1f} points, {100 * (v['max_seed_spread'] - limit):.1f} "
+                       f"more than the {100 * limit:.0f} allowed.")
     scored = {tier: v for tier, v in t["tiers"].items() if v["scored"]}
-    if not any(v["significantly_better"] for v in scored.values()):
+    if not standalone and not any(v["significantly_better"] for v in scored.values()):
         best = min(scored.items(), key=lambda kv: kv[1]["p_value"])
-        out.append(f"no tier's chosen run captures significantly more than the LQR (smallest p: {best[0]}, "
-                   f"{best[1]['p_value']:.3g}).")
+        out.append(f"no tier's chosen run captures significantly more than the best classical controller (smallest p: "
+                   f"{best[0]}, {best[1]['p_value']:.3g}).")
     return out
+
+
+def _summary_markdown(doc: dict[str, Any]) -> list[str]:
+    """The report's summary: per tier the best classical controller, the best hybrid and the best
+    standalone learned method (each chosen on the validation episodes) on the held-out episodes,
+    and the standalone method relative to the classical controller."""
+    rows = []
+    for tier, t in doc["tiers"].items():
+        best = t.get("best") or {}
+        cells = []
+        c = best.get("classical")
+        cells.append("-" if c is None else f"{c} {_pct(t['policies'][c]['rate'])} ({_pct(t['policies'][c]['ci95'][0])} - "
+                     f"{_pct(t['policies'][c]['ci95'][1])})")
+        for family in FAMILIES:
+            m = best.get(family)
+            row = None if m is None else t["policies"][m]
+            cells.append("-" if row is None else f"{method_label(m)} {_pct(row['iqm'])} ({_pct(row['ci95'][0])} - "
+                         f"{_pct(row['ci95'][1])})")
+        m = best.get("standalone")
+        rel = None if m is None else t["policies"][m].get("vs_classical")
+        cells.append("-" if rel is None else f"{rel[0]:.3f} ({rel[1]:.3f} - {rel[2]:.3f})")
+        rows.append(f"| {tier} | " + " | ".join(cells) + " |")
+    if not rows:
+        return []
+    return ["", "## Summary", "",
+            "Per tier, on the held-out episodes: the best classical controller, the best hybrid method (a learned "
+            "correction of a classical controller's command) and the best standalone learned method (a network alone "
+            "at run time), each chosen on the validation episodes, with its 95 % interval (learned: IQM of the seeds); "
+            "the standalone method's IQM and interval divided by the classical controller's rate.", "",
+            "| tier | best classical | best hybrid (IQM) | best standalone (IQM) | standalone / classical |",
+            "|---|---|---|---|---|", *rows]
+
+
+#: The README's results table lies between these two lines (``accd-gym benchmark --readme``).
+README_BEGIN = "<!-- begin benchmark table (accd-gym benchmark --readme README.md) -->"
+README_END = "<!-- end benchmark table -->"
+
+
+def readme_table(doc: dict[str, Any]) -> str:
+    """The README's results table from a benchmark report document: per tier every classical
+    controller's rate, the best hybrid and the best standalone method (IQM, chosen on the
+    validation episodes), the trivial references' rates."""
+    first = next(iter(doc["tiers"].values()), {}).get("policies", {})
+    classical = [n for n, r in first.items() if r["kind"] == "classical"]
+    trivial = [n for n, r in first.items() if r["kind"] == "trivial"]
+    learned = {m for t in doc["tiers"].values() for m, r in t["policies"].items() if r["kind"] == "learned"}
+    seeds = {len(r["rates"]) for t in doc["tiers"].values() for r in t["policies"].values() if r["kind"] == "learned"}
+    n_seeds = f"IQM of {seeds.pop()} seeds" if len(seeds) == 1 else "IQM of the seeds"
+    cols = [*classical, *(FAMILIES if learned else ()), *trivial]
+    label = lambda c: (CONTROLLERS[c].summary.split(",")[0] if c in CONTROLLERS else c) + f" (`{c}`)"  # noqa: E731
+    head = ["tier", *(label(c) for c in classical), *((f"best hybrid, {n_seeds}", f"best standalone, {n_seeds}")
+                                                      if learned else ()), *(label(c) for c in trivial)]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for tier, t in doc["tiers"].items():
+        cells = [tier]
+        for c in cols:
+            if c in FAMILIES:
+                m = (t.get("best") or {}).get(c)
+                cells.append("-" if m is None else f"{_pct(t['policies'][m]['iqm'])} ({method_label(m)})")
+            else:
+                row = t["policies"].get(c)
+                cells.append("-" if row is None else _pct(row["rate"]))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def write_readme_table(path: str | Path, doc: Optional[dict[str, Any]]) -> None:
+    """Replaces the table between :data:`README_BEGIN` and :data:`README_END` in ``path`` with
+    :func:`readme_table`; ConfigError naming the file when it cannot be read or has not exactly
+    one such block. ``doc`` None only checks the file."""
+    try:
+        text = Path(path).read_text()
+    except (OSError, UnicodeDecodeError) as e:
+        raise ConfigError(f"invalid config: --readme {path} cannot be read ({e.__class__.__name__})") from None
+    if text.count(README_BEGIN) != 1 or text.count(README_END) != 1 or text.index(README_BEGIN) > text.index(README_END):
+        raise ConfigError(f"invalid config: --readme {path} has no block between {README_BEGIN!r} and {README_END!r}")
+    if doc is None:
+        return
+    head, rest = text.split(README_BEGIN)
+    _, tail = rest.split(README_END)
+    files.write_text(path, head + README_BEGIN + "\n" + readme_table(doc) + "\n" + README_END + tail)
 
 
 def report_markdown(doc: dict[str, Any]) -> str:
@@ -904,6 +1081,7 @@ def report_markdown(doc: dict[str, Any]) -> str:
         "each method's chosen run (the one a shipped policy is), the best learned method, run and classical "
         "baseline that the McNemar tests and the Target section compare. The held-out episodes only report.",
     ]
+    lines += _summary_markdown(doc)
     for tier, t in doc["tiers"].items():
         lines += ["", f"## {tier} (`{TIERS[tier].id}`)", "", TIERS[tier].summary + ".", "",
                   "| policy | capture rate | 95 % interval | per seed | miss median (m) | time to capture median (s) |",
@@ -913,7 +1091,8 @@ def report_markdown(doc: dict[str, Any]) -> str:
             ttc = "-" if row["capture_time_median_s"] is None else f"{row['capture_time_median_s']:.1f}"
             if row["kind"] == "learned":
                 seeds = ", ".join(_pct(r) for r in row["rates"])
-                lines.append(f"| {method_label(name)} (IQM of {len(row['rates'])}) | {_pct(row['iqm'])} | {_pct(lo)} - {_pct(hi)} "
+                lines.append(f"| {method_label(name)} ({row.get('family', 'standalone')}, IQM of {len(row['rates'])}) "
+                             f"| {_pct(row['iqm'])} | {_pct(lo)} - {_pct(hi)} "
                              f"| {seeds} | {row['miss_median_m']:.2f} | {ttc} |")
             else:
                 lines.append(f"| {name} | {_pct(row['rate'])} | {_pct(lo)} - {_pct(hi)} | - | {row['miss_median_m']:.2f} | {ttc} |")
@@ -929,13 +1108,17 @@ def report_markdown(doc: dict[str, Any]) -> str:
                       f"| {', '.join(f'{k} {v}' for k, v in sorted(f['outcomes'].items())) or '-'} "
                       f"| {f2(f['missed_miss_median_m'])} | {f2(f['missed_closest_speed_median_mps'])} "
                       f"| {f2(f['capture_speed_median_mps'])} | {f2(f['capture_time_median_s'])} |" for n, f in fails]
-        rel = [(n, r) for n, r in t["policies"].items() if r.get("vs_lqr")]
+        rel = [(n, r) for n, r in t["policies"].items() if r.get("vs_classical")]
         if rel:
-            lines += ["", "Relative to the LQR (LQR = 1.0; IQM and interval divided by the LQR's rate) and rliable's "
-                      "probability of improvement P(seed's rate > LQR's, ties one half, averaged over the seeds):", "",
-                      "| policy | normalized IQM | 95 % interval | P(improvement over LQR) |", "|---|---|---|---|"]
-            lines += [f"| {method_label(n)} | {r['vs_lqr'][0]:.3f} | {r['vs_lqr'][1]:.3f} - {r['vs_lqr'][2]:.3f} "
-                      f"| {r['p_improvement_over_lqr']:.2f} |" for n, r in rel]
+            ref = t["best"]["classical"]
+            lines += ["", f"Relative to the best classical controller, `{ref}` (chosen on the validation episodes; "
+                      f"`{ref}` = 1.0: IQM and interval divided by its rate) and rliable's probability of improvement "
+                      f"P(seed's rate > `{ref}`'s, ties one half, averaged over the seeds):", "",
+                      f"| policy | family | normalized IQM | 95 % interval | P(improvement over `{ref}`) |",
+                      "|---|---|---|---|---|"]
+            lines += [f"| {method_label(n)} | {r.get('family', 'standalone')} | {r['vs_classical'][0]:.3f} "
+                      f"| {r['vs_classical'][1]:.3f} - {r['vs_classical'][2]:.3f} "
+                      f"| {r['p_improvement_over_classical']:.2f} |" for n, r in rel]
         m = t["mcnemar"]
         if m:
             lines += ["", f"Learned run `{m['learned']}` ({_pct(m['learned_rate'])}) vs classical `{m['classical']}` "
@@ -950,6 +1133,7 @@ def report_markdown(doc: dict[str, Any]) -> str:
                   "| run | status |", "|---|---|"]
         lines += [f"| `{m['name']}` | {m['status']} |" for m in doc["missing"]]
     lines += _target_markdown(doc.get("target"))
+    lines += _target_markdown(doc.get("standalone_target"))
     lines += ["", "## Performance profile", "", "![performance profile](figures/benchmark_profile.png)", "",
               "Fraction of each policy's runs (every tier; learned: every seed) whose capture rate is at least tau."]
     return "\n".join(lines) + "\n"
@@ -957,7 +1141,7 @@ def report_markdown(doc: dict[str, Any]) -> str:
 
 def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] = None, docs: Optional[Path] = None,
         command: str = "accd-gym benchmark", progress: Callable[[str], None] = print,
-        chosen: Optional[Callable[[Job], bool]] = None) -> dict[str, Any]:
+        chosen: Optional[Callable[[Job], bool]] = None, readme: Optional[Path] = None) -> dict[str, Any]:
     """Runs the benchmark of a validated config into ``out``; returns the report document
     (also ``out/benchmark.json``, ``out/benchmark.md``, ``out/performance_profile.png``; with
     ``docs``, docs/benchmark.md and docs/figures/benchmark_profile.png there too).
@@ -974,6 +1158,8 @@ def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] =
     if docs is not None:
         files.writable_folder(docs, "--docs", ("benchmark.md",))
         files.writable_folder(docs / "figures", "--docs", ("benchmark_profile.png",))
+    if readme is not None:  # its table's block is checked before any work
+        write_readme_table(readme, None)
     _claim(out, config)
     t0 = time.perf_counter()
     every = jobs(config)
@@ -1007,6 +1193,13 @@ def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] =
     taus = np.linspace(0.0, 1.0, 101)
     profile = performance_profile(results, baselines, taus)
     summary = summarize(config, results, baselines)
+    # The targets' records: held-out (reported) and validation (choosing) episodes per tier.
+    held_out = {tier: {**{b: rec["captured"] for b, rec in baselines[tier].items() if rec is not None and is_classical(b)},
+                       **{r["name"]: r["episodes"]["captured"] for r in results if r["job"]["tier"] == tier}}
+                for tier in config["tiers"]}
+    valid = {tier: {algo: {r["name"]: r["validation"]["captured"] for r in results
+                           if r["job"]["tier"] == tier and r["job"]["algo"] == algo} for algo in config["learners"]}
+             for tier in config["tiers"]}
     doc = {
         "command": command,
         "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
@@ -1016,13 +1209,8 @@ def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] =
         "jobs_wall_s": jobs_s,  # this invocation's jobs (training and evaluation); a run's own training: its train_wall_s
         "baseline_wall_s": baseline_s,
         "tiers": summary,
-        "target": target(summary, {
-            tier: {"lqr": baselines[tier]["lqr"]["captured"],
-                   **{r["name"]: r["episodes"]["captured"] for r in results if r["job"]["tier"] == tier}}
-            for tier in config["tiers"] if baselines.get(tier, {}).get("lqr") is not None}, {
-            tier: {algo: {r["name"]: r["validation"]["captured"] for r in results
-                          if r["job"]["tier"] == tier and r["job"]["algo"] == algo} for algo in config["learners"]}
-            for tier in config["tiers"]}),
+        "target": target(summary, held_out, valid),
+        "standalone_target": target(summary, held_out, valid, family="standalone"),
         "runs": [{k: v for k, v in r.items() if k != "episodes"} | {"capture_rate": float(np.mean(r["episodes"]["captured"]))}
                  for r in results],
         "profile": {"tau": taus.tolist(), **profile},
@@ -1037,6 +1225,8 @@ def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] =
     if docs is not None:
         files.write_text(docs / "benchmark.md", report_markdown(doc))
         plot_profile(profile, taus, docs / "figures" / "benchmark_profile.png")
+    if readme is not None:
+        write_readme_table(readme, doc)
     return doc
 
 
