@@ -88,7 +88,7 @@ from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, VALIDATION_WAKE_SEEDS
 from accd_gym.envs.config import read_json_object
 from accd_gym.evals.episodes import EVAL_BASE_SEED, VALIDATION_BASE_SEED, run_episodes
 from accd_gym import _core, files
-from accd_gym.learning import training
+from accd_gym.learning import distill, training
 from accd_gym.evals import distributed
 from accd_gym.evals.sweep import iqm as _iqm
 from accd_gym.evals.evaluation import mcnemar_exact, wilson_interval
@@ -433,15 +433,19 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
     raw["seed"] = job.seed
     raw["total_timesteps"] = job.timesteps
     raw["num_threads"] = num_threads
+    distilled = distill.is_recipe(raw)  # a distillation recipe (behaviour cloning, DAgger): its own trainer
     updates = raw.get("update_threads", 0)
     # (A value that is not an integer is left for validate_config to refuse, naming it.)
-    if num_threads > 0 and type(updates) is int and updates > num_threads:
+    if not distilled and num_threads > 0 and type(updates) is int and updates > num_threads:
         # A job with a CPU budget (Ray's cpus_per_job) keeps its gradient updates within it.
         raw["update_threads"] = num_threads
-    cfg = training.validate_config(raw)
+    cfg = distill.validate_recipe(raw) if distilled else training.validate_config(raw)
     trained_now = not _trained(run, cfg)
     if not trained_now:  # its evaluation is missing or stale (other code or episodes): not retrained
         meta = json.loads((run / "run.json").read_text())
+    elif distilled:
+        meta = (distill.resume(run, make_teacher=_teacher) if _continues(run, cfg, distilled=True)
+                else distill.train(cfg, run, make_teacher=_teacher))
     elif _continues(run, cfg):
         meta = training.resume(run, progress=False)
     else:
@@ -475,16 +479,23 @@ def _trained(run: Path, cfg: dict[str, Any]) -> bool:
             and (run / "vecnormalize.pkl").is_file() and _same_recipe(meta.get("config"), cfg))
 
 
-def _continues(run: Path, cfg: dict[str, Any]) -> bool:
+def _continues(run: Path, cfg: dict[str, Any], *, distilled: bool = False) -> bool:
     """``run`` holds an unfinished run of the training config ``cfg`` with a checkpoint, which
     :func:`accd_gym.learning.training.resume` continues (it refuses finished runs and runs without a
-    checkpoint; the config check is the benchmark's: another recipe starts afresh)."""
+    checkpoint; the config check is the benchmark's: another recipe starts afresh). ``distilled``:
+    a distillation run (:func:`accd_gym.learning.distill.resume`; a checkpoint is a complete round)."""
     try:
         meta = json.loads((run / "run.json").read_text())
     except (OSError, ValueError):
         return False
-    return (isinstance(meta, dict) and meta.get("status") != "done" and training.latest_checkpoint(run) is not None
-            and _same_recipe(meta.get("config"), cfg))
+    saved = distill.completed_rounds(run) > 0 if distilled else training.latest_checkpoint(run) is not None
+    return (isinstance(meta, dict) and meta.get("status") != "done" and saved
+            and (not distilled or meta.get("trainer") == "distill") and _same_recipe(meta.get("config"), cfg))
+
+
+def _teacher(spec: str, seed: int, config: dict) -> Any:
+    """A distillation recipe's teacher, resolved as ``accd-gym evaluate --policy`` resolves a policy."""
+    return load_policy(spec, seed, config=config)
 
 
 def _same_recipe(stored: Any, cfg: dict[str, Any]) -> bool:
