@@ -150,6 +150,21 @@ def test_load_policy_runs_a_distilled_lqr_student_on_the_plain_env(tmp_path):
     stats = load_statistics((run / "vecnormalize.pkl").read_bytes(), "vecnormalize.pkl", obs_dim=first.shape[1])
     expected = distill.student_actions(student, stats.normalize_obs(first))
     np.testing.assert_allclose(policy.predict(first[:, :OBS_DIM]), expected, atol=1e-6)
+    # the torch-free export takes the run as any run (scripts/export_networks.py)
+    import sys
+    from pathlib import Path
+
+    from accd_gym.evals.network import NetworkPolicy
+
+    scripts = str(Path(__file__).resolve().parents[1] / "scripts")
+    sys.path.insert(0, scripts)
+    try:
+        from export_networks import export
+    finally:
+        sys.path.remove(scripts)
+    export(run)
+    net = NetworkPolicy(run)
+    np.testing.assert_allclose(net.predict(first[:, :OBS_DIM]), expected, atol=1e-5)
 
 
 def test_fine_tuning_starts_from_the_student(tmp_path):

@@ -513,7 +513,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=_path("--out"), default="runs/sweep", help="output folder (default: runs/sweep)")
     p.add_argument("--quiet", action="store_true", help="less output from Tune")
     p.set_defaults(func=_sweep)
-    p = sub.add_parser("benchmark", help="the benchmark suite: learned policies (PPO on every tier, residual PPO and SAC on the precision and hard tiers) with several seeds, every baseline, one report")
+    p = sub.add_parser("benchmark", help="the benchmark suite: learned policies (PPO on every tier, residual PPO and SAC, behaviour cloning and DAgger on the precision and hard tiers) with several seeds, every baseline, one report")
     p.add_argument("--config", type=_path("--config"), default="training/benchmark.json", help="benchmark config, JSON (default: training/benchmark.json)")
     p.add_argument("--out", type=_path("--out"), default="runs/benchmark", help="output folder (default: runs/benchmark)")
     p.add_argument("--quick", action="store_true", help="the config's quick overrides: a few minutes, for CI")

@@ -16,7 +16,9 @@ trained with several seeds, every baseline, the same held-out episodes, one repo
    and a rerun into the same ``OUT`` reuses it while its key (:func:`job_key`: job, training
    config, tier, build, evaluation) is unchanged; a finished training whose evaluation is stale
    is evaluated again without retraining; an interrupted training continues from its
-   checkpoint (:func:`run_job`). ``--tiers``, ``--algos``, ``--seeds`` (:func:`selection`) run
+   checkpoint (:func:`run_job`). A recipe with ``"trainer": "distill"`` (behaviour cloning,
+   DAgger: :mod:`accd_gym.learning.distill`; its ``timesteps`` are the labelled steps of all its
+   rounds) is trained, resumed and evaluated the same way. ``--tiers``, ``--algos``, ``--seeds`` (:func:`selection`) run
    only some jobs; the report covers every finished job in ``OUT`` and lists the others under
    "Missing / unfinished runs". Ctrl+C: the training under way writes its checkpoint, the report
    is written from what is finished, exit code 130.
