@@ -236,3 +236,19 @@ def test_evaluate_validation_uses_the_validation_episodes(tmp_path):
     doc = json.loads((tmp_path / "e" / "results.json").read_text())
     assert doc["wake_seeds"] == [VALIDATION_WAKE_SEEDS[0], VALIDATION_WAKE_SEEDS[1]]
     assert doc["base_seed"] == VALIDATION_BASE_SEED and not doc["wake_seeds_held_out"]
+
+
+def test_a_teacher_giving_nan_and_a_diverging_student_are_reported(tmp_path):
+    class NanTeacher(LinearTeacher):
+        def predict(self, obs):
+            return np.full((len(obs), 4), np.nan, dtype=np.float32)
+
+    with pytest.raises(distill.StateError, match="non-finite"):
+        distill.train(_recipe(), tmp_path / "nan", make_teacher=lambda *a: NanTeacher())
+
+    class HugeTeacher(LinearTeacher):
+        def predict(self, obs):
+            return np.full((len(obs), 4), 1e30, dtype=np.float32)
+
+    with pytest.raises(distill.ConfigError, match="diverged"):
+        distill.train(_recipe(rounds=0), tmp_path / "huge", make_teacher=lambda *a: HugeTeacher())

@@ -86,7 +86,7 @@ from accd_gym import files
 from accd_gym.control.registry import Policy, make_controller
 from accd_gym.envs.agent_io import physics_config, split_agent_options
 from accd_gym.envs.task import OBS_DIM, SEED_END
-from accd_gym.errors import ConfigError
+from accd_gym.errors import ConfigError, StateError
 from accd_gym.envs.config import read_json_object
 from accd_gym.learning.training import check_training_env, load_statistics
 
@@ -274,11 +274,15 @@ def fit(policy: Any, obs: np.ndarray, labels: np.ndarray, *, updates: int, batch
     for step in range(updates):
         idx = torch.as_tensor(rng.integers(0, len(obs), size=batch_size), device=policy.device)
         loss = torch.mean((_mean_action(policy, x_all[idx]) - y_all[idx]) ** 2)
+        value = float(loss.detach())
+        if not math.isfinite(value):
+            raise ConfigError(f"invalid config: the student's training diverged (loss {value} at Adam step {step}); "
+                              f"`learning_rate` = {learning_rate!r} is outside the range that trains it: lower it")
         opt.zero_grad()
         loss.backward()
         opt.step()
         if step >= updates - tail:
-            losses.append(float(loss.detach()))
+            losses.append(value)
     policy.set_training_mode(False)
     return float(np.mean(losses))
 
@@ -309,6 +313,10 @@ def collect(env: Any, teacher: Policy, steps: int, beta: float, rng: np.random.G
     can_sent = hasattr(teacher, "sent")
     for t in range(vsteps):
         u_teacher = np.asarray(teacher.predict(obs[:, :OBS_DIM]), dtype=np.float32)
+        if u_teacher.shape != (n, 4) or not np.isfinite(u_teacher).all():
+            raise StateError(f"teacher {getattr(teacher, 'name', type(teacher).__name__)!r} gave commands of shape "
+                             f"{u_teacher.shape} with non-finite or missing values; a teacher must label every "
+                             "observation with finite flap commands (N, 4)")
         xs[t * n:(t + 1) * n] = obs
         ys[t * n:(t + 1) * n] = u_teacher
         if beta >= 1.0:
