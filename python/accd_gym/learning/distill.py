@@ -513,7 +513,8 @@ def _run(cfg: dict[str, Any], out: Path, meta: dict[str, Any], start: int, make_
                     report(f"round {k}/{cfg['rounds']} (beta {beta:.3f}): {len(data['obs'])} steps, captured {rate}"
                            f"{agree}; dataset {record['dataset']}, train MSE {loss:.5f}; {record['wall_s']} s")
         except KeyboardInterrupt as e:
-            meta.update(status="interrupted", interrupted_by=str(e) or "SIGINT")
+            meta.update(status="interrupted", interrupted_by=str(e) or "SIGINT",
+                        wall_time_s=round(meta.get("wall_time_s", 0.0) + time.time() - t0, 1))
             _write_meta(out, meta)
             return meta
         _save_model(model, out / "final_model.zip")
