@@ -101,6 +101,39 @@ def _train(args: argparse.Namespace) -> int:
     return 0
 
 
+def _distill(args: argparse.Namespace) -> int:
+    # deferred: start-up time (a command imports only what it runs)
+    from accd_gym.evals.policies import load_policy
+    from accd_gym.learning import distill
+
+    def teacher(spec: str, seed: int, config: dict):
+        return load_policy(spec, seed, config=config)
+
+    def report(line: str) -> None:
+        if not args.quiet:
+            print(f"accd-gym distill: {line}", file=sys.stderr, flush=True)
+
+    if args.resume:
+        if args.config is not None or args.seed is not None:
+            raise _usage("--resume continues a run with its own recipe; drop --config and --seed")
+        out = Path(args.resume)
+        meta = distill.resume(out, make_teacher=teacher, report=report)
+    else:
+        if args.config is None or args.out is None:
+            raise _usage("distill needs --config RECIPE and --out RUN (or --resume RUN)")
+        out = Path(args.out)
+        meta = distill.train(distill.load_recipe(args.config, seed=args.seed), out, make_teacher=teacher, report=report)
+    if meta["status"] == "interrupted":
+        print(f"accd-gym: distillation interrupted after round {len(meta['rounds']) - 1}; continue with: "
+              f"accd-gym distill --resume {out}", file=sys.stderr)
+        return 130
+    last = meta["rounds"][-1]
+    print(f"distilled {meta['config']['teacher']} into a {meta['method'].upper()} student: {len(meta['rounds'])} rounds, "
+          f"{meta['timesteps']} labelled steps, final train MSE {last['train_mse']:.5f}, in {meta['wall_time_s']} s; "
+          f"wrote {out / 'final_model.zip'}, {out / 'vecnormalize.pkl'}")
+    return 0
+
+
 def _is_rllib_config(path: Optional[str]) -> bool:
     """Whether the training config file at ``path`` asks for the RLlib trainer (a file that cannot
     be read is left to the loader's error)."""
@@ -305,7 +338,18 @@ def _evaluate(args: argparse.Namespace) -> int:
     if args.ray_chunk is not None and args.ray is None:
         raise _usage("--ray-chunk sets the episodes per Ray task; it needs --ray")
 
-    results = evaluation.evaluate(args.policy, args.episodes, args.out, num_envs=args.num_envs, num_threads=args.num_threads,
+    if args.validation:
+        # deferred: start-up time (a command imports only what it runs)
+        from accd_gym.envs.task import VALIDATION_WAKE_SEEDS
+        from accd_gym.evals.episodes import VALIDATION_BASE_SEED
+
+        if args.episodes > len(VALIDATION_WAKE_SEEDS):
+            raise _usage(f"--episodes {args.episodes} is outside the allowed range 1..{len(VALIDATION_WAKE_SEEDS)} "
+                         "with --validation (the validation wake seeds)")
+        where = {"wake_seeds": list(VALIDATION_WAKE_SEEDS[:args.episodes]), "seed": VALIDATION_BASE_SEED}
+    else:
+        where = {}
+    results = evaluation.evaluate(args.policy, args.episodes, args.out, **where, num_envs=args.num_envs, num_threads=args.num_threads,
                                   config=_env_of(args), progress=not args.quiet,
                                   allow_unnormalized=args.allow_unnormalized,
                                   replay_writer=replay.evaluation_replays(args.replay) if args.replay else None,
@@ -428,8 +472,21 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run the episodes as Ray tasks: 'local' (default), 'auto' or HOST:PORT of a cluster "
                         "(needs the ray extra; results identical to a local run)")
     p.add_argument("--ray-chunk", type=_positive("--ray-chunk"), help="episodes per Ray task (default: about 4 tasks per CPU)")
+    p.add_argument("--validation", action="store_true",
+                   help="the validation episodes (validation wake seeds, the benchmark's validation base seed) instead "
+                        "of the held-out ones: for choices (a run, a hyperparameter)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_evaluate)
+
+    p = sub.add_parser("distill", help="distil a controller into a standalone network: behaviour cloning and DAgger")
+    p.add_argument("--config", type=_path("--config"), help="distillation recipe, JSON (training/distill_*.json)")
+    p.add_argument("--out", type=_path("--out"), help="run folder: the student (final_model.zip, vecnormalize.pkl), "
+                   "run.json, checkpoints/")
+    p.add_argument("--resume", type=_path("--resume"), metavar="RUN",
+                   help="continue an interrupted distillation run after its last complete round")
+    p.add_argument("--seed", type=_seed, help="override the recipe's seed")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.set_defaults(func=_distill)
     p = sub.add_parser("replay", help="record episodes of a policy: .npz, a self-contained 3D replay page each, MP4")
     p.add_argument("--policy", required=True, help="a baseline (zero, random, guidance, lqr, mpc), a shipped trained policy (accd_gym.trained) or a trained model")
     p.add_argument("--episodes", type=_positive("--episodes"), default=1, help="episodes (default 1)")
@@ -458,7 +515,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=_path("--out"), default="runs/sweep", help="output folder (default: runs/sweep)")
     p.add_argument("--quiet", action="store_true", help="less output from Tune")
     p.set_defaults(func=_sweep)
-    p = sub.add_parser("benchmark", help="the benchmark suite: learned policies (PPO on every tier, residual PPO and SAC on the precision and hard tiers) with several seeds, every baseline, one report")
+    p = sub.add_parser("benchmark", help="the benchmark suite: learned policies (PPO on every tier, residual PPO and SAC, behaviour cloning and DAgger on the precision and hard tiers) with several seeds, every baseline, one report")
     p.add_argument("--config", type=_path("--config"), default="training/benchmark.json", help="benchmark config, JSON (default: training/benchmark.json)")
     p.add_argument("--out", type=_path("--out"), default="runs/benchmark", help="output folder (default: runs/benchmark)")
     p.add_argument("--quick", action="store_true", help="the config's quick overrides: a few minutes, for CI")

@@ -16,7 +16,9 @@ trained with several seeds, every baseline, the same held-out episodes, one repo
    and a rerun into the same ``OUT`` reuses it while its key (:func:`job_key`: job, training
    config, tier, build, evaluation) is unchanged; a finished training whose evaluation is stale
    is evaluated again without retraining; an interrupted training continues from its
-   checkpoint (:func:`run_job`). ``--tiers``, ``--algos``, ``--seeds`` (:func:`selection`) run
+   checkpoint (:func:`run_job`). A recipe with ``"trainer": "distill"`` (behaviour cloning,
+   DAgger: :mod:`accd_gym.learning.distill`; its ``timesteps`` are the labelled steps of all its
+   rounds) is trained, resumed and evaluated the same way. ``--tiers``, ``--algos``, ``--seeds`` (:func:`selection`) run
    only some jobs; the report covers every finished job in ``OUT`` and lists the others under
    "Missing / unfinished runs". Ctrl+C: the training under way writes its checkpoint, the report
    is written from what is finished, exit code 130.
@@ -93,7 +95,7 @@ from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, VALIDATION_WAKE_SEEDS
 from accd_gym.envs.config import read_json_object
 from accd_gym.evals.episodes import EVAL_BASE_SEED, VALIDATION_BASE_SEED, run_episodes
 from accd_gym import _core, files
-from accd_gym.learning import training
+from accd_gym.learning import distill, training
 from accd_gym.evals import distributed
 from accd_gym.evals.sweep import iqm as _iqm
 from accd_gym.evals.evaluation import mcnemar_exact, wilson_interval
@@ -438,15 +440,19 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
     raw["seed"] = job.seed
     raw["total_timesteps"] = job.timesteps
     raw["num_threads"] = num_threads
+    distilled = distill.is_recipe(raw)  # a distillation recipe (behaviour cloning, DAgger): its own trainer
     updates = raw.get("update_threads", 0)
     # (A value that is not an integer is left for validate_config to refuse, naming it.)
-    if num_threads > 0 and type(updates) is int and updates > num_threads:
+    if not distilled and num_threads > 0 and type(updates) is int and updates > num_threads:
         # A job with a CPU budget (Ray's cpus_per_job) keeps its gradient updates within it.
         raw["update_threads"] = num_threads
-    cfg = training.validate_config(raw)
+    cfg = distill.validate_recipe(raw) if distilled else training.validate_config(raw)
     trained_now = not _trained(run, cfg)
     if not trained_now:  # its evaluation is missing or stale (other code or episodes): not retrained
         meta = json.loads((run / "run.json").read_text())
+    elif distilled:
+        meta = (distill.resume(run, make_teacher=_teacher) if _continues(run, cfg, distilled=True)
+                else distill.train(cfg, run, make_teacher=_teacher))
     elif _continues(run, cfg):
         meta = training.resume(run, progress=False)
     else:
@@ -480,16 +486,23 @@ def _trained(run: Path, cfg: dict[str, Any]) -> bool:
             and (run / "vecnormalize.pkl").is_file() and _same_recipe(meta.get("config"), cfg))
 
 
-def _continues(run: Path, cfg: dict[str, Any]) -> bool:
+def _continues(run: Path, cfg: dict[str, Any], *, distilled: bool = False) -> bool:
     """``run`` holds an unfinished run of the training config ``cfg`` with a checkpoint, which
     :func:`accd_gym.learning.training.resume` continues (it refuses finished runs and runs without a
-    checkpoint; the config check is the benchmark's: another recipe starts afresh)."""
+    checkpoint; the config check is the benchmark's: another recipe starts afresh). ``distilled``:
+    a distillation run (:func:`accd_gym.learning.distill.resume`; a checkpoint is a complete round)."""
     try:
         meta = json.loads((run / "run.json").read_text())
     except (OSError, ValueError):
         return False
-    return (isinstance(meta, dict) and meta.get("status") != "done" and training.latest_checkpoint(run) is not None
-            and _same_recipe(meta.get("config"), cfg))
+    saved = distill.completed_rounds(run) > 0 if distilled else training.latest_checkpoint(run) is not None
+    return (isinstance(meta, dict) and meta.get("status") != "done" and saved
+            and (not distilled or meta.get("trainer") == "distill") and _same_recipe(meta.get("config"), cfg))
+
+
+def _teacher(spec: str, seed: int, config: dict) -> Any:
+    """A distillation recipe's teacher, resolved as ``accd-gym evaluate --policy`` resolves a policy."""
+    return load_policy(spec, seed, config=config)
 
 
 def _same_recipe(stored: Any, cfg: dict[str, Any]) -> bool:

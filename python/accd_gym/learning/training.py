@@ -30,6 +30,11 @@ zero_action_init   true: the policy's last action layer starts at zero
                    when given), so that the deterministic policy starts with zero actions: with
                    ``env.residual`` it starts as the base controller, bit for bit (default false)
 checkpoint_every   environment steps between checkpoints (model + VecNormalize statistics)
+init_from          a run folder (``final_model.zip`` and ``vecnormalize.pkl``) of a PPO policy with
+                   the same observation, e.g. a distilled student (:mod:`accd_gym.learning.distill`):
+                   PPO starts from its policy's weights (but ``log_std``, which
+                   ``policy_kwargs.log_std_init`` sets) and its observation statistics: RL
+                   fine-tuning (default null: a fresh policy)
 device             PyTorch device (default ``"cpu"``: the networks are small)
 ================== ================================================================================
 
@@ -98,6 +103,9 @@ DEFAULTS: dict[str, Any] = {
     "device": "cpu",
     "zero_action_init": False,
 }
+#: Optional keys of a training config that have no default value (absent: off), so that the
+#: configs of runs made before them validate to the same dict.
+OPTIONAL_KEYS = ("init_from",)
 _ALGOS = ("ppo", "sac")
 _ACTIVATIONS = ("tanh", "relu", "elu")
 
@@ -113,9 +121,10 @@ def validate_config(raw: dict[str, Any]) -> dict[str, Any]:
     """Fills in defaults and checks every field; ConfigError names the field, value and allowed range."""
     if not isinstance(raw, dict):
         raise ConfigError(f"invalid config: a training config must be a JSON object, got {type(raw).__name__}")
-    unknown = set(raw) - set(DEFAULTS) - {"description"}
+    unknown = set(raw) - set(DEFAULTS) - set(OPTIONAL_KEYS) - {"description"}
     if unknown:
-        raise ConfigError(f"invalid config: training config key(s) {sorted(unknown)} outside the allowed set {sorted(DEFAULTS)}")
+        raise ConfigError(f"invalid config: training config key(s) {sorted(unknown)} outside the allowed set "
+                          f"{sorted([*DEFAULTS, *OPTIONAL_KEYS])}")
     cfg = json.loads(json.dumps(DEFAULTS))
     cfg.update(raw)
     if cfg["algo"] not in _ALGOS:
@@ -137,6 +146,7 @@ def validate_config(raw: dict[str, Any]) -> dict[str, Any]:
     if not isinstance(cfg["device"], str):
         raise ConfigError(f"invalid config: `device` = {cfg['device']!r} is outside the allowed range: a device name such as 'cpu'")
     _check_algo_kwargs(cfg["algo"], cfg["algo_kwargs"])
+    _check_init_from(cfg)
     bad_policy = set(cfg["policy_kwargs"]) - {"net_arch", "activation_fn", "log_std_init"}
     if bad_policy:
         raise ConfigError(f"invalid config: policy_kwargs key(s) {sorted(bad_policy)} outside the allowed set "
@@ -172,6 +182,45 @@ def _check_net_arch(policy_kwargs: dict[str, Any]) -> None:
     std = policy_kwargs.get("log_std_init")
     if std is not None and (not isinstance(std, (int, float)) or isinstance(std, bool) or not math.isfinite(std)):
         raise ConfigError(f"invalid config: `policy_kwargs.log_std_init` = {std!r} is outside the allowed range: a finite number")
+
+
+def _check_init_from(cfg: dict[str, Any]) -> None:
+    """ConfigError for an ``init_from`` that is not a PPO run folder with its final model and
+    statistics, or that is combined with SAC or ``zero_action_init``."""
+    src = cfg.get("init_from")
+    if src is None:
+        cfg.pop("init_from", None)
+        return
+    if not isinstance(src, str) or not src:
+        raise ConfigError(f"invalid config: `init_from` = {src!r} is outside the allowed range: null or a run folder")
+    if cfg["algo"] != "ppo" or cfg["zero_action_init"]:
+        raise ConfigError(f"invalid config: `init_from` = {src!r} is outside the allowed range for algo {cfg['algo']!r} "
+                          f"with zero_action_init {cfg['zero_action_init']}: it starts PPO (without zero_action_init) "
+                          "from a PPO policy")
+    folder = Path(src)
+    for name in ("final_model.zip", "vecnormalize.pkl"):
+        if not (folder / name).is_file():
+            raise ConfigError(f"invalid config: `init_from` = {src!r} is not a finished run folder: no {name} in it")
+
+
+def _init_from(model: Any, env: Any, cfg: dict[str, Any]) -> None:
+    """Starts ``model`` (PPO) from the policy and the observation statistics of the run folder
+    ``init_from``; its ``log_std`` stays the config's. ConfigError when the shapes differ (a
+    policy of another observation or network)."""
+    src = Path(cfg["init_from"])
+    obs_dim = env.observation_space.shape[0]
+    stats = load_statistics((src / "vecnormalize.pkl").read_bytes(), str(src / "vecnormalize.pkl"), obs_dim=obs_dim)
+    saved = load_model((src / "final_model.zip").read_bytes(), str(src / "final_model.zip"), "ppo", obs_dim,
+                       device=cfg["device"])
+    own = model.policy.state_dict()
+    theirs = {k: v for k, v in saved.policy.state_dict().items() if k != "log_std"}
+    bad = sorted(k for k, v in theirs.items() if k not in own or own[k].shape != v.shape)
+    if bad:
+        raise ConfigError(f"invalid config: `init_from` = {str(src)!r} holds a policy of another network: its "
+                          f"parameters {bad[:4]} do not fit the config's policy_kwargs {cfg['policy_kwargs']!r}")
+    own.update(theirs)
+    model.policy.load_state_dict(own)
+    env.obs_rms = stats.obs_rms
 
 
 def check_training_env(env: dict[str, Any]) -> None:
@@ -658,6 +707,12 @@ def _new_model(cfg: dict[str, Any], out: Path) -> tuple[Any, Any]:
         raise ConfigError(f"invalid config: {cfg['algo'].upper()} refused the config's algo_kwargs "
                           f"{cfg['algo_kwargs']!r} / policy_kwargs {cfg['policy_kwargs']!r} / device "
                           f"{cfg['device']!r}: {type(e).__name__}: {e}") from e
+    if cfg.get("init_from") is not None:
+        try:
+            _init_from(model, env, cfg)
+        except BaseException:
+            env.close()
+            raise
     return env, model
 
 

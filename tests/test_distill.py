@@ -1,0 +1,254 @@
+"""Behaviour cloning and DAgger (accd_gym.learning.distill): the student fits a known teacher, the
+teacher labels the states the student visits, runs are deterministic and resume to the same
+weights, the run folder is a policy for load_policy, the benchmark and RL fine-tuning, and the CLI
+reports bad input on one line."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from accd_gym.cli import main
+from accd_gym.envs.task import OBS_DIM, VALIDATION_WAKE_SEEDS
+from accd_gym.evals.episodes import VALIDATION_BASE_SEED
+from accd_gym.evals.policies import SB3Policy, load_policy
+from accd_gym.learning import distill, training
+
+SHORT = {"capture_window": 5.0}
+W = np.random.default_rng(3).normal(0.0, 0.4, size=(OBS_DIM, 4)).astype(np.float32)
+
+
+class LinearTeacher:
+    """A known teacher: flaps = clip(obs W, -1, 1); records every observation it labels and every
+    offset it is told (the commands sent minus its own)."""
+
+    name = "linear"
+
+    def __init__(self) -> None:
+        self.seen: list[np.ndarray] = []
+        self.offsets: list[np.ndarray] = []
+
+    def predict(self, obs):
+        o = np.asarray(obs, dtype=np.float32)
+        self.seen.append(o.copy())
+        return np.clip(o @ W, -1.0, 1.0).astype(np.float32)
+
+    def reset(self, mask=None):
+        pass
+
+    def sent(self, offset):
+        self.offsets.append(np.array(offset))
+
+    def get_state(self):
+        return {}
+
+    def set_state(self, state):
+        pass
+
+
+def _recipe(**kw):
+    cfg = {"trainer": "distill", "teacher": "linear", "env": {**SHORT, "history": 1}, "seed": 5, "num_envs": 4,
+           "num_threads": 1, "teacher_steps": 256, "rounds": 2, "round_steps": 256, "beta": {"start": 0.0},
+           "updates": 40, "batch_size": 64, "learning_rate": 3e-3, "net_arch": [32, 32]}
+    cfg.update(kw)
+    return cfg
+
+
+def _weights(run):
+    from stable_baselines3 import PPO
+
+    return PPO.load(str(run / "final_model.zip"), device="cpu").policy.state_dict()
+
+
+def test_bc_fits_a_known_linear_teacher(tmp_path):
+    teacher = LinearTeacher()
+    meta = distill.train(_recipe(rounds=0, teacher_steps=2048, updates=600, batch_size=128, env=SHORT), tmp_path / "bc",
+                         make_teacher=lambda *a: teacher)
+    assert meta["status"] == "done" and meta["method"] == "bc"
+    policy = load_policy(str(tmp_path / "bc"))
+    assert isinstance(policy, SB3Policy)
+    with np.load(tmp_path / "bc" / "checkpoints" / "data_00.npz") as z:
+        obs, labels = z["obs"], z["labels"]
+    # the labels are the teacher's commands for the stored observations
+    np.testing.assert_array_equal(labels, np.clip(obs[:, :OBS_DIM] @ W, -1, 1))
+    err = float(np.mean((policy.predict(obs) - labels) ** 2))
+    assert err < 0.05 * float(np.var(labels)), (err, float(np.var(labels)))
+
+
+def test_dagger_relabels_the_students_visited_states(tmp_path):
+    teacher = LinearTeacher()
+    run = tmp_path / "dagger"
+    distill.train(_recipe(), run, make_teacher=lambda *a: teacher)
+    with np.load(run / "checkpoints" / "data_01.npz") as z:
+        obs, labels = z["obs"], z["labels"]
+    n = 4
+    calls = np.concatenate(teacher.seen)
+    round1 = calls[256:512]  # round 0: 64 vector steps of 4 envs, then round 1
+    # the teacher was asked about exactly the observations round 1 visited, and labelled them
+    np.testing.assert_array_equal(round1, obs[:, :OBS_DIM])
+    np.testing.assert_array_equal(labels, np.clip(obs[:, :OBS_DIM] @ W, -1, 1))
+    # beta 0: the student flew round 1 (the command of step t is in step t+1's history) ...
+    from stable_baselines3 import PPO
+    from accd_gym.learning.training import load_statistics
+
+    student = PPO.load(str(run / "checkpoints" / "student_00.zip"), device="cpu").policy
+    stats = load_statistics((run / "vecnormalize.pkl").read_bytes(), "vecnormalize.pkl", obs_dim=obs.shape[1])
+    u_student = distill.student_actions(student, stats.normalize_obs(obs))
+    nxt_cmd = obs[n:, -4:]
+    same_episode = np.any(nxt_cmd != 0, axis=1)  # a new episode's history holds zero commands
+    assert same_episode.sum() > 100
+    np.testing.assert_array_equal(nxt_cmd[same_episode], u_student[:-n][same_episode])
+    # ... its commands differ from the teacher's, and the teacher was told the difference
+    assert np.abs(u_student - labels).max() > 1e-3
+    assert teacher.offsets and np.abs(np.concatenate(teacher.offsets)).max() > 1e-3
+
+
+def test_same_seed_same_weights_and_resume_gives_the_same_result(tmp_path):
+    make = lambda *a: LinearTeacher()  # noqa: E731
+    distill.train(_recipe(), tmp_path / "a", make_teacher=make)
+    distill.train(_recipe(), tmp_path / "b", make_teacher=make)
+    a, b = _weights(tmp_path / "a"), _weights(tmp_path / "b")
+    assert all(torch.equal(a[k], b[k]) for k in a)
+
+    def stop_after_round_0(line):
+        if line.startswith("round 0/"):
+            raise KeyboardInterrupt("test")
+
+    meta = distill.train(_recipe(), tmp_path / "c", make_teacher=make, report=stop_after_round_0)
+    assert meta["status"] == "interrupted" and len(meta["rounds"]) == 1
+    assert distill.completed_rounds(tmp_path / "c") == 1
+    lines = []
+    meta = distill.resume(tmp_path / "c", make_teacher=make, report=lines.append)
+    assert meta["status"] == "done" and [r["round"] for r in meta["rounds"]] == [0, 1, 2]
+    assert lines[0].startswith("round 1/2")
+    c = _weights(tmp_path / "c")
+    assert all(torch.equal(a[k], c[k]) for k in a)
+    with pytest.raises(distill.ConfigError, match="complete"):
+        distill.resume(tmp_path / "c", make_teacher=make)
+    other = distill.train(_recipe(seed=6), tmp_path / "d", make_teacher=make)
+    assert other["status"] == "done"
+    d = _weights(tmp_path / "d")
+    assert not all(torch.equal(a[k], d[k]) for k in a)
+
+
+def test_load_policy_runs_a_distilled_lqr_student_on_the_plain_env(tmp_path):
+    """The LQR as teacher (stateful: its filter follows the student's trajectory); the run folder
+    is a policy with the history option, acting on plain observations."""
+    run = tmp_path / "lqr"
+    meta = distill.train(_recipe(teacher="lqr", rounds=1, beta={"start": 0.5}), run)
+    assert meta["status"] == "done" and meta["rounds"][1]["student_mse"] is not None
+    policy = load_policy(str(run))
+    assert policy.agent_options.history == 1
+    with np.load(run / "checkpoints" / "data_00.npz") as z:
+        first = z["obs"][:4]  # the envs' first observations: history = the observation, zero commands
+    np.testing.assert_array_equal(first[:, OBS_DIM:2 * OBS_DIM], first[:, :OBS_DIM])
+    from stable_baselines3 import PPO
+    from accd_gym.learning.training import load_statistics
+
+    student = PPO.load(str(run / "final_model.zip"), device="cpu").policy
+    stats = load_statistics((run / "vecnormalize.pkl").read_bytes(), "vecnormalize.pkl", obs_dim=first.shape[1])
+    expected = distill.student_actions(student, stats.normalize_obs(first))
+    np.testing.assert_allclose(policy.predict(first[:, :OBS_DIM]), expected, atol=1e-6)
+    # the torch-free export takes the run as any run (scripts/export_networks.py)
+    import sys
+    from pathlib import Path
+
+    from accd_gym.evals.network import NetworkPolicy
+
+    scripts = str(Path(__file__).resolve().parents[1] / "scripts")
+    sys.path.insert(0, scripts)
+    try:
+        from export_networks import export
+    finally:
+        sys.path.remove(scripts)
+    export(run)
+    net = NetworkPolicy(run)
+    np.testing.assert_allclose(net.predict(first[:, :OBS_DIM]), expected, atol=1e-5)
+
+
+def test_fine_tuning_starts_from_the_student(tmp_path):
+    run = tmp_path / "s"
+    distill.train(_recipe(rounds=0), run, make_teacher=lambda *a: LinearTeacher())
+    cfg = training.validate_config({"algo": "ppo", "num_envs": 4, "num_threads": 1, "seed": 1,
+                                    "env": {**SHORT, "history": 1}, "init_from": str(run),
+                                    "algo_kwargs": {"n_steps": 16, "batch_size": 64},
+                                    "policy_kwargs": {"net_arch": {"pi": [32, 32], "vf": [32, 32]}, "activation_fn": "tanh",
+                                                      "log_std_init": -3.0}})
+    env, model = training._new_model(cfg, tmp_path / "ft")
+    try:
+        student = _weights(run)
+        own = model.policy.state_dict()
+        assert all(torch.equal(own[k], v) for k, v in student.items() if k != "log_std")
+        assert torch.all(own["log_std"] == -3.0)
+        stats = load_policy(str(run)).normalizer
+        np.testing.assert_array_equal(env.obs_rms.mean, stats.obs_rms.mean)
+    finally:
+        env.close()
+    with pytest.raises(training.ConfigError, match="init_from"):
+        training.validate_config({"algo": "sac", "init_from": str(run)})
+    with pytest.raises(training.ConfigError, match="init_from"):
+        training.validate_config({"init_from": str(tmp_path / "missing")})
+    with pytest.raises(training.ConfigError, match="another network"):
+        training._new_model(training.validate_config({**cfg, "policy_kwargs": {"net_arch": [8]}}), tmp_path / "ft2")
+    # a config without init_from validates to the same dict as before the key existed
+    assert "init_from" not in training.validate_config({})
+
+
+def test_benchmark_job_trains_and_evaluates_a_distillation_recipe(tmp_path):
+    from accd_gym.evals import benchmark
+
+    recipe = tmp_path / "bc.json"
+    recipe.write_text(json.dumps(_recipe(teacher="lqr", rounds=0, env={"history": 1}, updates=20)))
+    job = benchmark.Job("nominal", "bc", 0, str(recipe), 256)
+    result = benchmark.run_job(job, str(tmp_path / "bench"), 2, 2, 1, validation_episodes=2)
+    assert result["status"] == "done" and len(result["validation"]["captured"]) == 2
+    assert benchmark.run_job(job, str(tmp_path / "bench"), 2, 2, 1, validation_episodes=2)["reused"]
+    with pytest.raises(benchmark.ConfigError, match="total_timesteps"):
+        benchmark.run_job(benchmark.Job("nominal", "bc", 1, str(recipe), 999), str(tmp_path / "bench"), 2, 2, 1)
+    cfg = benchmark.load_config("training/benchmark.json")
+    assert {"bc", "dagger"} <= set(cfg["learners"])
+    for algo in ("bc", "dagger"):
+        for tier, path in cfg["learners"][algo]["train_config"].items():
+            recipe = distill.load_recipe(path, total_timesteps=cfg["learners"][algo]["timesteps"])
+            assert recipe["env"]["tier"] == tier
+
+
+@pytest.mark.parametrize("recipe, args, needle", [
+    ({"rounds": -1}, [], "`rounds` = -1"),
+    ({"beta": {"start": 2}}, [], "`beta.start` = 2"),
+    ({"env": {"residual": "lqr"}}, [], "history"),
+    ({"total_timesteps": 5}, [], "`total_timesteps` = 5"),
+    ({}, ["--resume", "nowhere"], "--resume"),
+])
+def test_cli_errors_are_one_line(tmp_path, capsys, recipe, args, needle):
+    path = tmp_path / "r.json"
+    path.write_text(json.dumps({**_recipe(teacher="lqr"), **recipe}))
+    argv = ["distill", *args] if args else ["distill", "--config", str(path), "--out", str(tmp_path / "o")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and err.startswith("accd-gym: error:") and needle in err, err
+
+
+def test_evaluate_validation_uses_the_validation_episodes(tmp_path):
+    assert main(["evaluate", "--policy", "zero", "--episodes", "2", "--num-envs", "2", "--validation",
+                 "--env", json.dumps(SHORT), "--out", str(tmp_path / "e"), "--quiet"]) == 0
+    doc = json.loads((tmp_path / "e" / "results.json").read_text())
+    assert doc["wake_seeds"] == [VALIDATION_WAKE_SEEDS[0], VALIDATION_WAKE_SEEDS[1]]
+    assert doc["base_seed"] == VALIDATION_BASE_SEED and not doc["wake_seeds_held_out"]
+
+
+def test_a_teacher_giving_nan_and_a_diverging_student_are_reported(tmp_path):
+    class NanTeacher(LinearTeacher):
+        def predict(self, obs):
+            return np.full((len(obs), 4), np.nan, dtype=np.float32)
+
+    with pytest.raises(distill.StateError, match="non-finite"):
+        distill.train(_recipe(), tmp_path / "nan", make_teacher=lambda *a: NanTeacher())
+
+    class HugeTeacher(LinearTeacher):
+        def predict(self, obs):
+            return np.full((len(obs), 4), 1e30, dtype=np.float32)
+
+    with pytest.raises(distill.ConfigError, match="diverged"):
+        distill.train(_recipe(rounds=0), tmp_path / "huge", make_teacher=lambda *a: HugeTeacher())
