@@ -10,6 +10,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use accd_sim::control::controller::{Controller, ControllerState};
+use accd_sim::control::mpc::MpcStats;
 use accd_sim::state_format::{self, Expected, StateError, StateKind};
 use accd_sim::task::episode::EpisodeState;
 use accd_sim::{EnvConfig, Episode, Equilibrium, Outcome, SimError, Valid, ACT_DIM, OBS_DIM};
@@ -191,6 +193,41 @@ struct Slot {
     /// A step of the batch was interrupted while this env's episode may have been part-way
     /// through it: the env refuses steps and saves until it is reset or restored.
     interrupted: bool,
+    /// The env's controller, where the batch has one ([`BatchEnv::set_controllers`]).
+    control: Option<Control>,
+}
+
+/// One env's controller and what it returned beyond its command.
+#[derive(Clone, Debug)]
+struct Control {
+    controller: Box<dyn Controller>,
+    /// The command for the last observation of the episode that ended in the last step
+    /// (same-step autoreset; [`Controller::peek`]).
+    final_command: [f32; ACT_DIM],
+    /// Why the controller failed in the last step or reset (its command was not finite).
+    error: Option<SimError>,
+}
+
+impl Control {
+    /// The controller's command for `obs` (an episode's first observation where `start`).
+    fn act(&mut self, obs: &[f32], start: bool) {
+        let obs: &[f32; OBS_DIM] = obs.try_into().expect("an observation row");
+        if start {
+            self.controller.reset();
+        }
+        let mut command = [0.0; ACT_DIM];
+        if let Err(e) = self.controller.act(obs, &mut command) {
+            self.error = Some(e);
+        }
+    }
+
+    /// The command for an ended episode's last observation `obs`, advancing nothing.
+    fn peek(&mut self, obs: &[f32]) {
+        let obs: &[f32; OBS_DIM] = obs.try_into().expect("an observation row");
+        if let Err(e) = self.controller.peek(obs, &mut self.final_command) {
+            self.error = Some(e);
+        }
+    }
 }
 
 /// Checks that base seed `seed` gives each of `num_envs` envs a seed `seed + i` inside the one
@@ -313,6 +350,7 @@ impl BatchEnv {
                 final_divergence: None,
                 final_true_obs: [0.0; OBS_DIM],
                 interrupted: false,
+                control: None,
             });
         }
         let pool = rayon::ThreadPoolBuilder::new()
@@ -433,6 +471,92 @@ impl BatchEnv {
         Ok(())
     }
 
+    /// Gives every env a controller made by `make` (or none, for `None`), stepped from now on in
+    /// the thread that steps its env ([`accd_sim::control::controller`]): after each env's step
+    /// and reset it computes its command for the new observation (restarted with each new
+    /// episode, automatic resets included), and before each step it is told the action sent.
+    /// The controllers start afresh (command zero until the env's next reset or step).
+    pub fn set_controllers(&mut self, make: Option<&dyn Fn() -> Box<dyn Controller>>) {
+        for slot in &mut self.slots {
+            slot.control = make.map(|m| Control {
+                controller: m(),
+                final_command: [0.0; ACT_DIM],
+                error: None,
+            });
+        }
+    }
+
+    /// Whether the envs have controllers ([`BatchEnv::set_controllers`]).
+    pub fn has_controllers(&self) -> bool {
+        self.slots.iter().all(|s| s.control.is_some()) && !self.slots.is_empty()
+    }
+
+    fn controls(&self) -> Result<impl Iterator<Item = &Control>> {
+        if !self.has_controllers() {
+            return Err(BatchError::NoController);
+        }
+        Ok(self.slots.iter().filter_map(|s| s.control.as_ref()))
+    }
+
+    /// Writes every env's controller command for its latest observation into `out`
+    /// (`N * ACT_DIM`).
+    pub fn controller_commands(&self, out: &mut [f32]) -> Result<()> {
+        check_len("commands", out.len(), self.slots.len() * ACT_DIM)?;
+        for (c, chunk) in self.controls()?.zip(out.chunks_exact_mut(ACT_DIM)) {
+            chunk.copy_from_slice(&c.controller.command());
+        }
+        Ok(())
+    }
+
+    /// Writes every env's controller command for the last observation of the episode that
+    /// ended in the last step into `out` (`N * ACT_DIM`; same-step autoreset, rows of envs
+    /// whose episode ended in the last step, the others' rows hold stale values).
+    pub fn final_controller_commands(&self, out: &mut [f32]) -> Result<()> {
+        check_len("commands", out.len(), self.slots.len() * ACT_DIM)?;
+        for (c, chunk) in self.controls()?.zip(out.chunks_exact_mut(ACT_DIM)) {
+            chunk.copy_from_slice(&c.final_command);
+        }
+        Ok(())
+    }
+
+    /// Every env's controller state.
+    pub fn controller_states(&self) -> Result<Vec<ControllerState>> {
+        Ok(self.controls()?.map(|c| c.controller.state()).collect())
+    }
+
+    /// Restores every env's controller state (one per env); on an error (a state that does
+    /// not fit, named by its env) nothing changes.
+    pub fn set_controller_states(&mut self, states: &[ControllerState]) -> Result<()> {
+        check_len("controller states", states.len(), self.slots.len())?;
+        let mut controllers: Vec<Box<dyn Controller>> =
+            self.controls()?.map(|c| c.controller.clone()).collect();
+        for (env, (c, s)) in controllers.iter_mut().zip(states).enumerate() {
+            c.set_state(s).map_err(|e| BatchError::Env {
+                env,
+                source: Box::new(e.into()),
+            })?;
+        }
+        for (slot, c) in self.slots.iter_mut().zip(controllers) {
+            let control = slot.control.as_mut().expect("checked by controls()");
+            control.controller = c;
+            control.error = None;
+        }
+        Ok(())
+    }
+
+    /// The MPC solve counts of every env's controller, summed (zero for the LQR).
+    pub fn controller_stats(&self) -> Result<MpcStats> {
+        let mut total = MpcStats::default();
+        for c in self.controls()? {
+            let s = c.controller.stats();
+            total.steps += s.steps;
+            total.constrained += s.constrained;
+            total.inexact += s.inexact;
+            total.fallbacks += s.fallbacks;
+        }
+        Ok(total)
+    }
+
     /// Why env `i`'s episode that ended in the last step (same-step autoreset) diverged, or
     /// `None` if it did not; for the other modes see [`Episode::divergence`].
     pub fn final_divergence(&self, i: usize) -> Result<Option<&str>> {
@@ -503,6 +627,12 @@ impl BatchEnv {
                 if selected(i) {
                     let s = episode_seeds(slot.base, slot.index, i as u64, n as u64, schedule);
                     *r = slot.episode.reset(s).map_err(BatchError::from);
+                    if let (Ok(()), Some(c)) = (&*r, slot.control.as_mut()) {
+                        c.act(slot.episode.observation(), true);
+                        if let Some(e) = c.error.take() {
+                            *r = Err(e.into());
+                        }
+                    }
                 }
             };
             let slots = &mut self.slots;
@@ -612,6 +742,19 @@ impl BatchEnv {
         }
         if stop.load(Ordering::Relaxed) {
             return Err(self.interrupted_step());
+        }
+        self.controller_error()
+    }
+
+    /// The first env whose controller failed in the last step or reset, as an error naming it.
+    fn controller_error(&mut self) -> Result<()> {
+        for (env, slot) in self.slots.iter_mut().enumerate() {
+            if let Some(e) = slot.control.as_mut().and_then(|c| c.error.take()) {
+                return Err(BatchError::Env {
+                    env,
+                    source: Box::new(e.into()),
+                });
+            }
         }
         Ok(())
     }
@@ -926,6 +1069,10 @@ impl RowStepper<'_> {
     /// [`RowStepper::finish`].
     fn step(&self, mut row: Row<'_>) {
         if self.begin(&mut row) {
+            if let Some(c) = row.slot.control.as_mut() {
+                let sent: &[f32; ACT_DIM] = row.action.try_into().expect("an action row");
+                c.controller.sent(sent);
+            }
             let result = row.slot.episode.step_interruptible(row.action, self.stop);
             self.finish(&mut row, result);
         }
@@ -937,6 +1084,9 @@ impl RowStepper<'_> {
         let slot = &mut *row.slot;
         *row.autoreset = false;
         slot.final_divergence = None;
+        if let Some(c) = slot.control.as_mut() {
+            c.error = None;
+        }
         if slot.pending_reset {
             slot.pending_reset = false;
             slot.index += 1;
@@ -948,6 +1098,9 @@ impl RowStepper<'_> {
             *row.autoreset = true;
             *row.wake_seed = slot.episode.seeds().wake;
             write_info(row.info, &outcome.unwrap_or_default(), 0);
+            if let Some(c) = slot.control.as_mut() {
+                c.act(row.obs, true);
+            }
             return false;
         }
         *row.wake_seed = slot.episode.seeds().wake;
@@ -974,11 +1127,16 @@ impl RowStepper<'_> {
         *row.truncated = o.truncated;
         write_info(row.info, &o, slot.episode.steps());
         row.obs.copy_from_slice(slot.episode.observation());
+        let mut start = false;
         if o.terminated || o.truncated {
             match self.mode {
                 Autoreset::NextStep | Autoreset::Disabled => slot.pending_reset = true,
                 Autoreset::SameStep => {
                     row.final_obs.copy_from_slice(row.obs);
+                    if let Some(c) = slot.control.as_mut() {
+                        c.peek(row.final_obs);
+                    }
+                    start = true;
                     if let Some(true_obs) = slot.episode.true_observation() {
                         slot.final_true_obs = *true_obs;
                     }
@@ -990,6 +1148,10 @@ impl RowStepper<'_> {
                     row.obs.copy_from_slice(slot.episode.observation());
                 }
             }
+        }
+        // The controller's command for the step's observation, in this thread.
+        if let Some(c) = slot.control.as_mut() {
+            c.act(row.obs, start);
         }
     }
 }

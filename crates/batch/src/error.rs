@@ -42,6 +42,9 @@ pub enum BatchError {
     /// True observations were read from a batch that does not keep them.
     #[error("true observations are off: enable them first (the env option true_observation=True)")]
     TrueObservationOff,
+    /// Controller commands or states were read from a batch without controllers.
+    #[error("this batch steps no controllers: set them first (BatchEnv.set_controller)")]
+    NoController,
     /// One env failed.
     #[error("env {env}: {source}")]
     Env {

@@ -7,9 +7,15 @@ use accd_batch::{
     check_base_seed, info, Autoreset, BatchEnv, BatchError, ResetBuffers, SeedSpec, StepBuffers,
     WakeSchedule, HELD_OUT_WAKE_SEEDS, MAX_ENVS, MAX_THREADS, TRAINING_WAKE_SEEDS,
 };
+use std::sync::Arc;
+
+use accd_sim::control::controller::{Controller, ControllerState, LqrController, MpcController};
+use accd_sim::control::filter::FilterState;
 use accd_sim::state_format::{self, StateKind};
 use accd_sim::{EnvConfig, SimError, Valid, ACT_DIM, OBSERVATION, OBS_BOUND, OBS_DIM};
-use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{
+    PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyString, PyTuple};
 use serde::{Deserialize, Serialize};
@@ -18,6 +24,8 @@ use crate::arrays::{vector_to_py, vectors_to_py};
 use crate::capture::{seed_from_py, snapshot_dict, usize_from_py};
 use crate::config::PyEnvConfig;
 use crate::errors::{raise, IntoPy, Kind};
+use crate::lqr::{check_shape, states_to_arrays, PyLqrFilter};
+use crate::mpc::PyMpc;
 use crate::signals::SignalCheck;
 
 /// One set of output arrays.
@@ -534,6 +542,138 @@ impl PyBatchEnv {
         let mut out = vec![0.0f32; self.inner.num_envs() * OBS_DIM];
         self.inner.final_true_observations(&mut out).py_err()?;
         rows_to_py(py, out)
+    }
+
+    /// Gives every env a controller of ``stepper`` (an ``LqrFilter`` or an ``Mpc``: its design,
+    /// not its env states), or removes them (None). From then on each env's controller runs
+    /// in the thread that steps the env, with the GIL released: after every reset and step it
+    /// computes the command for the env's new observation (restarted with each new episode,
+    /// automatic resets included), and before every step it is told the action sent (the
+    /// filter predicts with it). Every env's controller starts afresh.
+    fn set_controller(&mut self, stepper: Option<&Bound<'_, PyAny>>) -> PyResult<()> {
+        let Some(stepper) = stepper.filter(|s| !s.is_none()) else {
+            self.inner.set_controllers(None);
+            return Ok(());
+        };
+        if let Ok(f) = stepper.cast::<PyLqrFilter>() {
+            let filter = Arc::clone(&f.borrow().filter);
+            let make = move || -> Box<dyn Controller> {
+                Box::new(LqrController::new(Arc::clone(&filter)))
+            };
+            self.inner.set_controllers(Some(&make));
+        } else if let Ok(m) = stepper.cast::<PyMpc>() {
+            let mpc = Arc::clone(&m.borrow().mpc);
+            let make =
+                move || -> Box<dyn Controller> { Box::new(MpcController::new(Arc::clone(&mpc))) };
+            self.inner.set_controllers(Some(&make));
+        } else {
+            return Err(raise(
+                Kind::Config,
+                format!(
+                    "invalid config: a controller is an LqrFilter, an Mpc or None, got {}",
+                    stepper.get_type().name()?
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Whether the envs have controllers (``set_controller``).
+    #[getter]
+    fn has_controller(&self) -> bool {
+        self.inner.has_controllers()
+    }
+
+    /// Every env's controller command for its latest observation, (num_envs, 4) float32 in
+    /// [-1, 1] (StateError without controllers).
+    fn controller_commands<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let mut out = vec![0.0f32; self.inner.num_envs() * ACT_DIM];
+        self.inner.controller_commands(&mut out).py_err()?;
+        PyArray1::from_vec(py, out).reshape([self.inner.num_envs(), ACT_DIM])
+    }
+
+    /// Every env's controller command for the last observation of the episode that ended in the
+    /// last step, (num_envs, 4) float32 (``"same_step"`` autoreset; other rows are stale),
+    /// computed without advancing the controller.
+    fn final_controller_commands<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let mut out = vec![0.0f32; self.inner.num_envs() * ACT_DIM];
+        self.inner.final_controller_commands(&mut out).py_err()?;
+        PyArray1::from_vec(py, out).reshape([self.inner.num_envs(), ACT_DIM])
+    }
+
+    /// Every env's controller state: ``z`` (N, nz), ``u`` (N, 4), ``fresh`` (N,) as
+    /// ``LqrFilter.get_state``, and ``command`` (N, 4) float32, the last command (copies).
+    #[allow(clippy::type_complexity)]
+    fn controller_state<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(
+        Bound<'py, PyArray2<f64>>,
+        Bound<'py, PyArray2<f64>>,
+        Bound<'py, PyArray1<bool>>,
+        Bound<'py, PyArray2<f32>>,
+    )> {
+        let states = self.inner.controller_states().py_err()?;
+        let filters: Vec<FilterState> = states.iter().map(|s| s.filter.clone()).collect();
+        let nz = filters.first().map_or(0, |f| f.z.len());
+        let (z, u, fresh) = states_to_arrays(py, &filters, nz);
+        let commands: Vec<f32> = states.iter().flat_map(|s| s.command).collect();
+        let commands = PyArray1::from_vec(py, commands).reshape([states.len(), ACT_DIM])?;
+        Ok((z, u, fresh, commands))
+    }
+
+    /// Restores a state of ``controller_state`` (StateError for shapes that do not fit; then
+    /// nothing changes).
+    fn set_controller_state(
+        &mut self,
+        z: PyReadonlyArray2<'_, f64>,
+        u: PyReadonlyArray2<'_, f64>,
+        fresh: PyReadonlyArray1<'_, bool>,
+        command: PyReadonlyArray2<'_, f32>,
+    ) -> PyResult<()> {
+        let n = self.inner.num_envs();
+        let (zv, uv, fv, cv) = (
+            z.as_array(),
+            u.as_array(),
+            fresh.as_array(),
+            command.as_array(),
+        );
+        check_shape("command", cv.shape(), &[n, ACT_DIM])?;
+        check_shape("u", uv.shape(), &[n, ACT_DIM])?;
+        check_shape("fresh", fv.shape(), &[n])?;
+        if zv.nrows() != n {
+            check_shape("z", zv.shape(), &[n, zv.ncols()])?;
+        }
+        let states: Vec<ControllerState> = (0..n)
+            .map(|i| {
+                let mut filter = FilterState::new(zv.ncols());
+                filter
+                    .z
+                    .iter_mut()
+                    .zip(zv.row(i))
+                    .for_each(|(a, b)| *a = *b);
+                filter
+                    .u
+                    .iter_mut()
+                    .zip(uv.row(i))
+                    .for_each(|(a, b)| *a = *b);
+                filter.fresh = fv[i];
+                let mut command = [0.0f32; ACT_DIM];
+                command.iter_mut().zip(cv.row(i)).for_each(|(a, b)| *a = *b);
+                ControllerState { filter, command }
+            })
+            .collect();
+        self.inner.set_controller_states(&states).py_err()
+    }
+
+    /// ``(steps, constrained, inexact, fallbacks)`` of the envs' MPC controllers since they were
+    /// set, summed (zeros for the LQR; StateError without controllers).
+    fn controller_stats(&self) -> PyResult<(u64, u64, u64, u64)> {
+        let s = self.inner.controller_stats().py_err()?;
+        Ok((s.steps, s.constrained, s.inexact, s.fallbacks))
     }
 
     /// Why env ``i``'s episode diverged, or None.

@@ -111,7 +111,8 @@ impl ToPy for BatchError {
             | BatchError::Shape { .. }
             | BatchError::ResetNeeded { .. }
             | BatchError::Interrupted { .. }
-            | BatchError::TrueObservationOff => Some(Kind::State),
+            | BatchError::TrueObservationOff
+            | BatchError::NoController => Some(Kind::State),
             BatchError::Env { source, .. } => source.kind(),
             BatchError::Threads(_) => Some(Kind::Simulation),
             BatchError::Internal(_) => None,

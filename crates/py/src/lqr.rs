@@ -5,7 +5,9 @@
 //! batch and steps them with the GIL released, on the calling thread, in blocks of rows that
 //! share each read of the matrices (`LqrFilter::step_rows`): a row costs microseconds, less than
 //! waking other threads costs on a busy machine. Each row's arithmetic depends on nothing but its
-//! own inputs, so the results are the same bits whatever the batch size.
+//! own inputs, so the results are the same bits whatever the batch size. A batch env runs the
+//! same step per env in its own threads instead (`BatchEnv.set_controller`, which takes an
+//! `LqrFilter` or an `Mpc` for its design).
 
 use std::sync::Arc;
 
@@ -150,7 +152,7 @@ pub fn lqr_design(
 /// batch (see the module docs of ``accd_sim::control::filter``).
 #[pyclass(name = "LqrFilter", module = "accd_gym._core")]
 pub struct PyLqrFilter {
-    filter: Arc<LqrFilter>,
+    pub(crate) filter: Arc<LqrFilter>,
     states: Vec<FilterState>,
 }
 

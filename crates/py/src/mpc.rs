@@ -25,7 +25,7 @@ use crate::lqr::{
 /// docs of ``accd_sim::control::mpc``).
 #[pyclass(name = "Mpc", module = "accd_gym._core")]
 pub struct PyMpc {
-    mpc: Arc<Mpc>,
+    pub(crate) mpc: Arc<Mpc>,
     states: Vec<FilterState>,
     stats: MpcStats,
 }

@@ -303,6 +303,17 @@ class LqrPolicy:
         o = check_observations(obs)
         return self._filter.step(np.ascontiguousarray(o, dtype=np.float64), None, False)
 
+    def batch_stepper(self) -> Any:
+        """The Rust stepper of this design (``_core.LqrFilter``; ``_core.Mpc`` for the MPC) for a
+        batch to run per env in its own threads (``_core.BatchEnv.set_controller``): the
+        vector envs' residual base and the evaluation of this policy run it there, each env's
+        command computed right after its step, with the GIL released and the same bits as
+        :meth:`predict`. Its env states are this policy's; the batch keeps its own."""
+        return self._filter
+
+    def add_batch_stats(self, counts: tuple[int, int, int, int]) -> None:
+        """Counts of a batch that ran :meth:`batch_stepper` (the MPC's solves; the LQR keeps none)."""
+
     def sent(self, offset: np.ndarray) -> None:
         """Tells the filter that the command actually sent differs from the last :meth:`predict`'s
         by ``offset`` ((N, 4), flap-limit units; residual control adds a correction): its next

@@ -166,9 +166,15 @@ class MpcPolicy(LqrPolicy):
         """Counts since construction: ``steps`` (env steps planned), ``constrained`` (solved to
         tolerance with an active constraint), ``inexact`` (the solve reached ``iterations``
         unconverged: the LQR's command was sent), ``fallbacks`` (a non-finite estimate or
-        iterate: the LQR's command was sent)."""
-        steps, constrained, inexact, fallbacks = self._filter.stats
+        iterate: the LQR's command was sent); with the solves of batches that ran it in their
+        threads (:meth:`add_batch_stats`)."""
+        counts = [a + b for a, b in zip(self._filter.stats, getattr(self, "_batch_stats", (0, 0, 0, 0)))]
+        steps, constrained, inexact, fallbacks = counts
         return {"steps": steps, "constrained": constrained, "inexact": inexact, "fallbacks": fallbacks}
+
+    def add_batch_stats(self, counts: tuple[int, int, int, int]) -> None:
+        """Adds a batch's counts of :meth:`batch_stepper`'s solves (its envs' controllers) to :attr:`stats`."""
+        self._batch_stats = tuple(a + int(b) for a, b in zip(getattr(self, "_batch_stats", (0, 0, 0, 0)), counts))
 
     def tuning_dict(self) -> dict[str, Any]:
         """The MPC settings as a plain mapping (for records)."""

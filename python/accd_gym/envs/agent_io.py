@@ -36,7 +36,7 @@ from gymnasium import spaces
 
 from accd_gym.errors import ConfigError, StateError
 from accd_gym.envs.history import HISTORY_MAX, HistoryBuffer, parse_history
-from accd_gym.envs.residual import SCALE_MAX, BaseController, ResidualOptions
+from accd_gym.envs.residual import SCALE_MAX, ResidualOptions, base_controller
 from accd_gym.envs.task import ACT_DIM, OBS_BOUND, OBS_DIM, OBSERVATION_TABLE, check_actions
 
 #: The env arguments of this module (never configuration keys).
@@ -121,14 +121,17 @@ class AgentIO:
 
     The env calls :meth:`begin` when episodes start (reset), :meth:`command` with the agent's
     actions before a step (returns the flap commands to send) and :meth:`advance` with the
-    step's observations (returns the agent's). Every method returns new arrays.
+    step's observations (returns the agent's). Every method returns new arrays. ``core``: the
+    env's Rust batch (``_core.BatchEnv``), which then steps an LQR or MPC base controller per
+    env in its own threads (:class:`~accd_gym.envs.residual.BatchBaseController`); without it
+    (a policy's side) the base controller steps on the calling thread.
     """
 
-    def __init__(self, options: AgentOptions, config: Mapping[str, Any], num_envs: int) -> None:
+    def __init__(self, options: AgentOptions, config: Mapping[str, Any], num_envs: int, core: Any = None) -> None:
         self.options = options
         self.num_envs = int(num_envs)
         r = options.residual
-        self._base = BaseController(r, config) if r is not None else None
+        self._base = base_controller(r, config, core) if r is not None else None
         self._scale = np.float32(r.scale) if r is not None else None
         self._observe_base = r is not None and r.observe_base
         self._history = HistoryBuffer(self.num_envs, options.history, OBS_DIM, ACT_DIM) if options.history else None
@@ -139,9 +142,10 @@ class AgentIO:
         self.observation_space = options.observation_space()
 
     @classmethod
-    def create(cls, options: AgentOptions, config: Mapping[str, Any], num_envs: int) -> "Optional[AgentIO]":
-        """An AgentIO, or None when neither option is on."""
-        return cls(options, config, num_envs) if options.enabled else None
+    def create(cls, options: AgentOptions, config: Mapping[str, Any], num_envs: int,
+               core: Any = None) -> "Optional[AgentIO]":
+        """An AgentIO (``core`` as for the constructor), or None when neither option is on."""
+        return cls(options, config, num_envs, core) if options.enabled else None
 
     def _observation(self, cur: np.ndarray, base_u: np.ndarray) -> np.ndarray:
         parts = [cur]
@@ -254,10 +258,10 @@ class AgentIO:
         """Restores :meth:`get_state`'s arrays (checked first: StateError, nothing changed)."""
         self.check_state(state)
         base = {k[5:]: np.asarray(v) for k, v in state.items() if k.startswith("ctrl_")}
-        if self._base is not None:
-            self._base.set_state(base)
-        self._cur[:] = state["cur"]
         self._base_u = np.array(state["base_u"], dtype=np.float32)
+        if self._base is not None:
+            self._base.set_state(base, self._base_u)
+        self._cur[:] = state["cur"]
         self._sent = np.array(state["sent"], dtype=np.float32)
         if self._history is not None:
             self._history.set_state({"obs": state["history_obs"], "act": state["history_act"]})

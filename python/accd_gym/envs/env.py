@@ -161,7 +161,7 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
         self._core = _core.BatchEnv(valid, 1, random_seed(), "next_step", 1)
         if self.agent_options.true_observation:
             self._core.set_true_observation(True)
-        self._agent_io = AgentIO.create(self.agent_options, self._config, 1)
+        self._agent_io = AgentIO.create(self.agent_options, self._config, 1, self._core)
         self.observation_space = observation_space() if self._agent_io is None else self._agent_io.observation_space
         self.action_space = action_space()
         self._viewer = None

@@ -14,7 +14,9 @@ ones: the base controllers read nothing else). The base controller's state (the 
 filter, the guidance's integrators) starts afresh with every episode of its env, automatic
 resets included, is told the command actually sent (the LQR's filter predicts with it), and is
 part of the env's pickles and ``get_state()``. A zero action reproduces the base controller's
-episodes bit for bit. With ``observe_base`` (default) the base command is appended to the
+episodes bit for bit. The env's Rust batch steps an ``"lqr"`` or ``"mpc"`` base per env in its
+own threads, right after each env's step (:class:`BatchBaseController`), with the bits of the
+controller's own ``predict``. With ``observe_base`` (default) the base command is appended to the
 observation (the agent sees what it corrects; the LQR's command carries its filter's estimate).
 """
 
@@ -22,11 +24,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any, Mapping, Optional
 
 import numpy as np
 
 from accd_gym.control.registry import make_controller, residual_bases
+from accd_gym.envs.task import ACT_DIM
 from accd_gym.errors import ConfigError
 
 #: The allowed range of ``residual.scale`` (flap-limit units): (0, SCALE_MAX]; 2 lets a
@@ -139,9 +142,76 @@ class BaseController:
         """The controller's per-row state arrays (copies)."""
         return self.policy.get_state()
 
-    def set_state(self, state: Mapping[str, np.ndarray]) -> None:
-        """Restores :meth:`get_state`'s arrays."""
+    def set_state(self, state: Mapping[str, np.ndarray], commands: Optional[np.ndarray] = None) -> None:
+        """Restores :meth:`get_state`'s arrays (``commands``, the last base commands, are the
+        env's to keep here)."""
         self.policy.set_state(dict(state))
 
 
-__all__ = ["SCALE_MAX", "BaseController", "ResidualOptions"]
+class BatchBaseController(BaseController):
+    """A base controller that the env's Rust batch steps (``_core.BatchEnv.set_controller``):
+    each env's filter step (and MPC solve) runs in the thread that steps the env, right after
+    its step or reset, with the GIL released, in parallel across envs; the batch restarts it
+    with each new episode (automatic resets included) and tells it the action sent. The same
+    bits as :class:`BaseController` on the same policy: the per-row arithmetic is the same
+    Rust step. Here the methods read the batch's results."""
+
+    def __init__(self, options: ResidualOptions, config: Mapping[str, Any], core: Any) -> None:
+        super().__init__(options, config)
+        self._core = core
+        core.set_controller(self.policy.batch_stepper())
+
+    def restart(self, rows: "np.ndarray | None") -> None:
+        """Nothing: the batch restarts an env's controller with its episode."""
+
+    def command(self, obs: np.ndarray) -> np.ndarray:
+        """The commands the batch computed for its latest observations (``obs``)."""
+        return self._core.controller_commands()
+
+    def command_rows(self, obs: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """As :meth:`command`: the batch advanced exactly the rows it reset."""
+        return self._core.controller_commands()
+
+    def peek(self, obs: np.ndarray) -> np.ndarray:
+        """The commands for the last observations of the episodes that ended in the last step
+        (same-step autoreset; computed by the batch without advancing anything)."""
+        return self._core.final_controller_commands()
+
+    def sent(self, offset: np.ndarray) -> None:
+        """Nothing: the batch tells each env's controller the action it steps with."""
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        """The batch's controller state per env: ``z``, ``u``, ``fresh`` (as the policy's)."""
+        z, u, fresh, _ = self._core.controller_state()
+        return {"z": z, "u": u, "fresh": fresh}
+
+    def set_state(self, state: Mapping[str, np.ndarray], commands: Optional[np.ndarray] = None) -> None:
+        """Restores :meth:`get_state`'s arrays and the last base commands ``commands`` (N, 4)
+        into the batch (an empty state: every env starts afresh at its next reset)."""
+        n = self._core.num_envs
+        cmd = np.zeros((n, ACT_DIM), dtype=np.float32) if commands is None else commands
+        if state:
+            z, u, fresh = (np.asarray(state[k]) for k in ("z", "u", "fresh"))
+        else:
+            nz = self.policy.design.f.shape[0]
+            z, u, fresh = np.zeros((n, nz)), np.zeros((n, ACT_DIM)), np.ones(n, dtype=bool)
+        self._core.set_controller_state(np.ascontiguousarray(z, dtype=np.float64),
+                                        np.ascontiguousarray(u, dtype=np.float64),
+                                        np.ascontiguousarray(fresh, dtype=bool),
+                                        np.ascontiguousarray(cmd, dtype=np.float32))
+
+
+def base_controller(options: ResidualOptions, config: Mapping[str, Any], core: Any = None) -> BaseController:
+    """The base controller of ``options`` for a batch: run by the Rust batch ``core`` in its
+    threads where the controller has a Rust stepper (the LQR, the MPC) and a core is given,
+    else stepped from Python on the calling thread."""
+    if core is not None and options.base in BATCH_BASES:
+        return BatchBaseController(options, config, core)
+    return BaseController(options, config)
+
+
+#: The residual bases whose per-env step a Rust batch runs (``batch_stepper``).
+BATCH_BASES = ("lqr", "mpc")
+
+
+__all__ = ["BATCH_BASES", "SCALE_MAX", "BaseController", "BatchBaseController", "ResidualOptions", "base_controller"]

@@ -109,7 +109,7 @@ class AccdVecEnv(CoreEnvMixin, VecEnv):
         self._core = _core.BatchEnv(valid, n, base, "same_step", threads)
         if self.agent_options.true_observation:
             self._core.set_true_observation(True)
-        self._agent_io = AgentIO.create(self.agent_options, self._config, self._core.num_envs)
+        self._agent_io = AgentIO.create(self.agent_options, self._config, self._core.num_envs, self._core)
         self._actions: Optional[np.ndarray] = None
         self._base_seed: Optional[int] = None if seed is None else base
         self._pending_options: dict[str, Any] = {}

@@ -171,7 +171,7 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         if self.agent_options.true_observation:
             self._core.set_true_observation(True)
         self.num_envs = self._core.num_envs
-        self._agent_io = AgentIO.create(self.agent_options, self._config, self.num_envs)
+        self._agent_io = AgentIO.create(self.agent_options, self._config, self.num_envs, self._core)
         self.render_mode = render_mode
         self.metadata = {
             "autoreset_mode": mode,
@@ -254,6 +254,29 @@ class InAirCaptureVectorEnv(CoreEnvMixin, VectorEnv):
         finally:
             self._core.set_wake_schedule(kind, kept)
         return obs if self.copy else obs.copy()
+
+    def set_controller(self, policy: Any) -> None:
+        """Runs ``policy``'s Rust stepper (an :class:`~accd_gym.control.lqr.LqrPolicy` or
+        :class:`~accd_gym.control.mpc.MpcPolicy` designed for this env's configuration; its
+        ``batch_stepper()``) per env in the batch's own threads: from the next reset on, each
+        env's command for its new observation is computed right after the env's reset or step,
+        with the GIL released, and each step tells it the action sent. Read the commands with
+        :meth:`controller_commands`; they are the bits the policy's ``predict`` would give. None
+        removes it. Not with the ``residual`` env option (whose base runs there already)."""
+        if self._agent_io is not None and self.agent_options.residual is not None:
+            raise ConfigError("invalid config: `set_controller` on an env with the `residual` option, whose base "
+                              "controller the batch steps already")
+        self._core.set_controller(None if policy is None else policy.batch_stepper())
+
+    def controller_commands(self) -> np.ndarray:
+        """The commands ((num_envs, 4) float32) of :meth:`set_controller`'s controller for every
+        env's latest observation (StateError without one)."""
+        return self._core.controller_commands()
+
+    def controller_stats(self) -> tuple[int, int, int, int]:
+        """``(steps, constrained, inexact, fallbacks)`` of :meth:`set_controller`'s MPC solves,
+        summed over the envs (zeros for the LQR)."""
+        return self._core.controller_stats()
 
     @property
     def np_random_seed(self) -> tuple[int, ...]:  # type: ignore[override]

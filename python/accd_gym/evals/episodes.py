@@ -161,11 +161,19 @@ def schedule_episodes(
         start_policy_episodes(policy, mask, ep_of, last)
         return obs
 
+    # A policy with a Rust stepper (the LQR, the MPC) runs in the batch's threads, each env's
+    # command computed right after its step: the same bits as its predict.
+    in_batch = hasattr(policy, "batch_stepper")
+    if in_batch:
+        env.set_controller(policy)
     try:
         env.reset(seed=[seed + wanted[0]] * batch)
         obs = start(np.arange(batch))
         while remaining:
-            actions = check_actions(np.asarray(policy.predict(obs), dtype=np.float32), batch)
+            if in_batch:
+                actions = env.controller_commands()
+            else:
+                actions = check_actions(np.asarray(policy.predict(obs), dtype=np.float32), batch)
             obs, reward, terminated, truncated, infos = env.step(actions)
             observer.stepped(env, actions, obs, reward, terminated, truncated, infos)
             dones = np.flatnonzero(terminated | truncated)
@@ -177,6 +185,8 @@ def schedule_episodes(
             if remaining and len(dones):
                 obs = start(dones)
     finally:
+        if in_batch:
+            policy.add_batch_stats(env.controller_stats())
         env.close()
 
 

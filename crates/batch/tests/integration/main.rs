@@ -3,4 +3,5 @@
 //! binary of its own: it replaces the global allocator.
 
 mod batch;
+mod controller;
 mod reliability;

@@ -6,9 +6,12 @@
 //! * [`riccati`]: the discrete algebraic Riccati equation by the structured doubling algorithm.
 //! * [`lqr`]: the design (LQR gain, Kalman gain, offset-free reference) of one configuration.
 //! * [`filter`]: the per-step work (predict, update, control law) of one env.
+//! * [`controller`]: one env's controller as a batch steps it beside the env (the LQR and the
+//!   MPC, each with its env's state).
 //! * [`mpc`]: the MPC baseline, a condensed QP on the filter's estimate with the flap limits and
 //!   the closing-speed limit as constraints.
 
+pub mod controller;
 pub mod filter;
 pub mod lqr;
 pub mod matrix;
