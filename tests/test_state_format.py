@@ -40,7 +40,7 @@ def test_header_layout(vec):
     version, kind = np.frombuffer(good[8:16], "<u4")
     num_envs, = np.frombuffer(good[16:24], "<u8")
     payload, = np.frombuffer(good[56:64], "<u8")
-    assert (version, kind, num_envs) == (4, 4, 3)  # format 4, gymnasium vector env, 3 envs
+    assert (version, kind, num_envs) == (5, 4, 3)  # format 5, gymnasium vector env, 3 envs
     assert payload == len(good) - HEADER_LEN
     import zlib
 

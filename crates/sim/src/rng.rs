@@ -4,9 +4,10 @@
 //! * **Streams** ([`stream_rng`]): ChaCha8 ([`rand_chacha::ChaCha8Rng`], a fixed algorithm) whose
 //!   256-bit key is four successive SplitMix64 outputs started at the seed (little-endian), and
 //!   whose ChaCha stream (nonce) is a fixed label per use ([`WAKE_LANES_STREAM`],
-//!   [`AMBIENT_STREAM`], [`RLV_STREAM`], [`SENSOR_STREAM`]; the initial conditions' label is
-//!   `crate::task::episode::INITIAL_STREAM`). SplitMix64's output function is a bijective avalanche
-//!   mix, so neighbouring seeds give unrelated keys; distinct labels give independent streams.
+//!   [`AMBIENT_STREAM`], [`RLV_STREAM`], one per sensor by name ([`sensor_stream`]); the initial
+//!   conditions' label is `crate::task::episode::INITIAL_STREAM`). SplitMix64's output function
+//!   is a bijective avalanche mix, so neighbouring seeds give unrelated keys; distinct labels give
+//!   independent streams.
 //! * **Gaussians** ([`Stream::gaussian`]), by one of two samplers ([`NormalSampler`]):
 //!   - **Box-Muller**, written here, on two uniforms from the top 53 bits of one `u64` each,
 //!     `u1 = 1 - m1 2^-53` in (0, 1], `u2 = m2 2^-53` in [0, 1):
@@ -43,10 +44,28 @@ pub const AMBIENT_STREAM: u64 = u64::from_be_bytes(*b"AMBIENT ");
 /// ChaCha stream label of the RLV's motion ("RLV BOOM" in ASCII).
 pub const RLV_STREAM: u64 = u64::from_be_bytes(*b"RLV BOOM");
 
-/// ChaCha stream label of the sensor model's noise, biases and dropouts ("SENSORS " in ASCII;
-/// keyed by the episode's initial-conditions seed, [`crate::task::sensors`]). No physics stream reads
-/// it, so switching the sensors on changes no physics.
-pub const SENSOR_STREAM: u64 = u64::from_be_bytes(*b"SENSORS ");
+/// The ChaCha stream label of the sensor named `name` (a component of [`crate::task::sensors`],
+/// keyed by the episode's initial-conditions seed): the 64-bit FNV-1a hash ([`fnv1a`]) of the
+/// bytes of `"SENSORS "` followed by the name's, e.g. `"SENSORS vision"`. Each sensor draws from a
+/// stream of its own, so what one sensor draws never shifts another's numbers; no physics stream
+/// reads them, so switching the sensors on changes no physics.
+pub const fn sensor_stream(name: &str) -> u64 {
+    fnv1a(fnv1a(FNV_OFFSET_BASIS, b"SENSORS "), name.as_bytes())
+}
+
+/// The 64-bit FNV-1a offset basis (Fowler, Noll & Vo; IETF draft-eastlake-fnv).
+pub const FNV_OFFSET_BASIS: u64 = 0xCBF2_9CE4_8422_2325;
+
+/// 64-bit FNV-1a of `bytes` continuing from `hash` ([`FNV_OFFSET_BASIS`] to start): for each
+/// byte, `hash = (hash ^ byte) * 0x100000001B3` (mod 2^64).
+pub const fn fnv1a(mut hash: u64, bytes: &[u8]) -> u64 {
+    let mut i = 0;
+    while i < bytes.len() {
+        hash = (hash ^ bytes[i] as u64).wrapping_mul(0x0000_0100_0000_01B3);
+        i += 1;
+    }
+    hash
+}
 
 /// SplitMix64's output function (Steele, Lea & Flood 2014): a bijective avalanche mix of `z`.
 pub fn splitmix64_mix(mut z: u64) -> u64 {
@@ -212,13 +231,31 @@ mod tests {
             WAKE_LANES_STREAM,
             AMBIENT_STREAM,
             RLV_STREAM,
-            SENSOR_STREAM,
             crate::task::episode::INITIAL_STREAM,
+            crate::task::randomization::PARAMETERS_STREAM,
+            sensor_stream("vision"),
+            sensor_stream("gyro"),
+            sensor_stream("ahrs"),
+            sensor_stream("gnss"),
+            sensor_stream("load_cell"),
         ];
         for (i, a) in labels.iter().enumerate() {
             assert!(labels[i + 1..].iter().all(|b| a != b), "{a:x}");
         }
-        assert_eq!(SENSOR_STREAM.to_be_bytes(), *b"SENSORS ");
+    }
+
+    /// FNV-1a against the published test vectors of its authors' reference code (`""`, `"a"`,
+    /// `"foobar"`), and a sensor's label is the hash of `"SENSORS "` and its name.
+    #[test]
+    fn sensor_labels_are_fnv1a_of_the_prefixed_name() {
+        assert_eq!(fnv1a(FNV_OFFSET_BASIS, b""), 0xCBF2_9CE4_8422_2325);
+        assert_eq!(fnv1a(FNV_OFFSET_BASIS, b"a"), 0xAF63_DC4C_8601_EC8C);
+        assert_eq!(fnv1a(FNV_OFFSET_BASIS, b"foobar"), 0x8594_4171_F739_67E8);
+        assert_eq!(
+            sensor_stream("vision"),
+            fnv1a(FNV_OFFSET_BASIS, b"SENSORS vision")
+        );
+        assert_ne!(sensor_stream("vision"), sensor_stream("vision2"));
     }
 
     #[test]

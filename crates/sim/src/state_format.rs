@@ -45,10 +45,11 @@ use thiserror::Error;
 
 /// The first 8 bytes of every state.
 pub const MAGIC: [u8; 8] = *b"ACCDSNAP";
-/// The format version written and the only one read. Version 4 added the sensor model's state
+/// The format version written and the only one read. Version 5 split the sensor model's state
+/// into one state per sensor, each with its own stream; version 4 added the sensor model's state
 /// to the episode's; version 2 was the hand-written codec (magic `ACCDST02`), version 1 its
 /// predecessor.
-pub const FORMAT_VERSION: u32 = 4;
+pub const FORMAT_VERSION: u32 = 5;
 /// Bytes before the payload.
 pub const HEADER_LEN: usize = 68;
 /// The magic of format version 2 (the hand-written codec of `accd_sim::codec`).
@@ -445,7 +446,13 @@ mod tests {
     use crate::rng::{ChaChaState, Seeds, StreamState};
     use crate::task::episode::EpisodeState;
     use crate::task::observation::ACT_DIM;
-    use crate::task::sensors::SensorState;
+    use crate::task::sensors::ahrs::AhrsState;
+    use crate::task::sensors::delay_line::DelayLineState;
+    use crate::task::sensors::gnss::GnssState;
+    use crate::task::sensors::gyro::GyroState;
+    use crate::task::sensors::load_cell::LoadCellState;
+    use crate::task::sensors::vision::VisionState;
+    use crate::task::sensors::{ComponentStates, SensorState};
     use serde::Deserialize;
 
     #[derive(Debug, PartialEq, Serialize, Deserialize)]
@@ -655,23 +662,37 @@ mod tests {
             done: false,
             divergence: Some("x".into()),
             sensors: Some(SensorState {
-                stream,
-                rate_bias: [0.01; 3],
-                attitude_bias: [0.02; 3],
-                history: vec![[1.5; 3]; 2],
-                head: 1,
-                steps: 7,
-                next_update: 3,
-                lost: true,
-                last: [0.75; 3],
-                last_time: 0.5,
-                previous: [0.25; 3],
-                previous_time: 0.45,
-                received: 2,
-                dropped: 1,
-                delayed: vec![0.5f32; 2],
-                delayed_head: 0,
-                delayed_filled: true,
+                components: ComponentStates {
+                    vision: VisionState {
+                        stream,
+                        history: vec![[1.5; 3]; 2],
+                        head: 1,
+                        steps: 7,
+                        next_update: 3,
+                        lost: true,
+                        last: [0.75; 3],
+                        last_time: 0.5,
+                        previous: [0.25; 3],
+                        previous_time: 0.45,
+                        received: 2,
+                        dropped: 1,
+                    },
+                    gyro: GyroState {
+                        stream,
+                        bias: [0.01; 3],
+                    },
+                    ahrs: AhrsState {
+                        stream,
+                        bias: [0.02; 3],
+                    },
+                    gnss: GnssState { stream },
+                    load_cell: LoadCellState { stream },
+                },
+                delay: DelayLineState {
+                    observations: vec![0.5f32; 2],
+                    head: 0,
+                    filled: true,
+                },
             }),
         };
         let bytes = postcard::to_allocvec(&state).unwrap();
@@ -679,9 +700,9 @@ mod tests {
         assert_eq!(
             (FORMAT_VERSION, bytes.len(), digest.as_str()),
             (
-                4,
-                884,
-                "9c15706b1b25987c94235fa8da6d8109f96ced915da4ed2faedda9a3bdd3f7ab"
+                5,
+                1056,
+                "a56b580dba4374ad54ee5b011831990c78e4f83c64fa0188f944550618b6ebce"
             ),
             "the state types' encoding changed: bump FORMAT_VERSION, then pin the new digest"
         );

@@ -130,7 +130,7 @@ class CoreEnvMixin:
 
         Raises :class:`~accd_gym.StateError` (a ``ValueError``) naming what is wrong for anything
         else (a corrupted or truncated state, another env class, configuration or number of
-        envs, random bytes, a state of another format version, e.g. one written before version 4),
+        envs, random bytes, a state of another format version, e.g. one written before version 5),
         and then changes nothing."""
         if not isinstance(state, (bytes, bytearray, memoryview)):
             raise StateError(f"a state is bytes from {type(self).__name__}.get_state(), got {type(state).__name__}")

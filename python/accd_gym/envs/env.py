@@ -133,12 +133,14 @@ class InAirCaptureEnv(CoreEnvMixin, gym.Env):
     env, the number of envs, the configuration's SHA-256, a CRC-32) and the encoded state.
     ``set_state`` raises ``StateError`` naming what is wrong for anything but a state of this
     class, configuration and size (a corrupted or truncated state, random bytes, a state of a
-    format version other than this build's, 4), and then changes nothing.
+    format version other than this build's, 5), and then changes nothing.
 
     ## Version History
 
     * v0: first release. Later, same id and the same episodes for every existing configuration:
-      the opt-in ``sensors`` section (state format 4).
+      the opt-in ``sensors`` section (state format 4). Then each sensor its own random stream:
+      with ``sensors.enabled`` (the sensors and hard tiers) the observations' noise changed once,
+      the physics did not (state format 5).
     """
 
     _state_kind = "single"

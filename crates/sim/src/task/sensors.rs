@@ -1,148 +1,75 @@
 //! An opt-in sensor model for the observation (`sensors` in [`crate::task::config::EnvConfig`]; off by
 //! default, and then nothing here runs). It changes what the agent *sees*, never the physics:
 //! the reward and the episode end read the true state, and every random number comes from the
-//! sensor stream ([`crate::rng::SENSOR_STREAM`], keyed by the episode's initial-conditions seed),
-//! which no physics stream shares.
+//! sensors' own streams, which no physics stream shares.
 //!
 //! # What is sensed, and how
-//! | observation | sensor | model |
+//! | observation | sensor (component) | model |
 //! |---|---|---|
-//! | `boom_rel_x/y/z` | vision (camera on the ACCD looking at the boom tip) | range-dependent noise, update rate, latency, Markov dropouts; held between updates |
+//! | `boom_rel_x/y/z` | vision ([`vision`]: camera on the ACCD looking at the boom tip) | range-dependent noise, update rate, latency, Markov dropouts; held between updates |
 //! | `boom_rel_vx/vy/vz` | the same vision measurements | finite difference of the last two *received* measurements |
-//! | `quat_*` | AHRS | constant per-episode attitude bias plus white noise, a small rotation in body axes; unit norm, w >= 0 |
-//! | `rate_p/q/r` | gyros (IMU) | constant per-episode bias plus white noise |
-//! | `accd_dx/dy/dz`, `accd_vx/vy/vz` | relative (moving-baseline) GNSS between aircraft and ACCD | white noise per axis |
-//! | `tension` | load cell at the attachment | white noise |
+//! | `quat_*` | AHRS ([`ahrs`]) | constant per-episode attitude bias plus white noise, a small rotation in body axes; unit norm, w >= 0 |
+//! | `rate_p/q/r` | gyros of the IMU ([`gyro`]) | constant per-episode bias plus white noise |
+//! | `accd_dx/dy/dz`, `accd_vx/vy/vz` | relative (moving-baseline) GNSS between aircraft and ACCD ([`gnss`]) | white noise per axis |
+//! | `tension` | load cell at the attachment ([`load_cell`]) | white noise |
 //! | `flap_*`, `time_left` | actuator position feedback, clock | exact |
 //!
-//! Then the whole observation vector can be delayed by `delay_steps` agent steps (the first
-//! observations of an episode repeat the initial one).
+//! Then the whole observation vector can be delayed by `delay_steps` agent steps
+//! ([`delay_line`]; the first observations of an episode repeat the initial one). Each sensor's
+//! model, defaults and sources are in its module's docs.
 //!
-//! ## Vision: noise
-//! With `x` the true boom tip minus capture point (TA frame) at the time the measurement shows,
-//! `r = |x|` and `u = x / r`, a measurement is `x + n` with
+//! # Components
+//! Each sensor is a component behind the [`Sensor`] trait (reset, physics step, sense, state) in
+//! a file of its own. [`Sensors`] holds the configuration, the [`SensedLayout`], the list of
+//! components (in the order of the table above: vision, gyro, AHRS, GNSS, load cell; a fixed
+//! struct, so the calls are static) and the delay line.
 //!
-//! ```text
-//! sigma_range = noise_floor + range_noise * r^2        along the line of sight u
-//! sigma_cross = noise_floor + bearing_noise * r        each of the two directions across it
-//! n = sigma_cross g + (sigma_range - sigma_cross) (u . g) u,    g ~ N(0, I_3)
-//! ```
+//! # Randomness
+//! Each component draws from its **own** stream: ChaCha8 keyed by the episode's initial-conditions
+//! seed, with the label [`crate::rng::sensor_stream`] of the sensor's name (`vision`, `gyro`,
+//! `ahrs`, `gnss`, `load_cell`). So a sensor's numbers depend on the seed, its name and its own
+//! configuration only: adding a sensor, or changing how many numbers one draws (the vision's
+//! update rate, for instance), shifts no other sensor's numbers
+//! (`changing_one_sensor_leaves_every_other_sensors_numbers_bit_identical`).
 //!
-//! so that `u . n ~ N(0, sigma_range^2)` and the part of `n` normal to `u` has the standard
-//! deviation `sigma_cross` in every direction. The range error grows with the square of the range
-//! because a stereo camera triangulates depth from disparity, `Z = f B / d`, so a disparity
-//! error `sigma_d` (pixels) gives `sigma_Z = Z^2 sigma_d / (f B)` (focal length `f` in pixels,
-//! baseline `B`; e.g. Gallup, Frahm, Mordohai & Pollefeys, "Variable baseline/resolution
-//! stereo", CVPR 2008, section 3); a monocular camera ranging on a target of known size `D` from
-//! its apparent size `s = f D / Z` has the same form, `sigma_Z = Z^2 sigma_s / (f D)`. The
-//! bearing error is an angle (detection and centroiding error over the focal length), so the
-//! cross-range error grows linearly. `noise_floor` collects what does not scale with range
-//! (the detected point wandering over the boom's tip, calibration). Defaults: `range_noise`
-//! 1e-3 1/m is `sigma_d / (f B)` for a 0.25 px disparity error, `f` = 1000 px and a 0.25 m
-//! baseline; `bearing_noise` 1 mrad is about one pixel at `f` = 1000 px; the floor is 2 cm.
-//! The line of sight is the same in every frame, so this distribution does not depend on the
-//! camera frame; the error of rotating a body-frame measurement into the TA frame with the
-//! estimated attitude is not modelled (an assumption).
-//!
-//! ## Vision: timing, latency, dropouts
-//! * **Latency.** The true `x` is recorded after every physics step in a ring buffer of
-//!   `round(latency / tether.time_step) + 1` entries allocated at construction; a measurement
-//!   taken at physics step `n` shows the state of step `n - round(latency / time_step)`. Before
-//!   the episode's first step the history is the initial state.
-//! * **Update rate.** Measurement `k` is taken at the first physics step at or after
-//!   `k / update_rate` (k = 0 at the reset). Between measurements the observation holds the last
-//!   received one. Rates that do not divide the physics rate give a period that alternates
-//!   between the two neighbouring whole numbers of physics steps, `update_rate` on average.
-//! * **Dropouts** (a Gilbert-Elliott two-state Markov chain: E. N. Gilbert, "Capacity of a
-//!   burst-noise channel", Bell System Technical Journal 39, 1960): at each measurement the link
-//!   goes from *received* to *lost* with probability `a` and from *lost* back to *received* with
-//!   probability `b = 1 / dropout_burst`, with `a = dropout b / (1 - dropout)`, so that a fraction
-//!   `dropout` of the measurements is lost (the chain's stationary probability of *lost*) in
-//!   bursts of `dropout_burst` measurements on average (geometric lengths). A lost measurement
-//!   changes nothing: the observation holds the last received one. Independent losses are the
-//!   special case `dropout_burst = 1 / (1 - dropout)`. The reset's measurement is always received.
-//!
-//! ## Vision: the rate
-//! `boom_rel_v*` is the finite difference of the last two received measurements over the times
-//! of the states they show, `(m_1 - m_0) / (t_1 - t_0)`. This is what a vision sensor gives
-//! without a motion model: the noise of the rate follows from the position noise and the update
-//! rate (`sqrt(sigma_0^2 + sigma_1^2) / (t_1 - t_0)` per direction), it is as late as the
-//! measurements (latency plus half an update period), and after a dropout the difference spans
-//! the gap (less noise, more lag). A "noisy true rate" would instead hand the agent a velocity
-//! whose error is independent of its position error, which no camera provides; filtering (an
-//! alpha-beta or Kalman tracker) is the agent's or controller's job. At the reset the measurement
-//! before the first one is a second, independent measurement of the initial state taken one
-//! update period earlier (the history before the episode is the initial state held), so the
-//! first rates show noise around zero, not the true initial rate.
-//!
-//! ## IMU and AHRS
-//! Body rates: `omega_m = omega + b_g + sigma_g g` per axis, the bias `b_g ~ N(0, rate_bias^2)`
-//! per axis drawn at the reset and constant over the episode (the turn-on bias of an
-//! uncalibrated MEMS gyro), white noise per observation (IEEE Std 952-1997's rate white noise
-//! sampled at the observation). Attitude: `q_m = q (x) exp(delta / 2)` with the body-axes
-//! rotation vector `delta = b_a + sigma_a g` (bias per axis drawn at the reset), normalised and
-//! put in the hemisphere w >= 0 like the true one. Defaults: 0.002 rad/s noise and 0.005 rad/s
-//! bias (0.11 and 0.29 deg/s: an uncalibrated MEMS gyro), 0.1 deg attitude noise and 0.5 deg
-//! bias per axis (MEMS AHRS datasheets give about 0.1-0.5 deg in roll and pitch and 0.5-2 deg in
-//! heading in dynamic conditions; one value for the three axes here).
-//!
-//! ## GNSS and load cell
-//! The ACCD's position offset and velocity relative to the aircraft from moving-baseline
-//! (relative) GNSS between the two: white noise per axis, 5 cm and 5 cm/s by default (RTK
-//! accuracy is 1-2 cm horizontally and about twice that vertically; the default allows for
-//! the antenna lever arm and multipath under the aircraft). The attachment tension from a load
-//! cell: white noise, 100 N by default (0.02 % of the tether's 550 kN breaking tension, a
-//! load cell of 0.1 % full-scale accuracy sized for the 275 kN overload limit gives about 275 N
-//! of bias-type error, of which the white part here is a fraction). GNSS and load cell have no
-//! rate, latency or dropout of their own (they are sampled at the observation; the whole-vector
-//! delay covers a common pipeline delay).
+//! # Where to add a sensor
+//! A file in `sensors/` with its component (and its configuration section, if it has one), a
+//! name not used before, one line in the `components!` list below and its construction in
+//! [`Sensors::new`]; the state format changes with it
+//! ([`crate::state_format::FORMAT_VERSION`]).
 //!
 //! # Cost and determinism
-//! Nothing here allocates after construction. Every draw comes from one stream in a fixed order
-//! (the vision's dropout draw and three normals at every measurement, received or not; thirteen
-//! normals at every observation; six at the reset for the biases and six for the reset's two
-//! vision measurements), so the sensor noise of an episode depends on its initial-conditions
-//! seed and the configuration only.
+//! Nothing here allocates after construction. The sensor noise of an episode depends on its
+//! initial-conditions seed and the configuration only.
 
-use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+pub mod ahrs;
+pub mod delay_line;
+pub mod gnss;
+pub mod gyro;
+pub mod load_cell;
+pub mod sensor;
+pub mod vision;
+
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use crate::rng::{NormalSampler, Stream, StreamState, SENSOR_STREAM};
-use crate::rotation;
-use crate::state_format::{check_len, StateError};
+use crate::state_format::StateError;
+use crate::task::sensors::ahrs::{Ahrs, AhrsState};
+use crate::task::sensors::delay_line::{DelayLine, DelayLineState};
+use crate::task::sensors::gnss::{Gnss, GnssState};
+use crate::task::sensors::gyro::{Gyro, GyroState};
+use crate::task::sensors::load_cell::{LoadCell, LoadCellState};
+use crate::task::sensors::vision::{Vision, VisionState};
 use accd_spec::Rules;
+
+pub use crate::task::sensors::gnss::GnssConfig;
+pub use crate::task::sensors::sensor::{Sensor, Truth};
+pub use crate::task::sensors::vision::VisionConfig;
 
 type V3 = Vector3<f64>;
 
 accd_spec::config_struct! {
-    /// The vision sensor measuring the boom tip relative to the capture point (module docs).
-    #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-    #[serde(deny_unknown_fields, default)]
-    pub struct VisionConfig {
-        /// At most one measurement per physics step: not above 1 / `tether.time_step`.
-        pub update_rate: f64 = 20.0, "Hz", "(0, 1000]",
-            "measurements per second (at most 1 / tether.time_step); between them the observation holds the last received one";
-        pub latency: f64 = 0.05, "s", "[0, 1]",
-            "age of the state a measurement shows (rounded to whole physics steps)";
-        pub noise_floor: f64 = 0.02, "m", "[0, 10]",
-            "standard deviation of the error at zero range (along and across the line of sight)";
-        pub range_noise: f64 = 1e-3, "1/m", "[0, 1]",
-            "k in the range error noise_floor + k r^2 along the line of sight (stereo triangulation)";
-        pub bearing_noise: f64 = 1e-3, "rad", "[0, 0.1]",
-            "angular error: the cross-range error is noise_floor + bearing_noise r per direction";
-        pub dropout: f64 = 0.05, "-", "[0, 0.5]",
-            "fraction of measurements lost (stationary probability of the Markov chain's lost state)";
-        pub dropout_burst: f64 = 3.0, "-", "[1, 1000]",
-            "mean number of consecutive measurements lost in one dropout";
-    }
-}
-
-/// Each field's range is all there is to check (the update rate against the physics step is
-/// the environment's rule).
-impl Rules for VisionConfig {}
-
-accd_spec::config_struct! {
-    /// The gyros and the attitude estimate (AHRS) of the ACCD (module docs).
+    /// The gyros and the attitude estimate (AHRS) of the ACCD (module docs of `gyro` and `ahrs`).
     #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
     #[serde(deny_unknown_fields, default)]
     pub struct ImuConfig {
@@ -159,21 +86,6 @@ accd_spec::config_struct! {
 
 /// Each field's range is all there is to check.
 impl Rules for ImuConfig {}
-
-accd_spec::config_struct! {
-    /// Relative GNSS between the aircraft and the ACCD (module docs).
-    #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-    #[serde(deny_unknown_fields, default)]
-    pub struct GnssConfig {
-        pub position_noise: f64 = 0.05, "m", "[0, 10]",
-            "standard deviation of the white noise of each component of the ACCD's position";
-        pub velocity_noise: f64 = 0.05, "m/s", "[0, 10]",
-            "standard deviation of the white noise of each component of the ACCD's velocity";
-    }
-}
-
-/// Each field's range is all there is to check.
-impl Rules for GnssConfig {}
 
 accd_spec::config_struct! {
     /// The sensor model of the observation (module docs of `accd_sim::task::sensors`). Off by
@@ -207,7 +119,7 @@ impl Rules for SensorsConfig {
 impl SensorsConfig {
     /// The vision latency in whole physics steps of `time_step` s.
     pub fn latency_steps(&self, time_step: f64) -> usize {
-        (self.vision.latency / time_step).round() as usize
+        self.vision.latency_steps(time_step)
     }
 
     /// Heap bytes of one episode's sensor state at physics step `time_step` s with `dim`
@@ -243,83 +155,105 @@ pub struct SensedLayout {
     pub tension: usize,
 }
 
-/// One received vision measurement: the value and the time of the state it shows (s, episode
-/// time; negative before the episode's start).
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Measurement {
-    value: V3,
-    time: f64,
+/// Declares the list of sensor components once: the struct of components, the struct of their
+/// states (in the list's order, which is the state format's) and the calls that go to every
+/// component in that order.
+macro_rules! components {
+    ($($field:ident: $sensor:ty => $state:ty),* $(,)?) => {
+        /// The sensor components of one episode, one field per sensor (module docs).
+        #[derive(Debug, Clone)]
+        pub struct Components {
+            $(
+                #[doc = concat!("The `", stringify!($field), "` sensor.")]
+                pub $field: $sensor,
+            )*
+        }
+
+        /// The dynamic state of each sensor component, in the order of [`Components`].
+        ///
+        /// Part of the state format: a change is a change of
+        /// [`crate::state_format::FORMAT_VERSION`].
+        #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+        pub struct ComponentStates {
+            $(
+                #[doc = concat!("The state of the `", stringify!($field), "` sensor.")]
+                pub $field: $state,
+            )*
+        }
+
+        impl Components {
+            fn reset(&mut self, seed: u64, truth: &Truth) {
+                $(self.$field.reset(seed, truth);)*
+            }
+
+            #[inline]
+            fn physics_step(&mut self, truth: &Truth) {
+                $(self.$field.physics_step(truth);)*
+            }
+
+            #[inline]
+            fn sense(&mut self, raw: &mut [f64]) {
+                $(self.$field.sense(raw);)*
+            }
+
+            fn state(&self) -> ComponentStates {
+                ComponentStates {
+                    $($field: self.$field.state(),)*
+                }
+            }
+
+            /// Each component's state in turn: on an error, the components before it changed
+            /// (the caller restores a copy, [`Sensors::set_state`]).
+            fn set_state(&mut self, state: &ComponentStates) -> Result<(), StateError> {
+                $(self.$field.set_state(&state.$field)?;)*
+                Ok(())
+            }
+        }
+    };
 }
 
-/// The sensors of one episode (module docs): configuration, biases, vision history and hold,
-/// observation delay line, and the stream.
+components! {
+    vision: Vision => VisionState,
+    gyro: Gyro => GyroState,
+    ahrs: Ahrs => AhrsState,
+    gnss: Gnss => GnssState,
+    load_cell: LoadCell => LoadCellState,
+}
+
+/// The sensors of one episode (module docs): configuration, layout, components, and the delay
+/// line of the whole observation.
 #[derive(Debug, Clone)]
 pub struct Sensors {
     config: SensorsConfig,
-    layout: SensedLayout,
-    time_step: f64,
-    latency_steps: usize,
-    /// Markov chain: P(received -> lost), P(lost -> received).
-    to_lost: f64,
-    to_received: f64,
-    stream: Stream,
-    rate_bias: V3,
-    attitude_bias: V3,
-    /// True boom-relative position after each of the last `latency_steps + 1` physics steps.
-    history: Vec<V3>,
-    /// Index of the newest entry of `history`.
-    head: usize,
-    /// Physics steps since the reset.
-    steps: u64,
-    /// Index of the next vision measurement.
-    next_update: u64,
-    lost: bool,
-    last: Measurement,
-    previous: Measurement,
-    received: u64,
-    dropped: u64,
-    /// The last `delay_steps + 1` observations, `dim` values each.
-    delayed: Vec<f32>,
-    /// Index (in observations) of the newest entry of `delayed`.
-    delayed_head: usize,
-    /// `delayed` holds this episode's observations (false after a reset until the first one).
-    delayed_filled: bool,
+    components: Components,
+    delay: DelayLine,
 }
 
 impl Sensors {
     /// The sensors of `config` (which must be enabled) at physics step `time_step` s for an
     /// observation of `layout`; every buffer is allocated here. Reset before use.
     pub fn new(config: &SensorsConfig, time_step: f64, layout: SensedLayout) -> Sensors {
-        let latency_steps = config.latency_steps(time_step);
-        let v = &config.vision;
-        let to_received = 1.0 / v.dropout_burst;
-        let to_lost = (v.dropout * to_received / (1.0 - v.dropout)).min(1.0);
-        let blank = Measurement {
-            value: V3::zeros(),
-            time: 0.0,
+        let imu = &config.imu;
+        let components = Components {
+            vision: Vision::new(
+                &config.vision,
+                time_step,
+                layout.boom_rel,
+                layout.boom_rel_rate,
+            ),
+            gyro: Gyro::new(imu.rate_noise, imu.rate_bias, layout.body_rates),
+            ahrs: Ahrs::new(
+                imu.attitude_noise_deg.to_radians(),
+                imu.attitude_bias_deg.to_radians(),
+                layout.attitude,
+            ),
+            gnss: Gnss::new(&config.gnss, layout.position, layout.velocity),
+            load_cell: LoadCell::new(config.tension_noise, layout.tension),
         };
         Sensors {
             config: config.clone(),
-            layout,
-            time_step,
-            latency_steps,
-            to_lost,
-            to_received,
-            stream: Stream::with_sampler(0, SENSOR_STREAM, NormalSampler::Ziggurat),
-            rate_bias: V3::zeros(),
-            attitude_bias: V3::zeros(),
-            history: vec![V3::zeros(); latency_steps + 1],
-            head: 0,
-            steps: 0,
-            next_update: 1,
-            lost: false,
-            last: blank,
-            previous: blank,
-            received: 0,
-            dropped: 0,
-            delayed: vec![0.0; (config.delay_steps + 1) * layout.dim],
-            delayed_head: 0,
-            delayed_filled: false,
+            components,
+            delay: DelayLine::new(config.delay_steps, layout.dim),
         }
     }
 
@@ -328,236 +262,79 @@ impl Sensors {
         &self.config
     }
 
+    /// The components.
+    pub fn components(&self) -> &Components {
+        &self.components
+    }
+
     /// The vision latency in physics steps.
     pub fn latency_steps(&self) -> usize {
-        self.latency_steps
+        self.components.vision.latency_steps()
     }
 
     /// Vision measurements received and lost since the reset (the reset's own two not counted).
     pub fn vision_counts(&self) -> (u64, u64) {
-        (self.received, self.dropped)
+        self.components.vision.counts()
     }
 
     /// The constant biases of this episode: body rates (rad/s) and attitude (rad, body axes).
     pub fn biases(&self) -> (V3, V3) {
-        (self.rate_bias, self.attitude_bias)
+        (self.components.gyro.bias(), self.components.ahrs.bias())
     }
 
-    /// Starts an episode: a fresh stream of `seed` (the initial-conditions seed), biases drawn,
-    /// the vision history filled with the initial boom-relative position `boom_rel` and the
-    /// reset's measurement taken (received), the delay line emptied.
+    /// Starts an episode: every component reset with `seed` (the initial-conditions seed) and
+    /// the initial boom-relative position `boom_rel`, the delay line emptied.
     pub fn reset(&mut self, seed: u64, boom_rel: &V3) {
-        self.stream = Stream::with_sampler(seed, SENSOR_STREAM, NormalSampler::Ziggurat);
-        let imu = &self.config.imu;
-        let (rb, ab) = (imu.rate_bias, imu.attitude_bias_deg.to_radians());
-        self.rate_bias = V3::new(self.normal(rb), self.normal(rb), self.normal(rb));
-        self.attitude_bias = V3::new(self.normal(ab), self.normal(ab), self.normal(ab));
-        self.history.fill(*boom_rel);
-        self.head = 0;
-        self.steps = 0;
-        self.next_update = 1;
-        self.lost = false;
-        self.received = 0;
-        self.dropped = 0;
-        let shown = -(self.latency_steps as f64) * self.time_step;
-        self.previous = Measurement {
-            value: boom_rel + self.vision_noise(boom_rel),
-            time: shown - 1.0 / self.config.vision.update_rate,
-        };
-        self.last = Measurement {
-            value: boom_rel + self.vision_noise(boom_rel),
-            time: shown,
-        };
-        self.delayed_filled = false;
-        self.delayed_head = 0;
+        self.components.reset(
+            seed,
+            &Truth {
+                boom_rel: *boom_rel,
+            },
+        );
+        self.delay.reset();
     }
 
-    /// After a physics step: records the true boom-relative position `boom_rel` (m) and takes a
-    /// vision measurement if one is due (module docs).
+    /// After a physics step: every component records the true boom-relative position
+    /// `boom_rel` (m) and measures if a measurement is due.
+    #[inline]
     pub fn physics_step(&mut self, boom_rel: &V3) {
-        self.steps += 1;
-        self.head = (self.head + 1) % self.history.len();
-        self.history[self.head] = *boom_rel;
-        let elapsed = self.steps as f64 * self.time_step;
-        let due = elapsed * self.config.vision.update_rate;
-        if due + 1e-9 < self.next_update as f64 {
-            return;
-        }
-        self.next_update = (due + 1e-9).floor() as u64 + 1;
-        // The oldest entry: `latency_steps` physics steps before the newest.
-        let shown = self.history[(self.head + 1) % self.history.len()];
-        let u = self.stream.uniform();
-        self.lost = if self.lost {
-            u >= self.to_received
-        } else {
-            u < self.to_lost
-        };
-        let noise = self.vision_noise(&shown);
-        if self.lost {
-            self.dropped += 1;
-        } else {
-            self.received += 1;
-            self.previous = self.last;
-            self.last = Measurement {
-                value: shown + noise,
-                time: elapsed - self.latency_steps as f64 * self.time_step,
-            };
-        }
+        self.components.physics_step(&Truth {
+            boom_rel: *boom_rel,
+        });
     }
 
     /// Replaces the true values of the sensed quantities in `raw` (physical units, the layout's
     /// places; the attitude in the hemisphere w >= 0) by their measurements.
+    #[inline]
     pub fn sense(&mut self, raw: &mut [f64]) {
-        let l = self.layout;
-        let rate = (self.last.value - self.previous.value) / (self.last.time - self.previous.time);
-        for i in 0..3 {
-            raw[l.boom_rel + i] = self.last.value[i];
-            raw[l.boom_rel_rate + i] = rate[i];
-        }
-        let gnss = &self.config.gnss;
-        let (sp, sv) = (gnss.position_noise, gnss.velocity_noise);
-        for i in 0..3 {
-            raw[l.position + i] += self.normal(sp);
-        }
-        for i in 0..3 {
-            raw[l.velocity + i] += self.normal(sv);
-        }
-        let sa = self.config.imu.attitude_noise_deg.to_radians();
-        let delta = self.attitude_bias + V3::new(self.normal(sa), self.normal(sa), self.normal(sa));
-        let a = l.attitude;
-        let q = UnitQuaternion::new_normalize(Quaternion::new(
-            raw[a],
-            raw[a + 1],
-            raw[a + 2],
-            raw[a + 3],
-        ));
-        let m = (q * rotation::from_scaled_axis(delta)).into_inner();
-        let sign = if m.w < 0.0 { -1.0 } else { 1.0 };
-        raw[a] = sign * m.w;
-        raw[a + 1] = sign * m.i;
-        raw[a + 2] = sign * m.j;
-        raw[a + 3] = sign * m.k;
-        let sg = self.config.imu.rate_noise;
-        for i in 0..3 {
-            raw[l.body_rates + i] += self.rate_bias[i] + self.normal(sg);
-        }
-        raw[l.tension] += self.normal(self.config.tension_noise);
+        self.components.sense(raw);
     }
 
     /// Puts `obs` (one scaled observation) into the delay line and replaces it by the one of
     /// `delay_steps` calls ago (the first of the episode while there are fewer).
-    pub fn delay(&mut self, obs: &mut [f32]) {
-        let dim = self.layout.dim;
-        let slots = self.config.delay_steps + 1;
-        if !self.delayed_filled {
-            for slot in self.delayed.chunks_exact_mut(dim) {
-                slot.copy_from_slice(obs);
-            }
-            self.delayed_filled = true;
-            self.delayed_head = 0;
-            return;
-        }
-        self.delayed_head = (self.delayed_head + 1) % slots;
-        let at = self.delayed_head * dim;
-        self.delayed[at..at + dim].copy_from_slice(obs);
-        let oldest = ((self.delayed_head + 1) % slots) * dim;
-        obs.copy_from_slice(&self.delayed[oldest..oldest + dim]);
-    }
-
-    /// `sigma` times a standard normal deviate of the stream.
     #[inline]
-    fn normal(&mut self, sigma: f64) -> f64 {
-        sigma * self.stream.gaussian()
+    pub fn delay(&mut self, obs: &mut [f32]) {
+        self.delay.delay(obs);
     }
 
-    /// A draw of the vision error at the true boom-relative position `x` (module docs).
-    fn vision_noise(&mut self, x: &V3) -> V3 {
-        let v = &self.config.vision;
-        let r = x.norm();
-        let along = v.noise_floor + v.range_noise * r * r;
-        let across = v.noise_floor + v.bearing_noise * r;
-        let g = V3::new(
-            self.stream.gaussian(),
-            self.stream.gaussian(),
-            self.stream.gaussian(),
-        );
-        let u = if r > 0.0 { x / r } else { V3::zeros() };
-        across * g + (along - across) * u.dot(&g) * u
-    }
-
-    /// The dynamic state (stream, biases, vision history and hold, delay line).
+    /// The dynamic state: each component's, then the delay line's.
     pub fn state(&self) -> SensorState {
         SensorState {
-            stream: self.stream.state(),
-            rate_bias: self.rate_bias.into(),
-            attitude_bias: self.attitude_bias.into(),
-            history: self.history.iter().map(|v| (*v).into()).collect(),
-            head: self.head as u64,
-            steps: self.steps,
-            next_update: self.next_update,
-            lost: self.lost,
-            last: self.last.value.into(),
-            last_time: self.last.time,
-            previous: self.previous.value.into(),
-            previous_time: self.previous.time,
-            received: self.received,
-            dropped: self.dropped,
-            delayed: self.delayed.clone(),
-            delayed_head: self.delayed_head as u64,
-            delayed_filled: self.delayed_filled,
+            components: self.components.state(),
+            delay: self.delay.state(),
         }
     }
 
     /// Restores a state of [`Sensors::state`] of sensors with the same configuration, checked
-    /// whole first (lengths and indices): on an error nothing changed.
+    /// whole (lengths, indices, each stream's label) into a copy first: on an error nothing
+    /// changed.
     pub fn set_state(&mut self, state: &SensorState) -> Result<(), StateError> {
-        check_len("sensors.history", state.history.len(), self.history.len())?;
-        check_len("sensors.delayed", state.delayed.len(), self.delayed.len())?;
-        if state.head >= self.history.len() as u64 {
-            return Err(StateError::invalid(
-                "sensors.head",
-                state.head,
-                format!("below {}", self.history.len()),
-            ));
-        }
-        let slots = self.config.delay_steps as u64 + 1;
-        if state.delayed_head >= slots {
-            return Err(StateError::invalid(
-                "sensors.delayed_head",
-                state.delayed_head,
-                format!("below {slots}"),
-            ));
-        }
-        if state.stream.chacha.stream != SENSOR_STREAM {
-            return Err(StateError::invalid(
-                "sensors.stream.chacha.stream",
-                state.stream.chacha.stream,
-                format!("the sensor stream's label {SENSOR_STREAM}"),
-            ));
-        }
-        self.stream = Stream::from_state(&state.stream, NormalSampler::Ziggurat);
-        self.rate_bias = state.rate_bias.into();
-        self.attitude_bias = state.attitude_bias.into();
-        for (h, s) in self.history.iter_mut().zip(&state.history) {
-            *h = (*s).into();
-        }
-        self.head = state.head as usize;
-        self.steps = state.steps;
-        self.next_update = state.next_update;
-        self.lost = state.lost;
-        self.last = Measurement {
-            value: state.last.into(),
-            time: state.last_time,
-        };
-        self.previous = Measurement {
-            value: state.previous.into(),
-            time: state.previous_time,
-        };
-        self.received = state.received;
-        self.dropped = state.dropped;
-        self.delayed.copy_from_slice(&state.delayed);
-        self.delayed_head = state.delayed_head as usize;
-        self.delayed_filled = state.delayed_filled;
+        let mut components = self.components.clone();
+        components.set_state(&state.components)?;
+        let mut delay = self.delay.clone();
+        delay.set_state(&state.delay)?;
+        self.components = components;
+        self.delay = delay;
         Ok(())
     }
 }
@@ -567,45 +344,17 @@ impl Sensors {
 /// Part of the state format: a change is a change of [`crate::state_format::FORMAT_VERSION`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SensorState {
-    /// The sensor stream.
-    pub stream: StreamState,
-    /// Body-rate biases, rad/s.
-    pub rate_bias: [f64; 3],
-    /// Attitude biases (body axes), rad.
-    pub attitude_bias: [f64; 3],
-    /// True boom-relative positions of the last physics steps (a ring), m.
-    pub history: Vec<[f64; 3]>,
-    /// Index of the newest entry of `history`.
-    pub head: u64,
-    /// Physics steps since the reset.
-    pub steps: u64,
-    /// Index of the next vision measurement.
-    pub next_update: u64,
-    /// The dropout chain is in its lost state.
-    pub lost: bool,
-    /// The last received measurement, m.
-    pub last: [f64; 3],
-    /// The time of the state it shows, s.
-    pub last_time: f64,
-    /// The one before, m.
-    pub previous: [f64; 3],
-    /// The time of the state it shows, s.
-    pub previous_time: f64,
-    /// Measurements received since the reset.
-    pub received: u64,
-    /// Measurements lost since the reset.
-    pub dropped: u64,
-    /// The delay line of scaled observations (a ring of `delay_steps + 1`).
-    pub delayed: Vec<f32>,
-    /// Index of its newest observation.
-    pub delayed_head: u64,
-    /// The delay line holds this episode's observations.
-    pub delayed_filled: bool,
+    /// Each sensor component's state.
+    pub components: ComponentStates,
+    /// The delay line of the whole observation.
+    pub delay: DelayLineState,
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::rng::sensor_stream;
+    use nalgebra::{Quaternion, UnitQuaternion};
 
     const DT: f64 = 0.01;
     /// A small observation vector: the groups in the order of the real table, 20 values.
@@ -658,8 +407,8 @@ mod tests {
     }
 
     /// A raw observation whose attitude is the identity.
-    fn raw() -> Vec<f64> {
-        let mut r = vec![0.0; layout().dim];
+    fn raw() -> [f64; 20] {
+        let mut r = [0.0; 20];
         r[LAYOUT.attitude] = 1.0;
         r
     }
@@ -900,7 +649,7 @@ mod tests {
         let n = 20_000;
         let (mut rate_err, mut att_err) = (vec![vec![]; 3], vec![vec![]; 3]);
         for _ in 0..n {
-            let mut r = input.clone();
+            let mut r = input;
             s.sense(&mut r);
             let m = UnitQuaternion::new_normalize(Quaternion::new(
                 r[l.attitude],
@@ -1085,27 +834,124 @@ mod tests {
             assert_eq!(oa, ob);
         }
         let mut bad = state.clone();
-        bad.history.pop();
+        bad.components.vision.history.pop();
         let before = b.state();
         assert!(b
             .set_state(&bad)
             .unwrap_err()
             .to_string()
-            .contains("sensors.history"));
+            .contains("sensors.vision.history"));
         let mut bad = state.clone();
-        bad.head = bad.history.len() as u64;
+        bad.components.vision.head = bad.components.vision.history.len() as u64;
         assert!(b
             .set_state(&bad)
             .unwrap_err()
             .to_string()
-            .contains("sensors.head"));
+            .contains("sensors.vision.head"));
+        let mut bad = state.clone();
+        bad.delay.head = 3;
+        assert!(b
+            .set_state(&bad)
+            .unwrap_err()
+            .to_string()
+            .contains("sensors.delay.head"));
+        // A stream of another sensor, after components that restore fine: refused whole.
         let mut bad = state;
-        bad.delayed_head = 3;
-        assert!(b
-            .set_state(&bad)
-            .unwrap_err()
-            .to_string()
-            .contains("sensors.delayed_head"));
+        bad.components.load_cell.stream = bad.components.gnss.stream;
+        bad.components.vision.steps += 1;
+        let e = b.set_state(&bad).unwrap_err().to_string();
+        assert!(e.contains("sensors.load_cell.stream.chacha.stream"), "{e}");
         assert_eq!(b.state(), before, "a refused state changes nothing");
+    }
+
+    /// Each component on its own, reset with the same seed, draws exactly the numbers it draws
+    /// among the others: a sensor's numbers do not depend on which other sensors there are.
+    #[test]
+    fn a_sensor_alone_measures_what_it_measures_among_the_others() {
+        let c = SensorsConfig {
+            enabled: true,
+            ..SensorsConfig::default()
+        };
+        let l = LAYOUT;
+        let mut all = Sensors::new(&c, DT, layout());
+        let mut vision = Vision::new(&c.vision, DT, l.boom_rel, l.boom_rel_rate);
+        let mut gyro = Gyro::new(c.imu.rate_noise, c.imu.rate_bias, l.body_rates);
+        let mut ahrs = Ahrs::new(
+            c.imu.attitude_noise_deg.to_radians(),
+            c.imu.attitude_bias_deg.to_radians(),
+            l.attitude,
+        );
+        let mut gnss = Gnss::new(&c.gnss, l.position, l.velocity);
+        let mut load_cell = LoadCell::new(c.tension_noise, l.tension);
+        let truth = |n: u64| Truth {
+            boom_rel: ramp(n) * 0.01,
+        };
+        all.reset(15, &truth(0).boom_rel);
+        vision.reset(15, &truth(0));
+        gyro.reset(15, &truth(0));
+        ahrs.reset(15, &truth(0));
+        gnss.reset(15, &truth(0));
+        load_cell.reset(15, &truth(0));
+        for n in 1..=300 {
+            all.physics_step(&truth(n).boom_rel);
+            vision.physics_step(&truth(n));
+            if n % 10 == 0 {
+                let mut together = raw();
+                all.sense(&mut together);
+                let mut alone = raw();
+                vision.sense(&mut alone);
+                gyro.sense(&mut alone);
+                ahrs.sense(&mut alone);
+                gnss.sense(&mut alone);
+                load_cell.sense(&mut alone);
+                assert_eq!(
+                    together.map(f64::to_bits),
+                    alone.map(f64::to_bits),
+                    "step {n}"
+                );
+            }
+        }
+        // Only the components' own draws: the same seed gives each sensor other numbers.
+        let mut r = raw();
+        gyro.sense(&mut r);
+        let mut q = raw();
+        load_cell.sense(&mut q);
+        assert_ne!(r[l.body_rates], q[l.tension]);
+    }
+
+    /// Every sensor has its own stream label, distinct from each other's and from the physics
+    /// streams'.
+    #[test]
+    fn every_sensor_has_a_stream_of_its_own() {
+        let names = [
+            Vision::NAME,
+            Gyro::NAME,
+            Ahrs::NAME,
+            Gnss::NAME,
+            LoadCell::NAME,
+        ];
+        let mut labels: Vec<u64> = names.iter().map(|n| sensor_stream(n)).collect();
+        labels.extend([
+            crate::rng::WAKE_LANES_STREAM,
+            crate::rng::AMBIENT_STREAM,
+            crate::rng::RLV_STREAM,
+            crate::task::episode::INITIAL_STREAM,
+            crate::task::randomization::PARAMETERS_STREAM,
+        ]);
+        let mut sorted = labels.clone();
+        sorted.sort_unstable();
+        sorted.dedup();
+        assert_eq!(sorted.len(), labels.len(), "{labels:x?}");
+        let state = Sensors::new(&SensorsConfig::default(), DT, layout()).state();
+        let c = &state.components;
+        for (name, stream) in [
+            ("vision", &c.vision.stream),
+            ("gyro", &c.gyro.stream),
+            ("ahrs", &c.ahrs.stream),
+            ("gnss", &c.gnss.stream),
+            ("load_cell", &c.load_cell.stream),
+        ] {
+            assert_eq!(stream.chacha.stream, sensor_stream(name), "{name}");
+        }
     }
 }

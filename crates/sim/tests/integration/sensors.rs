@@ -1,13 +1,18 @@
 //! The sensor model in the episode (`sensors`): switching it on changes the observation only
 //! (the physics, reward and episode end are bitwise those of the same seeds without it), its
 //! draws are deterministic per seed, the latency and the observation delay shift the true
-//! signal by exactly their steps, and a saved state continues bit for bit.
+//! signal by exactly their steps, a saved state continues bit for bit, and each sensor draws
+//! from its own stream: changing one sensor's parameters (also the vision's update rate, latency
+//! and dropouts, which change how many numbers it draws) leaves every other sensor's measurements
+//! bit for bit as they were.
 
 use crate::support;
 use support::episode;
 
+use accd_sim::task::observation::{OBS_DIM, SENSED_LAYOUT};
 use accd_sim::task::sensors::SensorsConfig;
-use accd_sim::{observation_index, EnvConfig, Episode, Outcome};
+use accd_sim::{observation_index, EnvConfig, Episode, Outcome, Sensors};
+use nalgebra::Vector3;
 
 /// A 5 s window; the capture radius so small that no capture ends the episode early.
 fn quick(sensors: SensorsConfig) -> EnvConfig {
@@ -279,4 +284,99 @@ fn a_state_saved_mid_episode_with_sensors_continues_bit_for_bit() {
     assert!(e.contains("sensors"), "{e}");
     let e = b.set_state(off.state()).unwrap_err().to_string();
     assert!(e.contains("sensors"), "{e}");
+}
+
+/// The physics step of the isolation test's sensors, s.
+const TIME_STEP: f64 = 0.01;
+
+/// The observation slots of each sensor: vision (position and rate), gyros, AHRS, GNSS, load cell.
+fn slots() -> [(&'static str, Vec<usize>); 5] {
+    let l = SENSED_LAYOUT;
+    let run = |start: usize, n: usize| (start..start + n).collect::<Vec<_>>();
+    [
+        (
+            "vision",
+            [run(l.boom_rel, 3), run(l.boom_rel_rate, 3)].concat(),
+        ),
+        ("gyro", run(l.body_rates, 3)),
+        ("ahrs", run(l.attitude, 4)),
+        ("gnss", [run(l.position, 3), run(l.velocity, 3)].concat()),
+        ("load_cell", vec![l.tension]),
+    ]
+}
+
+/// The sensors' measurements (raw values, bits) of a moving signal over 600 physics steps, an
+/// observation every 10 steps.
+fn measurements(config: &SensorsConfig, seed: u64) -> Vec<[u64; OBS_DIM]> {
+    let mut sensors = Sensors::new(config, TIME_STEP, SENSED_LAYOUT);
+    let boom = |n: u64| Vector3::new(-20.0 + 0.01 * n as f64, 1.0 - 0.002 * n as f64, 2.0);
+    sensors.reset(seed, &boom(0));
+    let mut out = vec![];
+    for n in 1..=600u64 {
+        sensors.physics_step(&boom(n));
+        if n % 10 == 0 {
+            let mut raw = [0.0f64; OBS_DIM];
+            raw[SENSED_LAYOUT.attitude] = 0.8;
+            raw[SENSED_LAYOUT.attitude + 2] = 0.6;
+            raw[SENSED_LAYOUT.body_rates] = 0.1;
+            raw[SENSED_LAYOUT.tension] = 1.0e4;
+            sensors.sense(&mut raw);
+            out.push(raw.map(f64::to_bits));
+        }
+    }
+    out
+}
+
+fn defaults() -> SensorsConfig {
+    SensorsConfig {
+        enabled: true,
+        ..SensorsConfig::default()
+    }
+}
+
+#[test]
+fn changing_one_sensor_leaves_every_other_sensors_numbers_bit_identical() {
+    let base = defaults();
+    let mut variants: Vec<(&str, SensorsConfig)> = vec![];
+    let mut c = defaults();
+    c.vision.update_rate = 30.0;
+    c.vision.latency = 0.08;
+    c.vision.dropout = 0.2;
+    variants.push(("vision", c));
+    let mut c = defaults();
+    c.imu.rate_noise *= 3.0;
+    c.imu.rate_bias *= 2.0;
+    variants.push(("gyro", c));
+    let mut c = defaults();
+    c.imu.attitude_noise_deg *= 3.0;
+    c.imu.attitude_bias_deg *= 2.0;
+    variants.push(("ahrs", c));
+    let mut c = defaults();
+    c.gnss.position_noise *= 3.0;
+    c.gnss.velocity_noise *= 2.0;
+    variants.push(("gnss", c));
+    let mut c = defaults();
+    c.tension_noise *= 3.0;
+    variants.push(("load_cell", c));
+    for seed in [3, 11] {
+        let before = measurements(&base, seed);
+        for (changed, config) in &variants {
+            let after = measurements(config, seed);
+            for (sensor, indices) in slots() {
+                let differing = before
+                    .iter()
+                    .zip(&after)
+                    .filter(|(b, a)| indices.iter().any(|&i| b[i] != a[i]))
+                    .count();
+                if sensor == *changed {
+                    assert!(differing > 0, "{changed} changed, its numbers did not");
+                } else {
+                    assert_eq!(
+                        differing, 0,
+                        "seed {seed}: changing the {changed} shifted the {sensor}'s numbers"
+                    );
+                }
+            }
+        }
+    }
 }
