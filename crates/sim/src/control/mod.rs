@@ -7,10 +7,12 @@
 //! * [`lqr`]: the design (LQR gain, Kalman gain, offset-free reference) of one configuration.
 //! * [`filter`]: the per-step work (predict, update, control law) of one env.
 //! * [`mpc`]: the MPC baseline, a condensed QP on the filter's estimate with the flap limits and
-//!   the closing-speed limit as constraints.
+//!   the capture conditions (closing speed, capture radius) as constraints.
+//! * [`qp`]: the exact dense QP solver the MPC uses (the Goldfarb-Idnani dual active-set method).
 
 pub mod filter;
 pub mod lqr;
 pub mod matrix;
 pub mod mpc;
+pub mod qp;
 pub mod riccati;
