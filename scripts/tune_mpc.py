@@ -1,7 +1,7 @@
 """Chooses the MPC baseline's horizon, lead and margin (accd_gym.control.mpc.MpcTuning) on VALIDATION wake seeds only.
 
 Usage: python scripts/tune_mpc.py [--episodes 50] [--tiers precision,hard] [--horizons 10,20,30]
-       [--leads 0.5] [--margins 0.8] [--out training/mpc_tuning.json]
+       [--leads 0.5] [--margins 0.8] [--confirm 0] [--out training/mpc_tuning.json]
 
 Every (horizon, lead, margin) of the grid (``--leads``: fractions of the horizon, rounded up; the
 other settings at MpcTuning's defaults) and the LQR
@@ -11,7 +11,8 @@ tiers (ties: the shorter horizon, the cheaper one, then the larger lead and marg
 captures, the median miss distance and closing speed at the closest approach, the outcomes, the
 solve counts, the policy's CPU time per env step (the controller alone, process time of its
 ``predict`` calls) and the wall time per env step including the physics, to JSON. Timings are of
-this machine with whatever else runs on it: rough costs.
+this machine with whatever else runs on it: rough costs. ``--confirm N`` then flies the chosen
+tuning and the LQR on the next N validation wake seeds, which the choice did not see.
 """
 
 import argparse
@@ -79,6 +80,7 @@ def main() -> None:
     ap.add_argument("--horizons", default="10,20,30")
     ap.add_argument("--leads", default="0.5")
     ap.add_argument("--margins", default="0.8")
+    ap.add_argument("--confirm", type=int, default=0)
     ap.add_argument("--out", default="training/mpc_tuning.json")
     args = ap.parse_args()
     seeds = list(VALIDATION_WAKE_SEEDS[: args.episodes])
@@ -102,6 +104,16 @@ def main() -> None:
     best = max(rows, key=lambda r: (r["captured"], -r["tuning"]["horizon"], r["tuning"]["lead"], r["tuning"]["margin"]))
     doc = {"policy": "mpc", "wake_seeds": "VALIDATION_WAKE_SEEDS[:%d]" % args.episodes, "base_seed": EVAL_BASE_SEED,
            "tiers": tiers, "lqr": results["lqr"], "best": best, "results": rows}
+    if args.confirm:
+        fresh = list(VALIDATION_WAKE_SEEDS[args.episodes: args.episodes + args.confirm])
+        assert not set(fresh) & set(HELD_OUT_WAKE_SEEDS)
+        tuning = MpcTuning(**best["tuning"])
+        doc["confirmation"] = {"wake_seeds": "VALIDATION_WAKE_SEEDS[%d:%d]" % (args.episodes, args.episodes + args.confirm)}
+        for t in tiers:
+            cfg = tier(t).config()
+            doc["confirmation"][t] = {"mpc": _fly(MpcPolicy.for_config(cfg, tuning=tuning), cfg, fresh),
+                                      "lqr": _fly(LqrPolicy.for_config(cfg), cfg, fresh)}
+            print("confirmation", t, doc["confirmation"][t], flush=True)
     Path(args.out).write_text(json.dumps(doc, indent=1))
     print(json.dumps({"best": best["tuning"], "captured": best["captured"]}))
 
