@@ -204,8 +204,8 @@ class Mpc:
         u_ss: _FloatArray,
         r_flap: float,
         dt: float,
-        settings: tuple[int, float, float, float, float, int],
-        limits: tuple[float, float],
+        settings: tuple[int, int, float, float, float, int],
+        limits: tuple[float, float, float],
     ) -> "Mpc": ...
     @property
     def num_envs(self) -> int: ...

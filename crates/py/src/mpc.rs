@@ -35,8 +35,8 @@ impl PyMpc {
     /// The MPC of an LQR design's matrices (``n`` plant states; ``f``, ``g``, ``h``, ``l``,
     /// ``k``, ``k_ff``, ``y_trim`` as ``LqrFilter``'s; ``q``, ``p`` the LQR's weight and Riccati
     /// solution, ``x_ss``, ``u_ss`` its reference), ``r_flap``, the agent step ``dt``, the
-    /// settings ``(horizon, speed_margin, window, slack_weight, rho, iterations)`` and the
-    /// capture limits ``(max_closing_speed, approach_speed)``. ``ConfigError`` naming the field
+    /// settings ``(horizon, lead, margin, window, slack_weight, iterations)`` and the capture limits
+    /// ``(max_closing_speed, capture_radius, approach_speed)``. ``ConfigError`` naming the field
     /// for a bad value (a zero horizon among them).
     #[new]
     #[allow(clippy::too_many_arguments)]
@@ -56,12 +56,12 @@ impl PyMpc {
         u_ss: PyReadonlyArray2<'_, f64>,
         r_flap: f64,
         dt: f64,
-        settings: (usize, f64, f64, f64, f64, usize),
-        limits: (f64, f64),
+        settings: (usize, usize, f64, f64, f64, usize),
+        limits: (f64, f64, f64),
     ) -> PyResult<Self> {
-        let (horizon, speed_margin, window, slack_weight, rho, iterations) = settings;
-        let tuning = MpcTuning::new(horizon, speed_margin, window, slack_weight, rho, iterations)
-            .py_err()?;
+        let (horizon, lead, margin, window, slack_weight, iterations) = settings;
+        let tuning =
+            MpcTuning::new(horizon, lead, margin, window, slack_weight, iterations).py_err()?;
         let y = y_trim.as_array();
         check_shape("y_trim", y.shape(), &[MEASURED_DIM])?;
         let mut yt = [0.0; MEASURED_DIM];
@@ -83,7 +83,8 @@ impl PyMpc {
         let (q, p, x_ss, u_ss) = (from_py(&q), from_py(&p), from_py(&x_ss), from_py(&u_ss));
         let limits = CaptureLimits {
             max_closing_speed: limits.0,
-            approach_speed: limits.1,
+            capture_radius: limits.1,
+            approach_speed: limits.2,
         };
         let mpc = py
             .detach(|| {
@@ -118,8 +119,8 @@ impl PyMpc {
     }
 
     /// ``(steps, constrained, inexact, fallbacks)`` since construction: rows stepped, rows
-    /// solved with active constraints, rows whose solve reached the iteration limit, rows whose
-    /// solve failed and that got the LQR's command.
+    /// solved exactly with active constraints, rows whose solve reached the active-set step
+    /// limit and rows whose solve failed (both of which got the LQR's command).
     #[getter]
     fn stats(&self) -> (u64, u64, u64, u64) {
         (

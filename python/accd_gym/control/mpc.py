@@ -6,25 +6,29 @@ Rust code) with the LQR's cost as its stage cost and the LQR's Riccati solution 
 cost, so that without active constraints its command is the LQR's. Constraints:
 
 * **flap limits** (hard): every planned command in [-1, 1];
-* **closing speed** (soft, a quadratic slack penalty ``slack_weight``): near the boom's predicted
-  arrival (the predicted along-track distance under ``window`` m, or past it) the capture point's
-  lateral velocity relative to the boom tip stays, per axis, within
-  ``speed_margin * sqrt((max_closing_speed^2 - approach_speed^2) / 2)`` (the box inside the
-  closing-speed sphere the boom's approach leaves), the limits read from the env's ``boom``
-  configuration.
+* **capture conditions** (a terminal set, softened): at the steps from ``lead`` on and from the
+  boom's predicted arrival on (the predicted along-track distance changing sign or coming within
+  the capture radius), the capture point's y-z offset from the boom
+  tip within ``margin * capture_radius`` and its y-z velocity relative to the tip within
+  ``margin * max_closing_speed`` (each disk kept by its inscribed octagon); before the arrival,
+  at the steps (from ``lead`` on) whose predicted along-track distance is under ``window`` m, the
+  velocity within
+  ``margin * sqrt(max_closing_speed^2 - a^2)`` (``a``: the boom's closing speed, at most
+  ``approach_speed``). The limits are read from the env's ``boom`` configuration. One slack per
+  condition with the exact penalty ``slack_weight`` keeps the problem feasible where the set
+  cannot be reached in time.
 
-The condensed QP (``4 horizon`` variables) is solved in Rust (``accd_sim::control::mpc``): the
-unconstrained optimum is one matrix product; where it breaks an active bound, a dense ADMM
-iteration (OSQP's) with its matrix factored once per design, started from that optimum clipped
-to the flap box. A solve that reaches ``iterations`` without converging, or meets a non-finite
-estimate or iterate, falls back to the LQR's command for that step; :attr:`MpcPolicy.stats`
-counts the constrained solves, the unconverged ones and the non-finite ones. Every row is stepped in fixed-order arithmetic with the GIL released:
-the same bits whatever the batch size or CPU.
+The condensed QP (``4 horizon + 2`` variables) is solved exactly in Rust
+(``accd_sim::control::qp``, the Goldfarb-Idnani dual active-set method, started from the
+unconstrained optimum, which is one matrix product and the answer when it keeps every
+constraint). A solve that reaches ``iterations`` active-set steps, or meets a non-finite
+estimate or an infeasible problem, falls back to the LQR's command for that step;
+:attr:`MpcPolicy.stats` counts the constrained solves and both fallbacks. Every row is stepped
+in fixed-order arithmetic with the GIL released: the same bits whatever the batch size or CPU.
 
-Defaults (:class:`MpcTuning`): set by hand, ADMM's ``rho`` from a comparison of unconverged
-solves on four training-seed episodes; ``training/mpc_tuning.json`` (``scripts/tune_mpc.py``, on
-validation wake seeds only) records the horizon of 20 against the LQR: 47 of 50 precision
-episodes captured (the LQR 47), 44 of 50 hard (the LQR 47). No horizon sweep is recorded yet.
+Defaults (:class:`MpcTuning`): horizon 20 agent steps (2 s), lead 15, margin 0.8, chosen on
+validation wake seeds only by ``scripts/tune_mpc.py`` (horizons 10 and 20, leads of half and
+three quarters of the horizon); ``training/mpc_tuning.json`` records the sweep and the choice.
 """
 
 from __future__ import annotations
@@ -45,18 +49,20 @@ from accd_gym.errors import ConfigError
 class MpcTuning:
     """Settings of :class:`MpcPolicy` (see the module docstring).
 
-    ``horizon`` (agent steps, >= 1), ``speed_margin`` (fraction of the lateral closing-speed
-    bound, (0, 1]), ``window`` (m: the along-track distance to the boom under which the speed
-    rows are active), ``slack_weight`` (per (m/s)^2 of speed-bound violation), ``rho`` (ADMM's
-    penalty relative to the QP's mean Hessian diagonal), ``iterations`` (ADMM's limit).
+    ``horizon`` (agent steps, >= 1), ``lead`` (the first step of the horizon the capture
+    conditions hold at, [1, horizon]), ``margin`` (fraction of the closing-speed limit and of the
+    capture radius the prediction keeps, (0, 1]), ``window`` (m: the along-track distance to the
+    boom under which the speed rows hold before the arrival), ``slack_weight`` (the exact
+    penalty per m/s or m of violation of the capture conditions), ``iterations`` (the
+    active-set step limit of one solve).
     """
 
     horizon: int = 20
-    speed_margin: float = 0.8
+    lead: int = 15
+    margin: float = 0.8
     window: float = 1.0
     slack_weight: float = 1000.0
-    rho: float = 0.003
-    iterations: int = 300
+    iterations: int = 1000
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any]) -> "MpcTuning":
@@ -68,17 +74,17 @@ class MpcTuning:
             raise ConfigError(f"invalid config: MPC tuning key(s) {sorted(unknown)} outside the allowed set {sorted(names)}")
         out: dict[str, Any] = {}
         for k, v in values.items():
-            kind = int if k in ("horizon", "iterations") else float
+            kind = int if k in ("horizon", "lead", "iterations") else float
             try:
                 out[k] = kind(v)
             except (TypeError, ValueError):
                 raise ConfigError(f"invalid config: `mpc.{k}` = {v!r} is not a number") from None
         return cls(**out)
 
-    def settings(self) -> tuple[int, float, float, float, float, int]:
+    def settings(self) -> tuple[int, int, float, float, float, int]:
         """The values in the order the Rust core takes them."""
-        return (int(self.horizon), float(self.speed_margin), float(self.window), float(self.slack_weight),
-                float(self.rho), int(self.iterations))
+        return (int(self.horizon), int(self.lead), float(self.margin), float(self.window), float(self.slack_weight),
+                int(self.iterations))
 
 
 @dataclass
@@ -125,11 +131,12 @@ class MpcPolicy(LqrPolicy):
 
     name = "mpc"
 
-    def __init__(self, design: LqrDesign, parts: MpcParts, tuning: MpcTuning, limits: tuple[float, float]) -> None:
+    def __init__(self, design: LqrDesign, parts: MpcParts, tuning: MpcTuning,
+                 limits: tuple[float, float, float]) -> None:
         self.design = design
         self.parts = parts
         self.tuning = tuning
-        self.limits = (float(limits[0]), float(limits[1]))
+        self.limits = (float(limits[0]), float(limits[1]), float(limits[2]))
         d = design
         self._filter = _core.Mpc(d.n, d.f, d.g, d.h, d.l, d.k, d.k_ff, d.y_trim, parts.q, parts.p, parts.x_ss,
                                  parts.u_ss, float(d.tuning.r_flap), float(parts.dt), tuning.settings(), self.limits)
@@ -159,15 +166,15 @@ class MpcPolicy(LqrPolicy):
               else (LqrTuning.from_mapping(lqr_tuning) if lqr_tuning else default_tuning()))
         boom = json.loads(cfg.to_json())["boom"]
         design, parts = _design(cfg, lt)
-        return cls(design, parts, t, (boom["max_closing_speed"], boom["approach_speed"]))
+        return cls(design, parts, t, (boom["max_closing_speed"], boom["capture_radius"], boom["approach_speed"]))
 
     @property
     def stats(self) -> dict[str, int]:
         """Counts since construction: ``steps`` (env steps planned), ``constrained`` (solved to
-        tolerance with an active constraint), ``inexact`` (the solve reached ``iterations``
-        unconverged: the LQR's command was sent), ``fallbacks`` (a non-finite estimate or
-        iterate: the LQR's command was sent); with the solves of batches that ran it in their
-        threads (:meth:`add_batch_stats`)."""
+        optimality with an active constraint), ``inexact`` (the solve reached ``iterations``
+        active-set steps: the LQR's command was sent), ``fallbacks`` (a non-finite estimate or
+        an infeasible problem: the LQR's command was sent); with the solves of batches that ran it
+        in their threads (:meth:`add_batch_stats`)."""
         counts = [a + b for a, b in zip(self._filter.stats, getattr(self, "_batch_stats", (0, 0, 0, 0)))]
         steps, constrained, inexact, fallbacks = counts
         return {"steps": steps, "constrained": constrained, "inexact": inexact, "fallbacks": fallbacks}

@@ -9,11 +9,13 @@
 //! * [`controller`]: one env's controller as a batch steps it beside the env (the LQR and the
 //!   MPC, each with its env's state).
 //! * [`mpc`]: the MPC baseline, a condensed QP on the filter's estimate with the flap limits and
-//!   the closing-speed limit as constraints.
+//!   the capture conditions (closing speed, capture radius) as constraints.
+//! * [`qp`]: the exact dense QP solver the MPC uses (the Goldfarb-Idnani dual active-set method).
 
 pub mod controller;
 pub mod filter;
 pub mod lqr;
 pub mod matrix;
 pub mod mpc;
+pub mod qp;
 pub mod riccati;
