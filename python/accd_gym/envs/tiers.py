@@ -8,8 +8,10 @@ Use a tier by id (``gymnasium.make("accd_gym/InAirCaptureHard-v0")``,
 (``InAirCaptureVectorEnv(16, tier="hard")``, ``AccdVecEnv(16, tier="hard")``) or on the command
 line (``accd-gym train|evaluate|rollout|replay --tier hard``). Keyword overrides are merged into
 the tier's, section by section (``tier="hard", boom={"capture_radius": 0.5}`` keeps the tier's
-closing-speed limit). Versions follow Gymnasium's rule: any change to a tier's definition that
-changes its episodes gets a new version (``-v1``); the old one stays registered as it was.
+closing-speed limit). Versions follow Gymnasium's rule from the first release on: any change to a
+tier's definition that changes its episodes gets a new version (``-v1``); the old one stays
+registered as it was. Until that release the ``-v0`` ids follow the code (the changes of their
+episodes are recorded in docs/decisions.md).
 """
 
 from __future__ import annotations
