@@ -32,7 +32,8 @@ EXACT_AIR_SCHEME: dict[str, Any] = {
 #: latency of 60 ms and 10 % of the vision measurements lost in bursts of 5 (0.25 s) on average,
 #: no whole-vector delay. Pass it as the ``sensors`` key: ``InAirCaptureEnv(sensors=SENSORS_TIER)``
 #: or ``--env '{"sensors": {...}}'``. On 100 held-out episodes the tuned guidance controller
-#: captures 43 (100 without sensors) and zero flaps 17 (README, "Sensors"). It registers no id.
+#: captures 41 (100 without sensors) and zero flaps 17 (docs/environment.md, "Sensors"). It
+#: registers no id.
 SENSORS_TIER: dict[str, Any] = {
     "enabled": True,
     "vision": {"latency": 0.06, "dropout": 0.1, "dropout_burst": 5.0},
