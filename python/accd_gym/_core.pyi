@@ -25,6 +25,7 @@ __all__ = [
     "PARAMETER_NAMES",
     "TRAINING_WAKE_SEEDS",
     "HELD_OUT_WAKE_SEEDS",
+    "VALIDATION_WAKE_SEEDS",
     "mix_flaps",
     "default_aero_table_json",
     "tether_config",
@@ -60,6 +61,7 @@ INFO_NAMES: list[str]
 PARAMETER_NAMES: list[str]
 TRAINING_WAKE_SEEDS: tuple[int, int]
 HELD_OUT_WAKE_SEEDS: tuple[int, int]
+VALIDATION_WAKE_SEEDS: tuple[int, int]
 
 def default_env_config_json() -> str: ...
 def env_config_json(config_json: str) -> str: ...

@@ -17,4 +17,6 @@ pub use batch::{
     SlotState, StepBuffers, StepOutputs, MAX_ENVS, MAX_THREADS,
 };
 pub use error::{BatchError, Result};
-pub use seeds::{episode_seeds, WakeSchedule, HELD_OUT_WAKE_SEEDS, TRAINING_WAKE_SEEDS};
+pub use seeds::{
+    episode_seeds, WakeSchedule, HELD_OUT_WAKE_SEEDS, TRAINING_WAKE_SEEDS, VALIDATION_WAKE_SEEDS,
+};

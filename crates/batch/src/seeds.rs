@@ -23,12 +23,15 @@
 //! at its value 0: episodes of a single env or of per-env list seeds are bitwise the ones
 //! recorded before.)
 //!
-//! # Training and held-out wake seeds
+//! # Training, validation and held-out wake seeds
 //! Training draws wake seeds from [`TRAINING_WAKE_SEEDS`] = [0, 10^9). The held-out set
 //! [`HELD_OUT_WAKE_SEEDS`] = [10^9, 10^9 + 1000) lies outside it: no training draw can produce
 //! a held-out seed (the draw above maps into the training range by construction; the modulo
-//! bias is below 10^9 / 2^64). Evaluation passes an explicit list (by default the held-out
-//! set) as [`WakeSchedule::List`].
+//! bias is below 10^9 / 2^64). The validation set [`VALIDATION_WAKE_SEEDS`], the range's last
+//! 1000 seeds, holds episodes of the training distribution on which choices are made; a draw
+//! that lands in it (one in 10^6) is drawn again from `h` of its own hash until it does not, so
+//! training never sees a validation wake either, and every other draw is the formula's above.
+//! Evaluation passes an explicit list (by default the held-out set) as [`WakeSchedule::List`].
 
 use std::ops::Range;
 
@@ -39,6 +42,9 @@ use accd_sim::Seeds;
 pub const TRAINING_WAKE_SEEDS: Range<u64> = 0..1_000_000_000;
 /// Wake seeds kept for held-out evaluation; training never draws them.
 pub const HELD_OUT_WAKE_SEEDS: Range<u64> = 1_000_000_000..1_000_001_000;
+/// Wake seeds for validation (choosing runs, methods, hyperparameters): the training range's last
+/// 1000, of the training distribution; training never draws them either.
+pub const VALIDATION_WAKE_SEEDS: Range<u64> = TRAINING_WAKE_SEEDS.end - 1000..TRAINING_WAKE_SEEDS.end;
 
 // The two sets are disjoint (checked at compile time).
 const _: () = assert!(TRAINING_WAKE_SEEDS.end <= HELD_OUT_WAKE_SEEDS.start);
@@ -77,10 +83,17 @@ pub fn episode_key(base: u64, episode: u64) -> u64 {
     h(h(h(base) ^ h(A)) ^ h(episode.wrapping_add(B)))
 }
 
-/// A training wake seed drawn from `key`.
+/// A training wake seed drawn from `key`, never one of [`VALIDATION_WAKE_SEEDS`].
 pub fn training_wake_seed(key: u64) -> u64 {
     let len = TRAINING_WAKE_SEEDS.end - TRAINING_WAKE_SEEDS.start;
-    TRAINING_WAKE_SEEDS.start + h(key ^ WAKE) % len
+    let mut draw = h(key ^ WAKE);
+    loop {
+        let seed = TRAINING_WAKE_SEEDS.start + draw % len;
+        if !VALIDATION_WAKE_SEEDS.contains(&seed) {
+            return seed;
+        }
+        draw = h(draw);
+    }
 }
 
 /// The seeds of episode `episode` under base seed `base`, for env `env` of a batch of
@@ -140,6 +153,29 @@ mod tests {
                 assert!(!HELD_OUT_WAKE_SEEDS.contains(&s.wake));
             }
         }
+    }
+
+    #[test]
+    fn a_draw_in_the_validation_tail_is_drawn_again_and_no_other_draw_moves() {
+        let len = TRAINING_WAKE_SEEDS.end - TRAINING_WAKE_SEEDS.start;
+        let first = |key: u64| TRAINING_WAKE_SEEDS.start + h(key ^ WAKE) % len;
+        // The keys whose first draw lands in the validation tail (about one in 10^6).
+        let landing: Vec<u64> = (0..20_000_000u64)
+            .filter(|&k| VALIDATION_WAKE_SEEDS.contains(&first(k)))
+            .take(3)
+            .collect();
+        assert!(!landing.is_empty(), "no first draw in the validation tail among 2e7 keys");
+        for &k in &landing {
+            let s = training_wake_seed(k);
+            assert!(TRAINING_WAKE_SEEDS.contains(&s) && !VALIDATION_WAKE_SEEDS.contains(&s));
+            assert_eq!(s, TRAINING_WAKE_SEEDS.start + h(h(k ^ WAKE)) % len);
+        }
+        for k in 0..100_000u64 {
+            if !landing.contains(&k) {
+                assert_eq!(training_wake_seed(k), first(k));
+            }
+        }
+        assert_eq!(VALIDATION_WAKE_SEEDS.end - VALIDATION_WAKE_SEEDS.start, 1000);
     }
 
     #[test]

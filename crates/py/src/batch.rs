@@ -5,7 +5,7 @@
 use accd_batch::BatchState;
 use accd_batch::{
     check_base_seed, info, Autoreset, BatchEnv, BatchError, ResetBuffers, SeedSpec, StepBuffers,
-    WakeSchedule, HELD_OUT_WAKE_SEEDS, MAX_ENVS, MAX_THREADS, TRAINING_WAKE_SEEDS,
+    WakeSchedule, HELD_OUT_WAKE_SEEDS, MAX_ENVS, MAX_THREADS, TRAINING_WAKE_SEEDS, VALIDATION_WAKE_SEEDS,
 };
 use std::sync::Arc;
 
@@ -806,6 +806,10 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add(
         "HELD_OUT_WAKE_SEEDS",
         (HELD_OUT_WAKE_SEEDS.start, HELD_OUT_WAKE_SEEDS.end),
+    )?;
+    m.add(
+        "VALIDATION_WAKE_SEEDS",
+        (VALIDATION_WAKE_SEEDS.start, VALIDATION_WAKE_SEEDS.end),
     )?;
     Ok(())
 }

@@ -33,8 +33,9 @@ TRAINING_WAKE_SEEDS: range = range(*_core.TRAINING_WAKE_SEEDS)
 HELD_OUT_WAKE_SEEDS: range = range(*_core.HELD_OUT_WAKE_SEEDS)
 #: Wake seeds for validation while tuning (the last 1000 training wake seeds): episodes of the
 #: training distribution, wake and randomized parameters alike, so that hyperparameters chosen on
-#: them have never seen the held-out set.
-VALIDATION_WAKE_SEEDS: range = TRAINING_WAKE_SEEDS[-len(HELD_OUT_WAKE_SEEDS):]
+#: them have never seen the held-out set; training's draws skip them (a draw that lands there is
+#: drawn again), so no training episode has a validation wake.
+VALIDATION_WAKE_SEEDS: range = range(*_core.VALIDATION_WAKE_SEEDS)
 #: Most envs of one vector env (``num_envs``).
 MAX_ENVS: int = _core.MAX_ENVS
 #: Most threads of one vector env (``num_threads``; 0: one per core).
