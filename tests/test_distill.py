@@ -183,6 +183,11 @@ def test_fine_tuning_starts_from_the_student(tmp_path):
         assert torch.all(own["log_std"] == -3.0)
         stats = load_policy(str(run)).normalizer
         np.testing.assert_array_equal(env.obs_rms.mean, stats.obs_rms.mean)
+        # the student's input scaling stays fixed while PPO steps the envs
+        model.learn(total_timesteps=64)
+        np.testing.assert_array_equal(env.obs_rms.mean, stats.obs_rms.mean)
+        np.testing.assert_array_equal(env.obs_rms.var, stats.obs_rms.var)
+        assert env.ret_rms.count > 1  # the rewards are still normalised as configured
     finally:
         env.close()
     with pytest.raises(training.ConfigError, match="init_from"):

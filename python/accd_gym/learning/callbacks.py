@@ -11,8 +11,30 @@ from __future__ import annotations
 
 from typing import Optional
 
+import numpy as np
 import torch
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.running_mean_std import RunningMeanStd
+
+
+class FrozenStatistics(RunningMeanStd):
+    """Observation statistics that stepping does not update: a policy started from another's
+    weights (``init_from``) keeps the input scaling it was trained with. A feature that hardly
+    varied in the teacher's episodes has a tiny variance there; updated by the fine-tuning's
+    exploratory episodes, its scaling would change by orders of magnitude and the inherited
+    policy would see other inputs than it learned on."""
+
+    def update(self, arr: np.ndarray) -> None:
+        """Leaves the statistics as they are."""
+
+    @classmethod
+    def of(cls, stats: RunningMeanStd) -> "FrozenStatistics":
+        """A frozen copy of ``stats``."""
+        out = cls(shape=np.shape(stats.mean))
+        out.mean = np.array(stats.mean, copy=True)
+        out.var = np.array(stats.var, copy=True)
+        out.count = float(stats.count)
+        return out
 
 
 def zero_action_init(model, log_std: Optional[float] = None) -> None:

@@ -33,8 +33,10 @@ checkpoint_every   environment steps between checkpoints (model + VecNormalize s
 init_from          a run folder (``final_model.zip`` and ``vecnormalize.pkl``) of a PPO policy with
                    the same observation, e.g. a distilled student (:mod:`accd_gym.learning.distill`):
                    PPO starts from its policy's weights (but ``log_std``, which
-                   ``policy_kwargs.log_std_init`` sets) and its observation statistics: RL
-                   fine-tuning (default null: a fresh policy)
+                   ``policy_kwargs.log_std_init`` sets) and its observation statistics, which
+                   then stay fixed (:class:`accd_gym.learning.callbacks.FrozenStatistics`; the
+                   rewards are still normalised as configured): RL fine-tuning (default null:
+                   a fresh policy)
 device             PyTorch device (default ``"cpu"``: the networks are small)
 ================== ================================================================================
 
@@ -220,7 +222,10 @@ def _init_from(model: Any, env: Any, cfg: dict[str, Any]) -> None:
                           f"parameters {bad[:4]} do not fit the config's policy_kwargs {cfg['policy_kwargs']!r}")
     own.update(theirs)
     model.policy.load_state_dict(own)
-    env.obs_rms = stats.obs_rms
+    # deferred: stable-baselines3, an optional dependency (accd_gym.learning.callbacks imports it)
+    from accd_gym.learning.callbacks import FrozenStatistics
+
+    env.obs_rms = FrozenStatistics.of(stats.obs_rms)
 
 
 def check_training_env(env: dict[str, Any]) -> None:
