@@ -37,6 +37,35 @@ class FrozenStatistics(RunningMeanStd):
         return out
 
 
+class CriticWarmup(BaseCallback):
+    """Trains only the critic for the first ``steps`` environment steps of a PPO run started from
+    another policy's weights (``init_from`` with ``critic_warmup``): the actor (hidden layers,
+    action layer, log std) is frozen, so that the advantages of its first updates come from a
+    critic that has learned the inherited policy's values, not from a random one."""
+
+    def __init__(self, steps: int) -> None:
+        super().__init__()
+        self.steps = int(steps)
+
+    def _actor(self) -> list:
+        policy = self.model.policy
+        return [*policy.mlp_extractor.policy_net.parameters(), *policy.action_net.parameters(), policy.log_std]
+
+    def _freeze(self, frozen: bool) -> None:
+        for param in self._actor():
+            param.requires_grad_(not frozen)
+
+    def _on_training_start(self) -> None:
+        self._freeze(self.model.num_timesteps < self.steps)
+
+    def _on_rollout_start(self) -> None:
+        if self.model.num_timesteps >= self.steps:
+            self._freeze(False)
+
+    def _on_step(self) -> bool:
+        return True
+
+
 def zero_action_init(model, log_std: Optional[float] = None) -> None:
     """Zeroes the last layer of ``model``'s action mean (PPO, A2C: ``policy.action_net``; SAC,
     TQC: ``actor.mu``), so that its deterministic action is exactly zero for every observation.
