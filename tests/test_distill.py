@@ -183,6 +183,11 @@ def test_fine_tuning_starts_from_the_student(tmp_path):
         assert torch.all(own["log_std"] == -3.0)
         stats = load_policy(str(run)).normalizer
         np.testing.assert_array_equal(env.obs_rms.mean, stats.obs_rms.mean)
+        # the student's input scaling stays fixed while PPO steps the envs
+        model.learn(total_timesteps=64)
+        np.testing.assert_array_equal(env.obs_rms.mean, stats.obs_rms.mean)
+        np.testing.assert_array_equal(env.obs_rms.var, stats.obs_rms.var)
+        assert env.ret_rms.count > 1  # the rewards are still normalised as configured
     finally:
         env.close()
     with pytest.raises(training.ConfigError, match="init_from"):
@@ -252,3 +257,25 @@ def test_a_teacher_giving_nan_and_a_diverging_student_are_reported(tmp_path):
 
     with pytest.raises(distill.ConfigError, match="diverged"):
         distill.train(_recipe(rounds=0), tmp_path / "huge", make_teacher=lambda *a: HugeTeacher())
+
+
+def test_critic_warmup_trains_only_the_critic_first(tmp_path):
+    run = tmp_path / "s"
+    distill.train(_recipe(rounds=0), run, make_teacher=lambda *a: LinearTeacher())
+    base = {"algo": "ppo", "num_envs": 4, "num_threads": 1, "seed": 1, "total_timesteps": 128,
+            "env": {**SHORT, "history": 1}, "init_from": str(run), "algo_kwargs": {"n_steps": 16, "batch_size": 32},
+            "policy_kwargs": {"net_arch": {"pi": [32, 32], "vf": [32, 32]}, "activation_fn": "tanh"}}
+    student = _weights(run)
+
+    def trained(warmup):
+        out = tmp_path / f"ft{warmup}"
+        training.train(training.validate_config({**base, "critic_warmup": warmup}), out, progress=False)
+        return _weights(out)
+
+    frozen = trained(128)  # the whole run is warm-up: the actor is the student's, the critic learned
+    assert all(torch.equal(frozen[k], v) for k, v in student.items() if k.startswith(("mlp_extractor.policy_net", "action_net")))
+    assert not torch.equal(frozen["value_net.weight"], student["value_net.weight"])
+    after = trained(64)  # warm-up for half the run, then the actor learns too
+    assert not torch.equal(after["action_net.weight"], student["action_net.weight"])
+    with pytest.raises(training.ConfigError, match="critic_warmup"):
+        training.validate_config({"critic_warmup": 10})

@@ -11,8 +11,59 @@ from __future__ import annotations
 
 from typing import Optional
 
+import numpy as np
 import torch
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.running_mean_std import RunningMeanStd
+
+
+class FrozenStatistics(RunningMeanStd):
+    """Observation statistics that stepping does not update: a policy started from another's
+    weights (``init_from``) keeps the input scaling it was trained with. A feature that hardly
+    varied in the teacher's episodes has a tiny variance there; updated by the fine-tuning's
+    exploratory episodes, its scaling would change by orders of magnitude and the inherited
+    policy would see other inputs than it learned on."""
+
+    def update(self, arr: np.ndarray) -> None:
+        """Leaves the statistics as they are."""
+
+    @classmethod
+    def of(cls, stats: RunningMeanStd) -> "FrozenStatistics":
+        """A frozen copy of ``stats``."""
+        out = cls(shape=np.shape(stats.mean))
+        out.mean = np.array(stats.mean, copy=True)
+        out.var = np.array(stats.var, copy=True)
+        out.count = float(stats.count)
+        return out
+
+
+class CriticWarmup(BaseCallback):
+    """Trains only the critic for the first ``steps`` environment steps of a PPO run started from
+    another policy's weights (``init_from`` with ``critic_warmup``): the actor (hidden layers,
+    action layer, log std) is frozen, so that the advantages of its first updates come from a
+    critic that has learned the inherited policy's values, not from a random one."""
+
+    def __init__(self, steps: int) -> None:
+        super().__init__()
+        self.steps = int(steps)
+
+    def _actor(self) -> list:
+        policy = self.model.policy
+        return [*policy.mlp_extractor.policy_net.parameters(), *policy.action_net.parameters(), policy.log_std]
+
+    def _freeze(self, frozen: bool) -> None:
+        for param in self._actor():
+            param.requires_grad_(not frozen)
+
+    def _on_training_start(self) -> None:
+        self._freeze(self.model.num_timesteps < self.steps)
+
+    def _on_rollout_start(self) -> None:
+        if self.model.num_timesteps >= self.steps:
+            self._freeze(False)
+
+    def _on_step(self) -> bool:
+        return True
 
 
 def zero_action_init(model, log_std: Optional[float] = None) -> None:

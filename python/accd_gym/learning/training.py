@@ -33,8 +33,13 @@ checkpoint_every   environment steps between checkpoints (model + VecNormalize s
 init_from          a run folder (``final_model.zip`` and ``vecnormalize.pkl``) of a PPO policy with
                    the same observation, e.g. a distilled student (:mod:`accd_gym.learning.distill`):
                    PPO starts from its policy's weights (but ``log_std``, which
-                   ``policy_kwargs.log_std_init`` sets) and its observation statistics: RL
-                   fine-tuning (default null: a fresh policy)
+                   ``policy_kwargs.log_std_init`` sets) and its observation statistics, which
+                   then stay fixed (:class:`accd_gym.learning.callbacks.FrozenStatistics`; the
+                   rewards are still normalised as configured): RL fine-tuning (default null:
+                   a fresh policy)
+critic_warmup      with ``init_from``: environment steps at the start during which only the
+                   critic learns, the actor frozen (:class:`accd_gym.learning.callbacks.CriticWarmup`;
+                   default 0)
 device             PyTorch device (default ``"cpu"``: the networks are small)
 ================== ================================================================================
 
@@ -105,7 +110,7 @@ DEFAULTS: dict[str, Any] = {
 }
 #: Optional keys of a training config that have no default value (absent: off), so that the
 #: configs of runs made before them validate to the same dict.
-OPTIONAL_KEYS = ("init_from",)
+OPTIONAL_KEYS = ("init_from", "critic_warmup")
 _ALGOS = ("ppo", "sac")
 _ACTIVATIONS = ("tanh", "relu", "elu")
 
@@ -187,6 +192,13 @@ def _check_net_arch(policy_kwargs: dict[str, Any]) -> None:
 def _check_init_from(cfg: dict[str, Any]) -> None:
     """ConfigError for an ``init_from`` that is not a PPO run folder with its final model and
     statistics, or that is combined with SAC or ``zero_action_init``."""
+    warmup = cfg.get("critic_warmup")
+    if warmup is not None and (not isinstance(warmup, int) or isinstance(warmup, bool) or not 0 <= warmup <= 10**12
+                               or cfg.get("init_from") is None):
+        raise ConfigError(f"invalid config: `critic_warmup` = {warmup!r} is outside the allowed range: an integer in "
+                          "[0, 10^12], with `init_from` (the critic of a policy started from another's weights)")
+    if not warmup:
+        cfg.pop("critic_warmup", None)
     src = cfg.get("init_from")
     if src is None:
         cfg.pop("init_from", None)
@@ -220,7 +232,10 @@ def _init_from(model: Any, env: Any, cfg: dict[str, Any]) -> None:
                           f"parameters {bad[:4]} do not fit the config's policy_kwargs {cfg['policy_kwargs']!r}")
     own.update(theirs)
     model.policy.load_state_dict(own)
-    env.obs_rms = stats.obs_rms
+    # deferred: stable-baselines3, an optional dependency (accd_gym.learning.callbacks imports it)
+    from accd_gym.learning.callbacks import FrozenStatistics
+
+    env.obs_rms = FrozenStatistics.of(stats.obs_rms)
 
 
 def check_training_env(env: dict[str, Any]) -> None:
@@ -865,6 +880,11 @@ def _learn_reserved(model: Any, env: Any, cfg: dict[str, Any], out: Path, meta: 
     init = _zero_action_init(cfg) if fresh else None
     if init is not None:
         callbacks.insert(0, init)
+    if cfg.get("critic_warmup"):
+        # deferred: stable-baselines3 and torch, optional dependencies (accd_gym.learning.callbacks imports them)
+        from accd_gym.learning.callbacks import CriticWarmup
+
+        callbacks.insert(0, CriticWarmup(cfg["critic_warmup"]))
     split = _thread_split(cfg["torch_threads"], cfg["update_threads"])  # PPO only: validate_config
     if split is not None:
         callbacks.append(split)
