@@ -44,7 +44,8 @@ pub const TRAINING_WAKE_SEEDS: Range<u64> = 0..1_000_000_000;
 pub const HELD_OUT_WAKE_SEEDS: Range<u64> = 1_000_000_000..1_000_001_000;
 /// Wake seeds for validation (choosing runs, methods, hyperparameters): the training range's last
 /// 1000, of the training distribution; training never draws them either.
-pub const VALIDATION_WAKE_SEEDS: Range<u64> = TRAINING_WAKE_SEEDS.end - 1000..TRAINING_WAKE_SEEDS.end;
+pub const VALIDATION_WAKE_SEEDS: Range<u64> =
+    TRAINING_WAKE_SEEDS.end - 1000..TRAINING_WAKE_SEEDS.end;
 
 // The two sets are disjoint (checked at compile time).
 const _: () = assert!(TRAINING_WAKE_SEEDS.end <= HELD_OUT_WAKE_SEEDS.start);
@@ -164,7 +165,10 @@ mod tests {
             .filter(|&k| VALIDATION_WAKE_SEEDS.contains(&first(k)))
             .take(3)
             .collect();
-        assert!(!landing.is_empty(), "no first draw in the validation tail among 2e7 keys");
+        assert!(
+            !landing.is_empty(),
+            "no first draw in the validation tail among 2e7 keys"
+        );
         for &k in &landing {
             let s = training_wake_seed(k);
             assert!(TRAINING_WAKE_SEEDS.contains(&s) && !VALIDATION_WAKE_SEEDS.contains(&s));
@@ -175,7 +179,10 @@ mod tests {
                 assert_eq!(training_wake_seed(k), first(k));
             }
         }
-        assert_eq!(VALIDATION_WAKE_SEEDS.end - VALIDATION_WAKE_SEEDS.start, 1000);
+        assert_eq!(
+            VALIDATION_WAKE_SEEDS.end - VALIDATION_WAKE_SEEDS.start,
+            1000
+        );
     }
 
     #[test]

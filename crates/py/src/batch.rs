@@ -5,7 +5,8 @@
 use accd_batch::BatchState;
 use accd_batch::{
     check_base_seed, info, Autoreset, BatchEnv, BatchError, ResetBuffers, SeedSpec, StepBuffers,
-    WakeSchedule, HELD_OUT_WAKE_SEEDS, MAX_ENVS, MAX_THREADS, TRAINING_WAKE_SEEDS, VALIDATION_WAKE_SEEDS,
+    WakeSchedule, HELD_OUT_WAKE_SEEDS, MAX_ENVS, MAX_THREADS, TRAINING_WAKE_SEEDS,
+    VALIDATION_WAKE_SEEDS,
 };
 use std::sync::Arc;
 
