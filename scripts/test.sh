@@ -177,11 +177,13 @@ source scripts/setup.sh
 echo "== Python set-up done [$SECONDS s]"
 echo "$ACCD_PY" >"$LOGS/setup-done"
 
-finish "$RUST" "Rust checks" "$LOGS/rust"
 finish "$CHROMIUM" "chromium install" "$LOGS/chromium"
 
-echo "== pytest (two workers; the slowest tests listed at the end; the wheel job runs meanwhile) [$SECONDS s]"
+# pytest starts as soon as the extension is installed; the Rust checks' last test binaries and
+# runs (they need no Python) end beside it, and their log is printed after it.
+echo "== pytest (two workers; the slowest tests listed at the end; the Rust checks' end and the wheel job run meanwhile) [$SECONDS s]"
 "$ACCD_PY" -m pytest -q -n 2 --dist worksteal --durations=15 tests
 echo "== pytest done [$SECONDS s]"
+finish "$RUST" "Rust checks" "$LOGS/rust"
 finish "$WHEEL" "wheel job" "$LOGS/wheel"
 echo "== done [$SECONDS s]"
