@@ -140,6 +140,7 @@ class MpcPolicy(LqrPolicy):
         d = design
         self._filter = _core.Mpc(d.n, d.f, d.g, d.h, d.l, d.k, d.k_ff, d.y_trim, parts.q, parts.p, parts.x_ss,
                                  parts.u_ss, float(d.tuning.r_flap), float(parts.dt), tuning.settings(), self.limits)
+        self._batch_stats: tuple[int, int, int, int] = (0, 0, 0, 0)  # solves run by batches (add_batch_stats)
 
     def __getstate__(self) -> dict[str, Any]:
         return {"design": self.design, "parts": self.parts, "tuning": self.tuning, "limits": self.limits,
@@ -175,13 +176,14 @@ class MpcPolicy(LqrPolicy):
         active-set steps: the LQR's command was sent), ``fallbacks`` (a non-finite estimate or
         an infeasible problem: the LQR's command was sent); with the solves of batches that ran it
         in their threads (:meth:`add_batch_stats`)."""
-        counts = [a + b for a, b in zip(self._filter.stats, getattr(self, "_batch_stats", (0, 0, 0, 0)))]
+        counts = [a + b for a, b in zip(self._filter.stats, self._batch_stats)]
         steps, constrained, inexact, fallbacks = counts
         return {"steps": steps, "constrained": constrained, "inexact": inexact, "fallbacks": fallbacks}
 
     def add_batch_stats(self, counts: tuple[int, int, int, int]) -> None:
         """Adds a batch's counts of :meth:`batch_stepper`'s solves (its envs' controllers) to :attr:`stats`."""
-        self._batch_stats = tuple(a + int(b) for a, b in zip(getattr(self, "_batch_stats", (0, 0, 0, 0)), counts))
+        a, b, c, d = (x + int(y) for x, y in zip(self._batch_stats, counts))
+        self._batch_stats = (a, b, c, d)
 
     def tuning_dict(self) -> dict[str, Any]:
         """The MPC settings as a plain mapping (for records)."""
