@@ -156,8 +156,9 @@ class BatchBaseController(BaseController):
     bits as :class:`BaseController` on the same policy: the per-row arithmetic is the same
     Rust step. Here the methods read the batch's results."""
 
-    def __init__(self, options: ResidualOptions, config: Mapping[str, Any], core: Any) -> None:
-        super().__init__(options, config)
+    def __init__(self, base: BaseController, core: Any) -> None:
+        self.options = base.options
+        self.policy = base.policy
         self._core = core
         core.set_controller(self.policy.batch_stepper())
 
@@ -203,15 +204,19 @@ class BatchBaseController(BaseController):
 
 def base_controller(options: ResidualOptions, config: Mapping[str, Any], core: Any = None) -> BaseController:
     """The base controller of ``options`` for a batch: run by the Rust batch ``core`` in its
-    threads where the controller has a Rust stepper (the LQR, the MPC) and a core is given,
-    else stepped from Python on the calling thread."""
-    if core is not None and options.base in BATCH_BASES:
-        return BatchBaseController(options, config, core)
-    return BaseController(options, config)
+    threads where the controller has a Rust stepper (its policy's ``batch_stepper``: the LQR,
+    the MPC) and a core is given, else stepped from Python on the calling thread."""
+    controller = BaseController(options, config)
+    if (core is not None and hasattr(controller.policy, "batch_stepper")
+            and (BATCH_BASES is None or options.base in BATCH_BASES)):
+        return BatchBaseController(controller, core)
+    return controller
 
 
-#: The residual bases whose per-env step a Rust batch runs (``batch_stepper``).
-BATCH_BASES = ("lqr", "mpc")
+#: The residual bases a Rust batch may run: None (the default) for every base whose policy has a
+#: Rust stepper (``batch_stepper``); a tuple of names limits it (``()``: the calling-thread path
+#: for every base, which benchmarks and tests compare the batch against).
+BATCH_BASES: Optional[tuple[str, ...]] = None
 
 
 __all__ = ["BATCH_BASES", "SCALE_MAX", "BaseController", "BatchBaseController", "ResidualOptions", "base_controller"]
