@@ -175,6 +175,28 @@ def test_evaluating_the_mpc_in_the_batch_gives_the_calling_thread_episodes_and_c
     assert threaded.stats["steps"] >= mpc.stats["steps"] > 0
 
 
+def test_non_finite_or_out_of_range_controller_values_are_refused_naming_the_field():
+    env = InAirCaptureVectorEnv(2, residual="lqr", **SHORT)
+    env.reset(seed=0)
+    z, u, fresh, command = env._core.controller_state()
+    bad_u = u.copy()
+    bad_u[0, 0] = np.nan
+    with pytest.raises(StateError, match="controller.u"):
+        env._core.set_controller_state(z, bad_u, fresh, command)
+    bad_command = command.copy()
+    bad_command[1, 2] = 2.0
+    with pytest.raises(StateError, match="controller.command"):
+        env._core.set_controller_state(z, u, fresh, bad_command)
+    after = env._core.controller_state()
+    assert all(np.array_equal(a, b) for a, b in zip((z, u, fresh, command), after))
+    policy = LqrPolicy.for_config(env.config)
+    policy.predict(np.zeros((2, OBS_DIM)))
+    state = policy.get_state()
+    with pytest.raises(StateError, match="offset"):
+        policy.sent(np.full((2, 4), np.inf))
+    assert all(np.array_equal(a, b) for a, b in zip(state.values(), policy.get_state().values()))
+
+
 def test_set_controller_is_refused_on_a_residual_env():
     env = InAirCaptureVectorEnv(2, residual="lqr", **SHORT)
     with pytest.raises(Exception, match="residual"):

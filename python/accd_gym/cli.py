@@ -114,8 +114,8 @@ def _distill(args: argparse.Namespace) -> int:
             print(f"accd-gym distill: {line}", file=sys.stderr, flush=True)
 
     if args.resume:
-        if args.config is not None or args.seed is not None:
-            raise _usage("--resume continues a run with its own recipe; drop --config and --seed")
+        if args.config is not None or args.seed is not None or args.out is not None:
+            raise _usage("--resume continues a run in its own folder with its own recipe; drop --config, --seed and --out")
         out = Path(args.resume)
         meta = distill.resume(out, make_teacher=teacher, report=report)
     else:
@@ -124,7 +124,7 @@ def _distill(args: argparse.Namespace) -> int:
         out = Path(args.out)
         meta = distill.train(distill.load_recipe(args.config, seed=args.seed), out, make_teacher=teacher, report=report)
     if meta["status"] == "interrupted":
-        print(f"accd-gym: distillation interrupted after round {len(meta['rounds']) - 1}; continue with: "
+        print(f"accd-gym: distillation interrupted with {len(meta['rounds'])} complete round(s); continue with: "
               f"accd-gym distill --resume {out}", file=sys.stderr)
         return 130
     last = meta["rounds"][-1]

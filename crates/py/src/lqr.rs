@@ -333,6 +333,12 @@ pub(crate) fn add_sent(
 ) -> PyResult<()> {
     let v = offset.as_array();
     check_shape("offset", v.shape(), &[states.len(), ACT_DIM])?;
+    if v.iter().any(|d| !d.is_finite()) {
+        return Err(crate::errors::raise(
+            crate::errors::Kind::State,
+            "invalid state: `offset` has non-finite values, outside the allowed range: finite flap-limit units",
+        ));
+    }
     for (s, r) in states.iter_mut().zip(v.rows()) {
         for (u, d) in s.u.iter_mut().zip(r.iter()) {
             *u += *d;

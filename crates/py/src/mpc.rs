@@ -10,7 +10,7 @@ use std::sync::Arc;
 
 use accd_sim::control::filter::{FilterState, LqrFilter};
 use accd_sim::control::lqr::MEASURED_DIM;
-use accd_sim::control::mpc::{CaptureLimits, Mpc, MpcStats, MpcTuning};
+use accd_sim::control::mpc::{CaptureLimits, Mpc, MpcScratch, MpcStats, MpcTuning};
 use accd_sim::{ACT_DIM, OBS_DIM};
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
@@ -28,6 +28,8 @@ pub struct PyMpc {
     pub(crate) mpc: Arc<Mpc>,
     states: Vec<FilterState>,
     stats: MpcStats,
+    /// The QP's workspace, made once: a solve allocates nothing.
+    scratch: MpcScratch,
 }
 
 #[pymethods]
@@ -93,10 +95,12 @@ impl PyMpc {
                 )
             })
             .py_err()?;
+        let scratch = mpc.plan().new_scratch();
         Ok(Self {
             mpc: Arc::new(mpc),
             states: Vec::new(),
             stats: MpcStats::default(),
+            scratch,
         })
     }
 
@@ -172,14 +176,14 @@ impl PyMpc {
             look_ahead = self.states.clone();
             &mut look_ahead
         };
-        py.detach(|| {
-            let mut scratch = mpc.plan().new_scratch();
-            mpc.step_rows(states, &flat, &mask, &mut out, &mut scratch, &mut stats)
-        })
-        .py_err()?;
+        let scratch = &mut self.scratch;
+        let solved =
+            py.detach(|| mpc.step_rows(states, &flat, &mask, &mut out, scratch, &mut stats));
         if advance {
+            // The rows stepped before an error keep their new states: their counts too.
             self.stats = stats;
         }
+        solved.py_err()?;
         let arr = Array2::from_shape_fn((n, ACT_DIM), |(i, j)| out[i][j]);
         Ok(arr.into_pyarray(py))
     }

@@ -198,7 +198,8 @@ class AgentIO:
         and ``final_obs`` (same-step autoreset) the rows whose episode ended in this step and
         their last observations. Returns the agent observations of every row and, with
         ``ended``, those of the ended episodes' last observations (rows ``ended`` selects)."""
-        if self._base is not None and self._corrected:  # (without a correction, the base command was sent)
+        if self._base is not None and self._corrected and self._base.needs_sent:
+            # (without a correction the base command was sent; a batch-run base is told by the batch)
             self._base.sent(self._sent.astype(np.float64) - self._base_u.astype(np.float64))
         if self._history is not None:
             self._history.push(self._cur, self._sent)

@@ -90,6 +90,9 @@ class BaseController:
     (:data:`accd_gym.control.registry.CONTROLLERS`, one with ``residual_base``) with the
     row bookkeeping residual control needs (restart rows, partial starts, state snapshots)."""
 
+    #: Whether :meth:`sent` must be told the corrections (a batch-run base learns them itself).
+    needs_sent = True
+
     def __init__(self, options: ResidualOptions, config: Mapping[str, Any]) -> None:
         self.options = options
         self.policy = make_controller(options.base, 0, dict(config))
@@ -155,6 +158,8 @@ class BatchBaseController(BaseController):
     with each new episode (automatic resets included) and tells it the action sent. The same
     bits as :class:`BaseController` on the same policy: the per-row arithmetic is the same
     Rust step. Here the methods read the batch's results."""
+
+    needs_sent = False
 
     def __init__(self, base: BaseController, core: Any) -> None:
         self.options = base.options

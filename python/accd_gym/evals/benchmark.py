@@ -1061,7 +1061,8 @@ def write_readme_table(path: str | Path, doc: Optional[dict[str, Any]]) -> None:
     except (OSError, UnicodeDecodeError) as e:
         raise ConfigError(f"invalid config: --readme {path} cannot be read ({e.__class__.__name__})") from None
     if text.count(README_BEGIN) != 1 or text.count(README_END) != 1 or text.index(README_BEGIN) > text.index(README_END):
-        raise ConfigError(f"invalid config: --readme {path} has no block between {README_BEGIN!r} and {README_END!r}")
+        raise ConfigError(f"invalid config: --readme {path} has no block between {README_BEGIN!r} and {README_END!r}, "
+                          "or more than one (it needs exactly one)")
     if doc is None:
         return
     head, rest = text.split(README_BEGIN)

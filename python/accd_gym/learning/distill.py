@@ -88,7 +88,7 @@ from accd_gym.envs.agent_io import physics_config, split_agent_options
 from accd_gym.envs.task import OBS_DIM, SEED_END
 from accd_gym.errors import ConfigError, StateError
 from accd_gym.envs.config import read_json_object
-from accd_gym.learning.training import check_training_env, load_statistics
+from accd_gym.learning.training import save_model, save_statistics, check_training_env, load_statistics
 
 #: The files a distillation run folder gets beside ``checkpoints/`` (checked before it starts).
 RUN_FILES = ("run.json", "final_model.zip", "vecnormalize.pkl")
@@ -385,18 +385,6 @@ def _write_meta(out: Path, meta: dict[str, Any]) -> None:
     files.write_text(out / "run.json", json.dumps(meta, indent=1, default=str))
 
 
-def _save_model(model: Any, path: Path) -> None:
-    with files.atomic_open(path, "wb") as f:
-        model.save(f)
-
-
-def _save_statistics(norm: Any, path: Path) -> None:
-    import pickle
-
-    with files.atomic_open(path, "wb") as f:
-        pickle.dump(norm, f)
-
-
 def _save_data(path: Path, obs: np.ndarray, labels: np.ndarray) -> None:
     import io
 
@@ -417,6 +405,10 @@ def train(recipe: dict[str, Any], out: str | Path, *, make_teacher: Optional[Tea
     (default: a registered controller); ``report`` gets one progress line per round."""
     cfg = validate_recipe(dict(recipe))
     out = files.writable_folder(out, "--out", RUN_FILES)
+    # A fresh run replaces the folder's run: the round checkpoints of an earlier one would be
+    # read as this run's by completed_rounds (and resume).
+    for stale in [*(out / "checkpoints").glob("data_*.npz"), *(out / "checkpoints").glob("student_*.zip")]:
+        stale.unlink()
     meta = {"algo": "ppo", "trainer": "distill", "method": "bc" if cfg["rounds"] == 0 else "dagger",
             "config": cfg, "status": "training", "total_timesteps": cfg["total_timesteps"], "rounds": []}
     _write_meta(out, meta)
@@ -442,7 +434,7 @@ def resume(run: str | Path, *, make_teacher: Optional[TeacherFactory] = None,
     except ConfigError as e:
         raise ConfigError(f"invalid config: {str(meta_path)!r} holds an invalid recipe: {e}") from None
     files.writable_folder(out, "--resume", RUN_FILES)
-    start = completed_rounds(out)
+    start = min(completed_rounds(out), cfg["rounds"] + 1)
     meta["rounds"] = [r for r in meta.get("rounds", []) if r.get("round", 0) < start]
     meta.setdefault("resumed", []).append({"from_round": start})
     meta["status"] = "training"
@@ -491,7 +483,7 @@ def _run(cfg: dict[str, Any], out: Path, meta: dict[str, Any], start: int, make_
                     norm.obs_rms.mean = x.mean(axis=0)
                     norm.obs_rms.var = x.var(axis=0)
                     norm.obs_rms.count = float(len(x))
-                    _save_statistics(norm, out / "vecnormalize.pkl")
+                    save_statistics(norm, out / "vecnormalize.pkl")
                 _save_data(_data_path(out, k), data["obs"], data["labels"])
                 obs_parts.append(data["obs"])
                 label_parts.append(data["labels"])
@@ -500,7 +492,7 @@ def _run(cfg: dict[str, Any], out: Path, meta: dict[str, Any], start: int, make_
                            batch_size=cfg["batch_size"], learning_rate=cfg["learning_rate"],
                            seed=round_seed(cfg["seed"], k, 2, 2**63))
                 del x_all
-                _save_model(model, _student_path(out, k))
+                save_model(model, _student_path(out, k))
                 record = {"round": k, "beta": beta, "steps": len(data["obs"]), "dataset": int(sum(map(len, obs_parts))),
                           "episodes": data["episodes"], "captures": data["captures"],
                           "student_mse": data["agreement"], "train_mse": loss, "wall_s": round(time.time() - r0, 1)}
@@ -517,7 +509,7 @@ def _run(cfg: dict[str, Any], out: Path, meta: dict[str, Any], start: int, make_
                         wall_time_s=round(meta.get("wall_time_s", 0.0) + time.time() - t0, 1))
             _write_meta(out, meta)
             return meta
-        _save_model(model, out / "final_model.zip")
+        save_model(model, out / "final_model.zip")
         meta.update(status="done", wall_time_s=round(meta.get("wall_time_s", 0.0) + time.time() - t0, 1),
                     torch_version=torch.__version__)
         meta.pop("interrupted_by", None)

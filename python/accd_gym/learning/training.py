@@ -194,9 +194,10 @@ def _check_init_from(cfg: dict[str, Any]) -> None:
     statistics, or that is combined with SAC or ``zero_action_init``."""
     warmup = cfg.get("critic_warmup")
     if warmup is not None and (not isinstance(warmup, int) or isinstance(warmup, bool) or not 0 <= warmup <= 10**12
-                               or cfg.get("init_from") is None):
+                               or (warmup > 0 and cfg.get("init_from") is None)):
         raise ConfigError(f"invalid config: `critic_warmup` = {warmup!r} is outside the allowed range: an integer in "
-                          "[0, 10^12], with `init_from` (the critic of a policy started from another's weights)")
+                          "[0, 10^12], above 0 only with `init_from` (the critic of a policy started from another's "
+                          "weights)")
     if not warmup:
         cfg.pop("critic_warmup", None)
     src = cfg.get("init_from")
@@ -558,7 +559,7 @@ def load_statistics(data: bytes, name: str, venv: Any = None, obs_dim: Optional[
     return stats
 
 
-def _save_statistics(env: Any, path: Path) -> None:
+def save_statistics(env: Any, path: Path) -> None:
     """Writes the VecNormalize statistics (as ``VecNormalize.save`` does) atomically."""
     import pickle
 
@@ -566,7 +567,7 @@ def _save_statistics(env: Any, path: Path) -> None:
         pickle.dump(env, f)
 
 
-def _save_model(model: Any, path: Path) -> None:
+def save_model(model: Any, path: Path) -> None:
     """Writes an SB3 model's zip (``model.save`` into the open temporary file of
     :func:`accd_gym.files.atomic_open`, so that the one writer decides where it goes)."""
     with files.atomic_open(path, "wb") as f:
@@ -583,12 +584,12 @@ def _save_checkpoint(model: Any, env: Any, cfg: dict[str, Any], out: Path, *, re
     folder.mkdir(parents=True, exist_ok=True)
     steps = int(model.num_timesteps)
     stem = f"{_prefix(cfg)}_{{}}{steps}_steps"
-    _save_statistics(env, folder / (stem.format("vecnormalize_") + ".pkl"))
+    save_statistics(env, folder / (stem.format("vecnormalize_") + ".pkl"))
     files.write_bytes(folder / (stem.format("envstate_") + ".bin"), _base_env(env).get_state())
     if replay_buffer and hasattr(model, "save_replay_buffer") and cfg["algo"] == "sac":
         with files.atomic_open(folder / (stem.format("replay_buffer_") + ".pkl"), "wb") as f:
             model.save_replay_buffer(f)
-    _save_model(model, folder / (stem.format("") + ".zip"))
+    save_model(model, folder / (stem.format("") + ".zip"))
     record = latest_checkpoint(out)
     assert record is not None and record["steps"] == steps
     return record
@@ -928,8 +929,8 @@ def _learn_reserved(model: Any, env: Any, cfg: dict[str, Any], out: Path, meta: 
                 _note_checkpoint(meta, ckpt)
             else:
                 # the statistics first: a final model on the disk always has its statistics
-                _save_statistics(env, out / "vecnormalize.pkl")
-                _save_model(model, out / "final_model.zip")
+                save_statistics(env, out / "vecnormalize.pkl")
+                save_model(model, out / "final_model.zip")
                 meta.update(status="done")
                 _note_checkpoint(meta, None)
                 meta.pop("interrupted_by", None)
@@ -958,4 +959,4 @@ def _write_failed(out: Path, meta: dict[str, Any], what: str, signal_name: Optio
 
 
 __all__ = ["DEFAULTS", "checkpoints", "latest_checkpoint", "load_config", "load_model", "load_statistics", "make_training_env",
-           "model_algo", "resume", "train", "validate_config"]
+           "model_algo", "resume", "save_model", "save_statistics", "train", "validate_config"]

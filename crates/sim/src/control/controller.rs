@@ -109,16 +109,21 @@ fn restore(into: &mut ControllerState, from: &ControllerState) -> Result<()> {
         )
         .into());
     }
-    if from
-        .filter
-        .z
-        .iter()
-        .chain(&from.filter.u)
-        .any(|v| !v.is_finite())
-    {
-        return Err(
-            StateError::invalid("controller.z", "non-finite values", "finite values").into(),
-        );
+    for (field, mut values) in [
+        ("controller.z", from.filter.z.iter()),
+        ("controller.u", from.filter.u.iter()),
+    ] {
+        if values.any(|v| !v.is_finite()) {
+            return Err(StateError::invalid(field, "non-finite values", "finite values").into());
+        }
+    }
+    if from.command.iter().any(|v| !(-1.0..=1.0).contains(v)) {
+        return Err(StateError::invalid(
+            "controller.command",
+            "values outside [-1, 1] or non-finite",
+            "flap commands in [-1, 1]",
+        )
+        .into());
     }
     into.filter.z.copy_from_slice(&from.filter.z);
     into.filter.u = from.filter.u;
