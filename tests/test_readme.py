@@ -2,8 +2,9 @@
 commands through `python -m accd_gym`, and the install block names the package, the wheel
 `scripts/wheel.sh` builds and the command `scripts/setup.sh` itself runs (the wheel itself is
 installed and run by scripts/test.sh's wheel job). The generated sections of README.md match the declarations they come from, and its
-results table the benchmark report (docs/benchmark.md)."""
+results table and docs/benchmark.md the committed benchmark report."""
 
+import json
 import os
 import re
 import shlex
@@ -96,44 +97,14 @@ def test_every_shell_command_is_tested():
     assert {c[0] for c in shell_commands()} <= tested, "a README shell command that no test runs"
 
 
-def _table_after(text: str, heading: str) -> list[list[str]]:
-    """The rows (cells stripped) of the first Markdown table after ``heading``, header first."""
-    lines = text[text.index(heading):].splitlines()
-    start = next(i for i, line in enumerate(lines) if line.startswith("|"))
-    rows = []
-    for line in lines[start:]:
-        if not line.startswith("|"):
-            break
-        if not set(line) <= set("|-: "):
-            rows.append([c.strip() for c in line.strip().strip("|").split("|")])
-    return rows
+def test_results_table_and_report_are_what_the_committed_benchmark_writes():
+    """README's results table and docs/benchmark.md are what `accd-gym benchmark --docs docs
+    --readme README.md` writes from the committed benchmark folder's report document
+    (runs/benchmark/benchmark.json), cell for cell."""
+    from accd_gym.evals import benchmark
 
-
-def _report_rates() -> dict[str, dict[str, str]]:
-    """docs/benchmark.md's capture rates: {tier: {policy row name: rate}}."""
-    report = (ROOT / "docs" / "benchmark.md").read_text()
-    out = {}
-    for tier in re.findall(r"^## (\w+) \(`accd_gym/", report, re.M):
-        rows = _table_after(report, f"## {tier} (")
-        assert rows[0][:2] == ["policy", "capture rate"]
-        out[tier] = {r[0]: r[1] for r in rows[1:]}
-    return out
-
-
-#: README results column -> the report's row name (learned methods: "PPO, IQM of 5 seeds" is the
-#: row "PPO (IQM of 5)").
-_BASELINE_COLUMNS = {"LQR + Kalman filter": "lqr", "PID (guidance)": "guidance", "zero flaps": "zero"}
-
-
-def test_results_table_is_the_benchmark_reports():
-    rates = _report_rates()
-    rows = _table_after(README, "## Results")
-    header = rows[0]
-    assert header[0] == "tier" and [r[0] for r in rows[1:]] == list(rates), "one README row per report tier, in order"
-    for column, name in enumerate(header[1:], 1):
-        learned = re.fullmatch(r"(.+), IQM of (\d+) seeds", name)
-        row_name = f"{learned[1]} (IQM of {learned[2]})" if learned else _BASELINE_COLUMNS[name]
-        for row in rows[1:]:
-            tier, cell = row[0], row[column]
-            expected = rates[tier].get(row_name, "-")
-            assert cell == expected, f"README results, {tier} / {name}: {cell!r}, docs/benchmark.md: {expected!r}"
+    doc = json.loads((ROOT / "runs" / "benchmark" / "benchmark.json").read_text())
+    table = README.split(benchmark.README_BEGIN)[1].split(benchmark.README_END)[0].strip()
+    assert table == benchmark.readme_table(doc), "README.md's results table is not the committed report's"
+    assert (ROOT / "docs" / "benchmark.md").read_text() == benchmark.report_markdown(doc), \
+        "docs/benchmark.md is not the committed report's"
