@@ -257,6 +257,19 @@ def test_ctrl_c_stops_the_benchmark_and_reports_what_is_finished(tmp_path, monke
         benchmark.run({**cfg, "episodes": 5}, tmp_path, progress=lambda _m: None)
 
 
+def test_an_unfinished_runs_status_names_its_latest_checkpoint(tmp_path):
+    run = tmp_path / "run"
+    assert benchmark._run_status(run) == "not started"
+    run.mkdir()
+    (run / "run.json").write_text(json.dumps({"status": "training", "total_timesteps": 500000}))
+    assert benchmark._run_status(run) == "training, no checkpoint yet of 500,000 steps"
+    (run / "run.json").write_text(json.dumps({"status": "training", "total_timesteps": 500000, "checkpoint_steps": 200000}))
+    assert benchmark._run_status(run) == "training, at 200,000 of 500,000 steps"
+    (run / "run.json").write_text(json.dumps({"status": "interrupted", "total_timesteps": 4096, "timesteps": 2048,
+                                              "checkpoint_steps": 2048}))
+    assert benchmark._run_status(run) == "interrupted, at 2,048 of 4,096 steps"
+
+
 def test_a_residual_job_keeps_its_recipes_env_options(tmp_path, monkeypatch):
     from accd_gym.learning import training
 

@@ -583,7 +583,8 @@ class _Interrupted(Exception):
 
 
 def _run_status(run: Path) -> str:
-    """A job that has no result: "not started", or its training's state from its run.json."""
+    """A job that has no result: "not started", or its training's state from its run.json (the
+    steps of its latest checkpoint while it trains)."""
     try:
         meta = json.loads((run / "run.json").read_text())
     except (OSError, ValueError):
@@ -592,7 +593,11 @@ def _run_status(run: Path) -> str:
         return "not started"
     if meta.get("status") == "done":
         return "trained; its evaluation is missing or stale (a rerun evaluates it)"
-    return f"{meta.get('status', 'unfinished')} at {meta.get('timesteps', 0):,} of {meta.get('total_timesteps', 0):,} steps"
+    # A run in training records its latest checkpoint's steps (checkpoint_steps); "timesteps"
+    # only once it stopped.
+    steps = meta.get("timesteps", meta.get("checkpoint_steps"))
+    where = "no checkpoint yet" if steps is None else f"at {steps:,}"
+    return f"{meta.get('status', 'unfinished')}, {where} of {meta.get('total_timesteps', 0):,} steps"
 
 
 def _baseline_record(name: str, tier: str, config: dict[str, Any], out: Path,
