@@ -29,11 +29,16 @@ FIELDS = ("captured", "outcome", "min_distance", "closest_speed", "final_speed",
 
 def versions() -> dict:
     """The software and settings the numbers were computed with."""
-    import scipy
-
-    out = {"python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__,
-           "machine": benchmark._machine(), "ACCD_GYM_ARITHMETIC": os.environ.get("ACCD_GYM_ARITHMETIC"),
+    out = {"python": platform.python_version(), "numpy": np.__version__,
+           "machine": f"{platform.machine()} {platform.processor() or platform.platform()}, {os.cpu_count()} CPUs",
+           "ACCD_GYM_ARITHMETIC": os.environ.get("ACCD_GYM_ARITHMETIC"),
            "OPENBLAS_CORETYPE": os.environ.get("OPENBLAS_CORETYPE")}
+    try:  # SciPy is a test-only dependency: nothing evaluated here uses it
+        import scipy
+
+        out["scipy"] = scipy.__version__
+    except ImportError:
+        out["scipy"] = None
     try:
         import torch
 
@@ -89,7 +94,8 @@ def main() -> int:
     summary = {"results": str(folder), "episodes_each": n, "versions": versions(), "checked": [], "differ": {}}
     t0 = time.perf_counter()
     for name, tier, (kind, what), record, num_envs in todo:
-        policy = load_policy(str(what)) if kind == "run" else benchmark._baseline_policy(what, tier)
+        # a baseline is built for its tier, as the benchmark builds it
+        policy = load_policy(str(what)) if kind == "run" else load_policy(what, 0, config={"tier": tier})
         fresh = benchmark.evaluate_policy(policy, tier, n, num_envs)
         diff = differences(record, fresh, n)
         summary["checked"].append(name)
