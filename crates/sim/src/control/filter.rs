@@ -209,17 +209,41 @@ impl LqrFilter {
         command: &mut [f32; ACT_DIM],
     ) -> Result<()> {
         debug_assert_eq!(state.z.len(), self.nz());
-        let prior = &mut state.prior;
-        prior.fill(0.0);
-        if !state.fresh {
-            for (j, zj) in state.z.iter().enumerate() {
-                axpy(prior, *zj, self.ft.row(j));
-            }
-            for (k, uk) in state.u.iter().enumerate() {
-                axpy(prior, *uk, self.gt.row(k));
-            }
+        for (c, out) in state.prior.chunks_mut(LANES).enumerate() {
+            self.predict_chunk(out, c * LANES, &state.z, &state.u, state.fresh);
         }
         self.update(state, obs, command)
+    }
+
+    /// Entries `i0..i0 + out.len()` of the prior `F z + G u` (zero for a fresh state): each
+    /// entry `0 + z_0 F_i0 + z_1 F_i1 + ... + u_0 G_i0 + ...` in ascending order, the sums of
+    /// a chunk kept in registers across the columns.
+    #[inline(always)]
+    fn predict_chunk(
+        &self,
+        out: &mut [f64],
+        i0: usize,
+        z: &[f64],
+        u: &[f64; ACT_DIM],
+        fresh: bool,
+    ) {
+        if fresh {
+            out.fill(0.0);
+            return;
+        }
+        match <&mut [f64; LANES]>::try_from(&mut *out) {
+            Ok(out) => {
+                let mut acc = [0.0; LANES];
+                accumulate(&mut acc, i0, z, &self.ft);
+                accumulate(&mut acc, i0, u, &self.gt);
+                *out = acc;
+            }
+            Err(_) => {
+                out.fill(0.0);
+                accumulate_tail(out, i0, z, &self.ft);
+                accumulate_tail(out, i0, u, &self.gt);
+            }
+        }
     }
 
     /// The update and the control law from the prior in `state.prior`.
@@ -242,12 +266,26 @@ impl LqrFilter {
         // z = z- + L innovation: the correction summed first (into z), then the prior added.
         let mut u = [0.0; ACT_DIM];
         let z = &mut state.z;
-        z.fill(0.0);
-        for (m, im) in innovation.iter().enumerate() {
-            axpy(z, *im, self.lt.row(m));
-        }
-        for (zi, pi) in z.iter_mut().zip(prior.iter()) {
-            *zi += *pi;
+        for (c, out) in z.chunks_mut(LANES).enumerate() {
+            let i0 = c * LANES;
+            let before = &prior[i0..i0 + out.len()];
+            match <&mut [f64; LANES]>::try_from(&mut *out) {
+                Ok(out) => {
+                    let mut acc = [0.0; LANES];
+                    accumulate(&mut acc, i0, &innovation, &self.lt);
+                    for (a, p) in acc.iter_mut().zip(before) {
+                        *a += *p;
+                    }
+                    *out = acc;
+                }
+                Err(_) => {
+                    out.fill(0.0);
+                    accumulate_tail(out, i0, &innovation, &self.lt);
+                    for (a, p) in out.iter_mut().zip(before) {
+                        *a += *p;
+                    }
+                }
+            }
         }
         for (j, zj) in z[..self.n].iter().enumerate() {
             axpy(&mut u, -*zj, self.kt.row(j));
@@ -274,9 +312,13 @@ impl LqrFilter {
     }
 }
 
-/// Rows whose predictions are computed together by [`LqrFilter::step_rows`]: each column of `F`
-/// is read once per block (from the L1 cache) instead of once per row.
+/// Rows whose predictions are computed together by [`LqrFilter::step_rows`]: each chunk of `F`'s
+/// columns is read from memory once per block, then from the L1 cache for the block's other rows.
 const BLOCK: usize = 8;
+
+/// Outputs summed together in registers (four AVX or eight SSE2 registers of f64): each
+/// matrix row's chunk is read once per step instead of once per output update.
+const LANES: usize = 16;
 
 impl LqrFilter {
     /// [`Self::step`] for the rows of a batch that `selected` selects (the others keep their
@@ -334,27 +376,13 @@ impl LqrFilter {
             let end = (start + BLOCK).min(states.len());
             let block = &mut states[start..end];
             let chosen = &selected[start..end];
-            for (s, &c) in block.iter_mut().zip(chosen) {
-                if c {
-                    debug_assert_eq!(s.z.len(), nz);
-                    s.prior.fill(0.0);
-                }
-            }
-            for j in 0..nz {
-                let column = self.ft.row(j);
+            for i0 in (0..nz).step_by(LANES) {
+                let i1 = (i0 + LANES).min(nz);
                 for (s, &c) in block.iter_mut().zip(chosen) {
-                    if c && !s.fresh {
-                        let zj = s.z[j];
-                        axpy(&mut s.prior, zj, column);
-                    }
-                }
-            }
-            for k in 0..ACT_DIM {
-                let column = self.gt.row(k);
-                for (s, &c) in block.iter_mut().zip(chosen) {
-                    if c && !s.fresh {
-                        let uk = s.u[k];
-                        axpy(&mut s.prior, uk, column);
+                    if c {
+                        debug_assert_eq!(s.z.len(), nz);
+                        let FilterState { z, u, fresh, prior } = s;
+                        self.predict_chunk(&mut prior[i0..i1], i0, z, u, *fresh);
                     }
                 }
             }
@@ -377,6 +405,28 @@ fn has_avx() -> bool {
     #[cfg(not(target_arch = "x86_64"))]
     {
         false
+    }
+}
+
+/// `acc[l] += a_j m[j][i0 + l]` for every `j` in ascending order: each output one separate
+/// multiplication and addition per term, the outputs kept in registers.
+#[inline(always)]
+fn accumulate(acc: &mut [f64; LANES], i0: usize, a: &[f64], m: &Matrix) {
+    for (j, aj) in a.iter().enumerate() {
+        let column: &[f64; LANES] = m.row(j)[i0..i0 + LANES]
+            .try_into()
+            .expect("a chunk of LANES columns");
+        for (o, x) in acc.iter_mut().zip(column) {
+            *o += *aj * x;
+        }
+    }
+}
+
+/// [`accumulate`] for a last chunk shorter than [`LANES`]: the same operations in the same order.
+#[inline(always)]
+fn accumulate_tail(acc: &mut [f64], i0: usize, a: &[f64], m: &Matrix) {
+    for (j, aj) in a.iter().enumerate() {
+        axpy(acc, *aj, &m.row(j)[i0..i0 + acc.len()]);
     }
 }
 
@@ -430,6 +480,114 @@ mod tests {
                 .iter()
                 .zip(&b.z)
                 .all(|(x, y)| x.to_bits() == y.to_bits()));
+        }
+    }
+
+    /// The step as the module docs write it, each sum a plain loop over its index in ascending
+    /// order from 0 (the arithmetic the filter promises, whatever its loops' layout).
+    #[allow(clippy::too_many_arguments)]
+    fn reference_step(
+        f: &Matrix,
+        g: &Matrix,
+        h: &Matrix,
+        l: &Matrix,
+        k: &Matrix,
+        k_ff: &Matrix,
+        y_trim: &[f64; MEASURED_DIM],
+        state: &mut FilterState,
+        obs: &[f64; OBS_DIM],
+    ) -> [f32; ACT_DIM] {
+        let (nz, n) = (f.rows(), k.cols());
+        let prior: Vec<f64> = (0..nz)
+            .map(|i| {
+                if state.fresh {
+                    return 0.0;
+                }
+                let mut s = 0.0;
+                for j in 0..nz {
+                    s += state.z[j] * f[(i, j)];
+                }
+                for c in 0..ACT_DIM {
+                    s += state.u[c] * g[(i, c)];
+                }
+                s
+            })
+            .collect();
+        let mut innovation = [0.0; MEASURED_DIM];
+        for (m, &i) in MEASURED.iter().enumerate() {
+            let mut predicted = 0.0;
+            for j in 0..nz {
+                predicted += prior[j] * h[(m, j)];
+            }
+            innovation[m] = (obs[i] - y_trim[m]) - predicted;
+        }
+        for i in 0..nz {
+            let mut s = 0.0;
+            for m in 0..MEASURED_DIM {
+                s += innovation[m] * l[(i, m)];
+            }
+            state.z[i] = s + prior[i];
+        }
+        let z = &state.z;
+        let reference = [z[n], z[n + 1], z[n + WIND_DIM + 1], z[n + WIND_DIM + 2]];
+        std::array::from_fn(|c| {
+            let mut u = 0.0;
+            for j in 0..n {
+                u += -z[j] * k[(c, j)];
+            }
+            let mut ff = 0.0;
+            for r in 0..4 {
+                ff += reference[r] * k_ff[(c, r)];
+            }
+            let v = (u + ff).clamp(-1.0, 1.0);
+            state.u[c] = v;
+            v as f32
+        })
+    }
+
+    #[test]
+    fn a_step_is_the_plain_sums_in_ascending_order() {
+        // 37 plant states: 45 observer states, two chunks of LANES and a shorter last one.
+        let n = 37;
+        let nz = n + EXTRA_STATES;
+        let mut seed = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let mut m = |r: usize, c: usize, s: f64| Matrix::from_fn(r, c, |_, _| s * next());
+        let (f, g, h, l) = (
+            m(nz, nz, 0.1),
+            m(nz, ACT_DIM, 1.0),
+            m(MEASURED_DIM, nz, 1.0),
+            m(nz, MEASURED_DIM, 0.1),
+        );
+        let (k, k_ff) = (m(ACT_DIM, n, 0.2), m(ACT_DIM, 4, 1.0));
+        let y_trim = [0.01; MEASURED_DIM];
+        for filter in [
+            LqrFilter::from_parts(n, &f, &g, &h, &l, &k, &k_ff, y_trim).unwrap(),
+            LqrFilter::from_parts(n, &f, &g, &h, &l, &k, &k_ff, y_trim)
+                .unwrap()
+                .baseline_width(),
+        ] {
+            let (mut ours, mut plain) = (filter.new_state(), filter.new_state());
+            for step in 0..15 {
+                let obs: [f64; OBS_DIM] =
+                    std::array::from_fn(|i| ((i * 7 + step * 3) % 11) as f64 * 0.07 - 0.3);
+                let mut u = [0.0_f32; ACT_DIM];
+                filter.step(&mut ours, &obs, &mut u).unwrap();
+                let expected = reference_step(&f, &g, &h, &l, &k, &k_ff, &y_trim, &mut plain, &obs);
+                plain.fresh = false;
+                assert_eq!(
+                    u.map(f32::to_bits),
+                    expected.map(f32::to_bits),
+                    "step {step}"
+                );
+                let bits = |s: &FilterState| s.z.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&ours), bits(&plain), "step {step}");
+            }
         }
     }
 

@@ -362,11 +362,40 @@ impl CaptureSim {
         aero: Arc<AeroModel>,
         wake: Wake,
     ) -> Result<Self> {
+        let field = Self::field(config, seeds, wake, true)?;
+        CaptureSim::with_parts(config, seeds, aero, Box::new(field))
+    }
+
+    /// [`CaptureSim::with_model`] for a simulation that is [reset](CaptureSim::reset) before
+    /// its first step: its turbulence generates its wake lanes at the reset and after (on
+    /// demand, where they are sampled) instead of all of them now, which the reset would
+    /// discard. From the reset on, the same simulation to the last bit.
+    pub fn with_model_for_reset(
+        config: &Valid<CaptureConfig>,
+        seeds: Seeds,
+        aero: Arc<AeroModel>,
+        wake: Wake,
+    ) -> Result<Self> {
+        let field = Self::field(config, seeds, wake, false)?;
+        CaptureSim::with_parts(config, seeds, aero, Box::new(field))
+    }
+
+    /// The air of a new simulation: the mean wake and the turbulence from the wake seed, with
+    /// every wake lane generated (`all_lanes`) or none yet.
+    fn field(
+        config: &Valid<CaptureConfig>,
+        seeds: Seeds,
+        wake: Wake,
+        all_lanes: bool,
+    ) -> Result<WakeField> {
         let airspeed = config.aircraft.airspeed;
         let turbulence = Turbulence::new(&config.turbulence, airspeed, seeds.wake)?;
         let density = Atmosphere::isa(config.aircraft.altitude)?.density;
-        let field = WakeField::from_parts(wake, turbulence, density);
-        CaptureSim::with_parts(config, seeds, aero, Box::new(field))
+        Ok(if all_lanes {
+            WakeField::from_parts(wake, turbulence, density)
+        } else {
+            WakeField::on_demand(wake, turbulence, density)
+        })
     }
 
     /// A new episode with a given (shared) aerodynamic model and air disturbance.

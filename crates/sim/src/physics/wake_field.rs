@@ -37,8 +37,17 @@ impl WakeField {
     /// Assembles a field; the free stream is `(-wake.airspeed(), 0, 0)`, `density` in kg/m^3.
     /// Every wake lane is generated (per-lane streams too, [`crate::physics::turbulence::LaneStreams`]:
     /// a standalone field cannot know where it will be sampled).
-    pub fn from_parts(wake: Wake, mut turbulence: Turbulence, density: f64) -> WakeField {
-        turbulence.activate_all();
+    pub fn from_parts(wake: Wake, turbulence: Turbulence, density: f64) -> WakeField {
+        let mut field = WakeField::on_demand(wake, turbulence, density);
+        field.turbulence.activate_all();
+        field
+    }
+
+    /// [`WakeField::from_parts`] without generating any wake lane: for an owner that prepares
+    /// the points it samples ([`AirDisturbance::prepare`], [`AirDisturbance::prepare_all`]),
+    /// such as a simulation reset before its first step. A lane generated later has the values
+    /// it would have had if generated at once.
+    pub fn on_demand(wake: Wake, turbulence: Turbulence, density: f64) -> WakeField {
         WakeField {
             free_stream: Vector3::new(-wake.airspeed(), 0.0, 0.0),
             wake,

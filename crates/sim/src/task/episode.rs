@@ -391,7 +391,8 @@ impl Episode {
             &self.base,
             Some((Arc::clone(&aero), wake.clone())),
         )?);
-        let mut sim = CaptureSim::with_model(&capture, seeds, aero, wake)?;
+        // Installed, then reset at once (`Episode::reset`): its turbulence is generated there.
+        let mut sim = CaptureSim::with_model_for_reset(&capture, seeds, aero, wake)?;
         sim.set_boom_nominal(equilibrium.boom_nominal)?;
         Ok(Some(Physics {
             parameters,
