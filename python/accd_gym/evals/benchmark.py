@@ -95,7 +95,7 @@ from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, VALIDATION_WAKE_SEEDS
 from accd_gym.envs.config import read_json_object
 from accd_gym.evals.episodes import EVAL_BASE_SEED, VALIDATION_BASE_SEED, run_episodes
 from accd_gym import _core, files
-from accd_gym.learning import distill, training
+from accd_gym.learning import distill, run_state, training
 from accd_gym.evals import distributed
 from accd_gym.evals.sweep import iqm as _iqm
 from accd_gym.evals.evaluation import mcnemar_exact, wilson_interval
@@ -447,13 +447,13 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
         # A job with a CPU budget (Ray's cpus_per_job) keeps its gradient updates within it.
         raw["update_threads"] = num_threads
     cfg = distill.validate_recipe(raw) if distilled else training.validate_config(raw)
-    trained_now = not _trained(run, cfg)
+    trained_now = not run_state.trained(run, cfg)
     if not trained_now:  # its evaluation is missing or stale (other code or episodes): not retrained
         meta = json.loads((run / "run.json").read_text())
     elif distilled:
-        meta = (distill.resume(run, make_teacher=_teacher) if _continues(run, cfg, distilled=True)
+        meta = (distill.resume(run, make_teacher=_teacher) if run_state.continues(run, cfg, distilled=True)
                 else distill.train(cfg, run, make_teacher=_teacher))
-    elif _continues(run, cfg):
+    elif run_state.continues(run, cfg):
         meta = training.resume(run, progress=False)
     else:
         meta = training.train(cfg, run, progress=False)
@@ -474,48 +474,6 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
     if meta["status"] == "done":
         files.write_text(run / RESULT_FILE, json.dumps({"key": key, "result": result}))
     return result | {"reused": False}
-
-
-def _trained(run: Path, cfg: dict[str, Any]) -> bool:
-    """``run`` holds a finished training of the config ``cfg`` with its final model and statistics."""
-    try:
-        meta = json.loads((run / "run.json").read_text())
-    except (OSError, ValueError):
-        return False
-    return (isinstance(meta, dict) and meta.get("status") == "done" and (run / "final_model.zip").is_file()
-            and (run / "vecnormalize.pkl").is_file() and _same_recipe(meta.get("config"), cfg))
-
-
-def _continues(run: Path, cfg: dict[str, Any], *, distilled: bool = False) -> bool:
-    """``run`` holds an unfinished run of the training config ``cfg`` with a checkpoint, which
-    :func:`accd_gym.learning.training.resume` continues (it refuses finished runs and runs without a
-    checkpoint; the config check is the benchmark's: another recipe starts afresh). ``distilled``:
-    a distillation run (:func:`accd_gym.learning.distill.resume`; a checkpoint is a complete round)."""
-    try:
-        meta = json.loads((run / "run.json").read_text())
-    except (OSError, ValueError):
-        return False
-    saved = distill.completed_rounds(run) > 0 if distilled else training.latest_checkpoint(run) is not None
-    return (isinstance(meta, dict) and meta.get("status") != "done" and saved
-            and (not distilled or meta.get("trainer") == "distill") and _same_recipe(meta.get("config"), cfg))
-
-
-def _teacher(spec: str, seed: int, config: dict) -> Any:
-    """A distillation recipe's teacher, resolved as ``accd-gym evaluate --policy`` resolves a policy."""
-    return load_policy(spec, seed, config=config)
-
-
-def _same_recipe(stored: Any, cfg: dict[str, Any]) -> bool:
-    """``stored`` (a run.json's config) trains what ``cfg`` trains: equal but for the two fields
-    that change no result: ``num_threads``, the env-stepping thread count (the batch is bitwise
-    identical for any thread count), and ``checkpoint_every``, how often the run is saved. A run
-    begun as a Ray task (one thread per job) thus continues or is reused locally (one thread per
-    core), and the other way round."""
-    if not isinstance(stored, dict):
-        return False
-    ignore = {"num_threads", "checkpoint_every"}
-    fresh = json.loads(json.dumps(cfg))
-    return {k: v for k, v in stored.items() if k not in ignore} == {k: v for k, v in fresh.items() if k not in ignore}
 
 
 def _run_jobs(todo: list[Job], cfg: dict[str, Any], out: Path, ray_address: Optional[str],

@@ -43,6 +43,12 @@ point the interquartile mean (IQM: the mean of the middle half, as rliable compu
 ``scipy.stats.trim_mean(x, 0.25)``) of the capture rates over seeds with a 95 % percentile
 bootstrap interval over seeds (10,000 resamples, fixed generator seed).
 
+A sweep rerun into the same ``out`` trains only what is missing: a trial whose run folder holds
+the finished training of its config is evaluated again without training, one stopped with a
+checkpoint (a killed machine, Ctrl+C) continues from its newest checkpoint
+(:func:`accd_gym.learning.training.resume`), as the benchmark's runs do; another config in the
+folder starts afresh. (RLlib trials always train afresh.)
+
 In a sweep an RLlib trial samples in its own process (``num_env_runners`` is set to 0) with its
 envs stepped on ``cpus_per_trial`` threads: the parallelism is across trials.
 """
@@ -65,7 +71,7 @@ from accd_gym.evals.policies import load_policy
 from accd_gym.envs.config import read_json_object
 from accd_gym.envs.task import HELD_OUT_WAKE_SEEDS, VALIDATION_WAKE_SEEDS
 from accd_gym.evals.episodes import EVAL_BASE_SEED, run_episodes, VALIDATION_BASE_SEED
-from accd_gym.learning import rllib, training
+from accd_gym.learning import rllib, run_state, training
 from accd_gym.evals.evaluation import summarize, wilson_interval
 from accd_gym.envs.agent_io import AGENT_KEYS
 from accd_gym.evals import distributed
@@ -229,9 +235,17 @@ def _trial(params: dict[str, Any]) -> None:
     t0 = time.perf_counter()
     if rllib.is_rllib_config(cfg):
         meta = rllib.train(cfg, run, progress=False, connect=False)
+    elif run_state.trained(run, cfg):  # the sweep rerun: this trial's training is done
+        meta = json.loads((run / "run.json").read_text())
+    elif run_state.continues(run, cfg):  # stopped with a checkpoint: continue from it
+        meta = training.resume(run, progress=False)
     else:
         meta = training.train(cfg, run, progress=False)
-    train_s = time.perf_counter() - t0
+    # The trial's own training time (every resumed part), not this invocation's.
+    train_s = meta.get("wall_time_s", time.perf_counter() - t0)
+    if meta["status"] != "done":
+        raise RuntimeError(f"trial {name}: training {meta['status']} at {meta['timesteps']} steps; "
+                           "rerun the sweep to continue it from its checkpoint")
     episodes = sweep["episodes"]
     env = cfg["env"] if sweep["eval_env"] is None else sweep["eval_env"]
     policy = load_policy(str(run))

@@ -1,0 +1,54 @@
+"""What a run folder holds against the training config that should fill it: a finished
+training of that config (reuse it), an unfinished one with a checkpoint (resume it), or
+neither (train afresh). The benchmark and the sweeps decide with these, so that an
+interrupted invocation, rerun, trains only what is missing."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from accd_gym.learning import distill, training
+
+__all__ = ["continues", "same_recipe", "trained"]
+
+
+def same_recipe(stored: Any, cfg: dict[str, Any]) -> bool:
+    """``stored`` (a run.json's config) trains what ``cfg`` trains: equal but for the two fields
+    that change no result: ``num_threads``, the env-stepping thread count (the batch is bitwise
+    identical for any thread count), and ``checkpoint_every``, how often the run is saved. A run
+    begun as a Ray task (one thread per job) thus continues or is reused locally (one thread per
+    core), and the other way round."""
+    if not isinstance(stored, dict):
+        return False
+    ignore = {"num_threads", "checkpoint_every"}
+    fresh = json.loads(json.dumps(cfg))
+    return {k: v for k, v in stored.items() if k not in ignore} == {k: v for k, v in fresh.items() if k not in ignore}
+
+
+def _meta(run: Path) -> Any:
+    try:
+        return json.loads((run / "run.json").read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def trained(run: Path, cfg: dict[str, Any]) -> bool:
+    """``run`` holds a finished training of the config ``cfg`` with its final model and statistics."""
+    meta = _meta(run)
+    return (isinstance(meta, dict) and meta.get("status") == "done" and (run / "final_model.zip").is_file()
+            and (run / "vecnormalize.pkl").is_file() and same_recipe(meta.get("config"), cfg))
+
+
+def continues(run: Path, cfg: dict[str, Any], *, distilled: bool = False) -> bool:
+    """``run`` holds an unfinished run of the training config ``cfg`` with a checkpoint, which
+    :func:`accd_gym.learning.training.resume` continues (it refuses finished runs and runs without a
+    checkpoint; another recipe starts afresh). ``distilled``: a distillation run
+    (:func:`accd_gym.learning.distill.resume`; a checkpoint is a complete round)."""
+    meta = _meta(run)
+    if not isinstance(meta, dict):
+        return False
+    saved = distill.completed_rounds(run) > 0 if distilled else training.latest_checkpoint(run) is not None
+    return (meta.get("status") != "done" and saved
+            and (not distilled or meta.get("trainer") == "distill") and same_recipe(meta.get("config"), cfg))
