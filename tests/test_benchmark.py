@@ -367,6 +367,15 @@ def test_a_result_is_keyed_by_the_whole_package_and_the_recipes_bytes_not_their_
     moved.write_text(moved.read_text() + "\n")  # an edited recipe is another config
     with pytest.raises(ConfigError, match=r"differs in \['learners'\]"):
         benchmark._claim(out, {**cfg, "learners": {**cfg["learners"], "ppo": spec}})
+    # A learner added (the others unchanged) extends the folder: recorded, and then required.
+    extra = {**cfg["learners"], "ppo2": dict(cfg["learners"]["ppo"])}
+    benchmark._claim(out, {**cfg, "learners": extra})
+    assert set(json.loads((out / benchmark.CONFIG_FILE).read_text())["learners"]) == set(extra)
+    benchmark._claim(out, {**cfg, "learners": extra})
+    with pytest.raises(ConfigError, match=r"differs in \['learners'\]"):  # one dropped: another config
+        benchmark._claim(out, cfg)
+    with pytest.raises(ConfigError, match=r"differs in \['episodes', 'learners'\]"):  # added, and more changed
+        benchmark._claim(out, {**cfg, "episodes": 7, "learners": {**extra, "ppo3": dict(cfg["learners"]["ppo"])}})
 
 
 def test_the_report_names_the_cpu_and_the_blas_kernels_it_ran_on():

@@ -279,3 +279,55 @@ def test_critic_warmup_trains_only_the_critic_first(tmp_path):
     assert not torch.equal(after["action_net.weight"], student["action_net.weight"])
     with pytest.raises(training.ConfigError, match="critic_warmup"):
         training.validate_config({"critic_warmup": 10})
+
+
+def test_a_benchmark_fine_tuning_job_starts_from_the_run_of_its_tier_and_seed(tmp_path):
+    from accd_gym.evals import benchmark
+
+    bc = tmp_path / "bc.json"
+    bc.write_text(json.dumps(_recipe(teacher="lqr", rounds=0, env={"history": 1}, updates=20)))
+    ft = tmp_path / "ft.json"
+    ft.write_text(json.dumps({"algo": "ppo", "num_envs": 4, "env": {"history": 1},
+                              "algo_kwargs": {"n_steps": 16, "batch_size": 32, "n_epochs": 1},
+                              "policy_kwargs": {"net_arch": {"pi": [32, 32], "vf": [32, 32]}, "activation_fn": "tanh",
+                                                "log_std_init": -3.0}, "checkpoint_every": 10_000}))
+    raw = {"tiers": ["nominal"], "baselines": ["zero"], "episodes": 2, "validation_episodes": 2, "num_envs": 2,
+           "learners": {"bc": {"train_config": str(bc), "seeds": [0, 1], "timesteps": 256},
+                        "bc_ppo": {"train_config": str(ft), "seeds": [1], "timesteps": 64, "init_from": "bc"}}}
+    cfg = benchmark.validate_config(raw)
+    jobs = benchmark.jobs(cfg)
+    (tuned,) = [j for j in jobs if j.algo == "bc_ppo"]
+    assert tuned.source == "nominal_bc_seed1" and all(j.source is None for j in jobs if j.algo == "bc")
+    out = tmp_path / "bench"
+    # Its run must exist first; the benchmark runs the jobs that start afresh first.
+    with pytest.raises(benchmark.ConfigError, match="nominal_bc_seed1.*not trained.*--algos bc"):
+        benchmark.run_job(tuned, str(out), 2, 2, 1, validation_episodes=2)
+    doc = benchmark.run(cfg, out, progress=lambda _: None)
+    assert {r["name"] for r in doc["runs"]} >= {"nominal_bc_seed0", "nominal_bc_seed1", "nominal_bc_ppo_seed1"}
+    meta = json.loads((out / "runs" / "nominal_bc_ppo_seed1" / "run.json").read_text())
+    assert meta["status"] == "done" and meta["config"]["init_from"] == str(out.resolve() / "runs" / "nominal_bc_seed1")
+    # Started from that student: its weights (but log_std) before any update equal the student's.
+    cfg_ft = training.validate_config(meta["config"])
+    env, model = training._new_model(cfg_ft, tmp_path / "probe")
+    try:
+        student = _weights(out / "runs" / "nominal_bc_seed1")
+        assert all(torch.equal(model.policy.state_dict()[k], v) for k, v in student.items() if k != "log_std")
+    finally:
+        env.close()
+    # The jobs that start afresh keep the keys they always had (no `init_from` entry).
+    assert "init_from" not in benchmark.job_key(jobs[0], 2, 2)["job"]
+    assert benchmark.job_key(tuned, 2, 2)["job"]["init_from"] == "bc"
+
+
+@pytest.mark.parametrize("init_from, needle", [("dagger", "another learner"), ("bc_ppo", "another learner"),
+                                               ("bc", r"no run for \['seed 7'\]")])
+def test_a_fine_tuning_learner_names_a_learner_with_its_tiers_and_seeds(tmp_path, init_from, needle):
+    from accd_gym.evals import benchmark
+
+    recipe = tmp_path / "r.json"
+    recipe.write_text("{}")
+    raw = {"tiers": ["nominal"], "learners": {"bc": {"train_config": str(recipe), "seeds": [0], "timesteps": 1},
+                                              "bc_ppo": {"train_config": str(recipe), "seeds": [0, 7], "timesteps": 1,
+                                                         "init_from": init_from}}}
+    with pytest.raises(benchmark.ConfigError, match=rf"`learners.bc_ppo.init_from` = .*{needle}"):
+        benchmark.validate_config(raw)

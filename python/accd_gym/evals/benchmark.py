@@ -62,7 +62,10 @@ tiers                 tier names (default: all)
 learners              ``{"ppo": {"train_config", "seeds", "timesteps", "tiers"}, "sac": {...}}``;
                       ``tiers`` limits an algorithm to some tiers (default: all); ``train_config`` a
                       recipe, or ``{tier: recipe}`` (then its tiers by default); the recipe's env
-                      options (residual, history) are kept, its tier set to the job's
+                      options (residual, history) are kept, its tier set to the job's;
+                      ``init_from`` another learner's name: each job starts from that learner's
+                      run of the same tier and seed (RL fine-tuning of a distilled student), after
+                      the jobs that start afresh
 baselines             baseline names (default ``["zero", "random", "guidance", "lqr"]``; unknown ones
                       are refused)
 episodes              held-out episodes per tier (default 500)
@@ -118,7 +121,7 @@ DEFAULTS: dict[str, Any] = {
 #: Bootstrap resamples and the seed of their generator.
 BOOTSTRAP_RESAMPLES = 10_000
 BOOTSTRAP_SEED = 0
-_LEARNER_KEYS = ("train_config", "seeds", "timesteps", "tiers")
+_LEARNER_KEYS = ("train_config", "seeds", "timesteps", "tiers", "init_from")
 
 
 def validate_config(raw: Any, *, quick: bool = False, root: Optional[Path] = None) -> dict[str, Any]:
@@ -182,6 +185,8 @@ def validate_config(raw: Any, *, quick: bool = False, root: Optional[Path] = Non
                 raise ConfigError(f"invalid config: `learners.{algo}.train_config` = {recipe!r} is not a file")
             resolved[tier_name] = str(path)
         spec["train_config"] = resolved if isinstance(recipes, dict) else resolved[None]
+    for algo, spec in cfg["learners"].items():
+        _check_init_from(algo, spec, cfg["learners"], tiers)
     if not isinstance(cfg["baselines"], list) or [b for b in cfg["baselines"] if b not in CONTROLLERS]:
         raise ConfigError(f"invalid config: `baselines` = {cfg['baselines']!r} is outside the allowed values: a list of {list(CONTROLLERS)}")
     for key, lo in (("episodes", 1), ("validation_episodes", 1), ("num_envs", 1), ("cpus_per_job", 1)):
@@ -197,6 +202,24 @@ def validate_config(raw: Any, *, quick: bool = False, root: Optional[Path] = Non
     return cfg
 
 
+def _check_init_from(algo: str, spec: dict[str, Any], learners: dict[str, Any], tiers: list[str]) -> None:
+    """ConfigError unless ``learners.<algo>.init_from`` (when set) names another learner of the
+    config, itself started afresh, that has a run for each of this learner's tiers and seeds:
+    each job starts from the run of the same tier and seed."""
+    source = spec.get("init_from")
+    if source is None:
+        return
+    other = learners.get(source) if isinstance(source, str) else None
+    if other is None or source == algo or other.get("init_from") is not None:
+        raise ConfigError(f"invalid config: `learners.{algo}.init_from` = {source!r} is outside the allowed values: "
+                          f"another learner of this config that starts afresh ({sorted(k for k, v in learners.items() if k != algo and v.get('init_from') is None)})")
+    mine, theirs = spec["tiers"] or tiers, other["tiers"] or tiers
+    missing = [t for t in mine if t not in theirs] + [f"seed {s}" for s in spec["seeds"] if s not in other["seeds"]]
+    if missing:
+        raise ConfigError(f"invalid config: `learners.{algo}.init_from` = {source!r} has no run for {missing}: "
+                          f"each of {algo}'s jobs starts from the {source} run of its tier and seed")
+
+
 def load_config(path: str | Path, *, quick: bool = False) -> dict[str, Any]:
     """A validated benchmark config from a JSON file (paths in it relative to the repository,
     the file's folder's parent)."""
@@ -208,18 +231,26 @@ def load_config(path: str | Path, *, quick: bool = False) -> dict[str, Any]:
 
 @dataclass(frozen=True)
 class Job:
-    """One training run of the benchmark: an algorithm's recipe on a tier with a seed."""
+    """One training run of the benchmark: an algorithm's recipe on a tier with a seed;
+    ``init_from``: the learner whose run of the same tier and seed it starts from (RL
+    fine-tuning of a distilled student), or None."""
 
     tier: str
     algo: str
     seed: int
     train_config: str
     timesteps: int
+    init_from: Optional[str] = None
 
     @property
     def name(self) -> str:
         """The run's folder name."""
         return f"{self.tier}_{self.algo}_seed{self.seed}"
+
+    @property
+    def source(self) -> Optional[str]:
+        """The folder name of the run it starts from (None: it starts afresh)."""
+        return None if self.init_from is None else f"{self.tier}_{self.init_from}_seed{self.seed}"
 
 
 def jobs(cfg: dict[str, Any]) -> list[Job]:
@@ -230,7 +261,7 @@ def jobs(cfg: dict[str, Any]) -> list[Job]:
             if spec["tiers"] is not None and tier not in spec["tiers"]:
                 continue
             recipe = spec["train_config"][tier] if isinstance(spec["train_config"], dict) else spec["train_config"]
-            out += [Job(tier, algo, s, recipe, spec["timesteps"]) for s in spec["seeds"]]
+            out += [Job(tier, algo, s, recipe, spec["timesteps"], spec.get("init_from")) for s in spec["seeds"]]
     return out
 
 
@@ -378,7 +409,9 @@ def job_key(job: Job, episodes: int, num_envs: int, validation_episodes: Optiona
     result with another key is not reused."""
     # The recipe by its name and bytes, not its path: a benchmark folder stays valid for a moved
     # or freshly cloned checkout.
-    return {"job": {**job.__dict__, "train_config": Path(job.train_config).name},
+    # (init_from only where set: the keys of the jobs that start afresh are those they always had)
+    fields = {k: v for k, v in job.__dict__.items() if not (k == "init_from" and v is None)}
+    return {"job": {**fields, "train_config": Path(job.train_config).name},
             "train_config_sha256": _sha256(job.train_config),
             "tier_config": _tier(job.tier).config(), "build": build_digest(), "episodes": episodes,
             "validation_episodes": episodes if validation_episodes is None else validation_episodes,
@@ -440,6 +473,13 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
     raw["seed"] = job.seed
     raw["total_timesteps"] = job.timesteps
     raw["num_threads"] = num_threads
+    if job.source is not None:  # RL fine-tuning: from the finished run of the same tier and seed
+        start = Path(out).resolve() / "runs" / job.source
+        meta = run_state.read_meta(start)
+        if not (isinstance(meta, dict) and meta.get("status") == "done"):
+            raise ConfigError(f"{job.name} starts from {job.source}, which is not trained in {out}: run its learner "
+                              f"{job.init_from!r} first (`--algos {job.init_from}`)")
+        raw["init_from"] = str(start)
     distilled = distill.is_recipe(raw)  # a distillation recipe (behaviour cloning, DAgger): its own trainer
     updates = raw.get("update_threads", 0)
     # (A value that is not an integer is left for validate_config to refuse, naming it.)
@@ -476,7 +516,27 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
     return result | {"reused": False}
 
 
+def _teacher(spec: str, seed: int, config: dict) -> Any:
+    """A distillation recipe's teacher, resolved as ``accd-gym evaluate --policy`` resolves a policy."""
+    return load_policy(spec, seed, config=config)
+
+
 def _run_jobs(todo: list[Job], cfg: dict[str, Any], out: Path, ray_address: Optional[str],
+              progress: Callable[[str], None]) -> list[dict[str, Any]]:
+    """Runs the jobs locally or as Ray tasks; returns their results in job order. Jobs that
+    start from another run (``init_from``) run after every job that starts afresh."""
+    waves = [[j for j in todo if j.init_from is None], [j for j in todo if j.init_from is not None]]
+    results: dict[Job, dict[str, Any]] = {}
+    for wave in waves:
+        if wave:
+            try:
+                results.update(zip(wave, _run_wave(wave, cfg, out, ray_address, progress)))
+            except _Interrupted as e:
+                raise _Interrupted([results[j] for j in todo if j in results] + e.results, str(e)) from None
+    return [results[j] for j in todo]
+
+
+def _run_wave(todo: list[Job], cfg: dict[str, Any], out: Path, ray_address: Optional[str],
               progress: Callable[[str], None]) -> list[dict[str, Any]]:
     """Runs the jobs locally (in order) or as Ray tasks; returns their results in job order."""
     if ray_address is None:
@@ -516,7 +576,9 @@ def _claim(out: Path, config: dict[str, Any]) -> None:
     """Records ``config`` in ``out`` (first run) or refuses a folder made with another one:
     ConfigError naming the folder and the keys that differ. Recipes count by their name and
     bytes (:func:`_portable`): the same recipes from another checkout are the same config, an
-    edited recipe is another."""
+    edited recipe is another. A config that only adds learners to the folder's (every other key
+    and every learner it had the same) extends the folder: it is recorded, and the runs already
+    there stay valid."""
     mine = _portable(config)
     path = out / CONFIG_FILE
     try:
@@ -526,10 +588,22 @@ def _claim(out: Path, config: dict[str, Any]) -> None:
         return
     except (OSError, ValueError) as e:
         raise ConfigError(f"invalid config: --out {str(out)!r}: its {CONFIG_FILE} is unreadable ({e})") from None
+    if _extends(stored, mine):
+        files.write_text(path, json.dumps(mine, indent=1))
+        return
     if stored != mine:
         keys = sorted(k for k in set(stored) | set(mine) if stored.get(k) != mine.get(k)) if isinstance(stored, dict) else ["*"]
         raise ConfigError(f"invalid config: --out {str(out)!r} was made by another benchmark config (differs in {keys}); "
                           "rerun with that config or choose another --out")
+
+
+def _extends(stored: Any, mine: dict[str, Any]) -> bool:
+    """``mine`` is ``stored`` with learners added (and nothing else changed)."""
+    if not isinstance(stored, dict) or stored == mine or not isinstance(stored.get("learners"), dict):
+        return False
+    same_rest = {k: v for k, v in stored.items() if k != "learners"} == {k: v for k, v in mine.items() if k != "learners"}
+    kept = all(mine["learners"].get(k) == v for k, v in stored["learners"].items())
+    return same_rest and kept
 
 
 class _Interrupted(Exception):

@@ -11,7 +11,7 @@ from typing import Any
 
 from accd_gym.learning import distill, training
 
-__all__ = ["continues", "same_recipe", "trained"]
+__all__ = ["continues", "read_meta", "same_recipe", "trained"]
 
 
 def same_recipe(stored: Any, cfg: dict[str, Any]) -> bool:
@@ -27,7 +27,9 @@ def same_recipe(stored: Any, cfg: dict[str, Any]) -> bool:
     return {k: v for k, v in stored.items() if k not in ignore} == {k: v for k, v in fresh.items() if k not in ignore}
 
 
-def _meta(run: Path) -> Any:
+def read_meta(run: Path) -> Any:
+    """The run summary ``run/run.json`` (whatever JSON it holds), or None where it is missing or
+    unreadable."""
     try:
         return json.loads((run / "run.json").read_text())
     except (OSError, ValueError):
@@ -36,7 +38,7 @@ def _meta(run: Path) -> Any:
 
 def trained(run: Path, cfg: dict[str, Any]) -> bool:
     """``run`` holds a finished training of the config ``cfg`` with its final model and statistics."""
-    meta = _meta(run)
+    meta = read_meta(run)
     return (isinstance(meta, dict) and meta.get("status") == "done" and (run / "final_model.zip").is_file()
             and (run / "vecnormalize.pkl").is_file() and same_recipe(meta.get("config"), cfg))
 
@@ -46,7 +48,7 @@ def continues(run: Path, cfg: dict[str, Any], *, distilled: bool = False) -> boo
     :func:`accd_gym.learning.training.resume` continues (it refuses finished runs and runs without a
     checkpoint; another recipe starts afresh). ``distilled``: a distillation run
     (:func:`accd_gym.learning.distill.resume`; a checkpoint is a complete round)."""
-    meta = _meta(run)
+    meta = read_meta(run)
     if not isinstance(meta, dict):
         return False
     saved = distill.completed_rounds(run) > 0 if distilled else training.latest_checkpoint(run) is not None
