@@ -314,6 +314,13 @@ def test_a_benchmark_fine_tuning_job_starts_from_the_run_of_its_tier_and_seed(tm
         assert all(torch.equal(model.policy.state_dict()[k], v) for k, v in student.items() if k != "log_std")
     finally:
         env.close()
+    # The folder moved elsewhere: the fine-tuned run is still its job's training (by the name of
+    # the run it started from, not its path).
+    from accd_gym.learning import run_state
+
+    moved = dict(meta["config"], init_from="/elsewhere/runs/nominal_bc_seed1")
+    assert run_state.same_recipe(meta["config"], moved)
+    assert not run_state.same_recipe(meta["config"], dict(moved, init_from="/elsewhere/runs/nominal_bc_seed0"))
     # The jobs that start afresh keep the keys they always had (no `init_from` entry).
     assert "init_from" not in benchmark.job_key(jobs[0], 2, 2)["job"]
     assert benchmark.job_key(tuned, 2, 2)["job"]["init_from"] == "bc"

@@ -19,12 +19,20 @@ def same_recipe(stored: Any, cfg: dict[str, Any]) -> bool:
     that change no result: ``num_threads``, the env-stepping thread count (the batch is bitwise
     identical for any thread count), and ``checkpoint_every``, how often the run is saved. A run
     begun as a Ray task (one thread per job) thus continues or is reused locally (one thread per
-    core), and the other way round."""
+    core), and the other way round. ``init_from`` counts by the name of the run folder it
+    starts from, not its path: a benchmark folder moved or cloned elsewhere keeps its
+    fine-tuned runs."""
     if not isinstance(stored, dict):
         return False
     ignore = {"num_threads", "checkpoint_every"}
-    fresh = json.loads(json.dumps(cfg))
-    return {k: v for k, v in stored.items() if k not in ignore} == {k: v for k, v in fresh.items() if k not in ignore}
+
+    def comparable(c: dict[str, Any]) -> dict[str, Any]:
+        out = {k: v for k, v in c.items() if k not in ignore}
+        if isinstance(out.get("init_from"), str):
+            out["init_from"] = Path(out["init_from"]).name
+        return out
+
+    return comparable(stored) == comparable(json.loads(json.dumps(cfg)))
 
 
 def read_meta(run: Path) -> Any:
