@@ -443,10 +443,10 @@ fn axpy(y: &mut [f64], a: f64, x: &[f64]) {
 mod tests {
     use super::*;
 
-    /// A filter of `n` plant states with deterministic pseudo-random matrices.
-    fn filter(n: usize) -> LqrFilter {
+    /// Deterministic pseudo-random matrices `(F, G, H, L, K, K_ff)` of a design of `n` plant
+    /// states, from `seed`.
+    fn matrices(n: usize, mut seed: u64) -> [Matrix; 6] {
         let nz = n + EXTRA_STATES;
-        let mut seed = 0x2545_f491_4f6c_dd1d_u64;
         let mut next = move || {
             seed ^= seed << 13;
             seed ^= seed >> 7;
@@ -454,13 +454,19 @@ mod tests {
             (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
         };
         let mut m = |r: usize, c: usize, s: f64| Matrix::from_fn(r, c, |_, _| s * next());
-        let (f, g, h, l) = (
+        [
             m(nz, nz, 0.1),
             m(nz, ACT_DIM, 1.0),
             m(MEASURED_DIM, nz, 1.0),
             m(nz, MEASURED_DIM, 0.1),
-        );
-        let (k, k_ff) = (m(ACT_DIM, n, 0.2), m(ACT_DIM, 4, 1.0));
+            m(ACT_DIM, n, 0.2),
+            m(ACT_DIM, 4, 1.0),
+        ]
+    }
+
+    /// A filter of `n` plant states with deterministic pseudo-random matrices.
+    fn filter(n: usize) -> LqrFilter {
+        let [f, g, h, l, k, k_ff] = matrices(n, 0x2545_f491_4f6c_dd1d);
         LqrFilter::from_parts(n, &f, &g, &h, &l, &k, &k_ff, [0.01; MEASURED_DIM]).unwrap()
     }
 
@@ -549,22 +555,7 @@ mod tests {
     fn a_step_is_the_plain_sums_in_ascending_order() {
         // 37 plant states: 45 observer states, two chunks of LANES and a shorter last one.
         let n = 37;
-        let nz = n + EXTRA_STATES;
-        let mut seed = 0x9e37_79b9_7f4a_7c15_u64;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
-        let mut m = |r: usize, c: usize, s: f64| Matrix::from_fn(r, c, |_, _| s * next());
-        let (f, g, h, l) = (
-            m(nz, nz, 0.1),
-            m(nz, ACT_DIM, 1.0),
-            m(MEASURED_DIM, nz, 1.0),
-            m(nz, MEASURED_DIM, 0.1),
-        );
-        let (k, k_ff) = (m(ACT_DIM, n, 0.2), m(ACT_DIM, 4, 1.0));
+        let [f, g, h, l, k, k_ff] = matrices(n, 0x9e37_79b9_7f4a_7c15);
         let y_trim = [0.01; MEASURED_DIM];
         for filter in [
             LqrFilter::from_parts(n, &f, &g, &h, &l, &k, &k_ff, y_trim).unwrap(),
