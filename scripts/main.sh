@@ -33,8 +33,19 @@ else
   TRAIN_ARGS=(--timesteps "${ACCD_TIMESTEPS:-1000000}")
   EPISODES="${ACCD_EPISODES:-200}"
 fi
-echo "main: training PPO (training/ppo.json ${TRAIN_ARGS[*]:-full length}) into $OUT/ppo"
-"$ACCD_PY" -m accd_gym train --config training/ppo.json --out "$OUT/ppo" "${TRAIN_ARGS[@]}"
+if [ -f "$OUT/ppo/run.json" ]; then
+  # A rerun: an interrupted training continues; a finished one is evaluated again, not replaced.
+  STATUS="$("$ACCD_PY" -c 'import json, sys; print(json.load(open(sys.argv[1])).get("status"))' "$OUT/ppo/run.json")"
+  if [ "$STATUS" = "done" ]; then
+    echo "main: $OUT/ppo holds a finished training; evaluating it (move it away to train again)"
+  else
+    echo "main: continuing the training in $OUT/ppo (status: $STATUS)"
+    "$ACCD_PY" -m accd_gym train --resume "$OUT/ppo"
+  fi
+else
+  echo "main: training PPO (training/ppo.json ${TRAIN_ARGS[*]:-full length}) into $OUT/ppo"
+  "$ACCD_PY" -m accd_gym train --config training/ppo.json --out "$OUT/ppo" "${TRAIN_ARGS[@]}"
+fi
 TRAIN_DONE=$(date +%s)
 echo "main: evaluating on $EPISODES held-out wake seeds into $OUT/eval"
 "$ACCD_PY" -m accd_gym evaluate --policy "$OUT/ppo" --policy guidance --policy zero --policy random \

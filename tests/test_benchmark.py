@@ -178,22 +178,27 @@ def test_an_interrupted_job_continues_from_its_checkpoint(tmp_path, monkeypatch)
     with pytest.raises(Chosen):  # nothing there: a fresh start
         benchmark.run_job(job, str(tmp_path), cfg["episodes"], cfg["num_envs"])
     run = tmp_path / "runs" / job.name
-    (run / "checkpoints").mkdir(parents=True)
-    (run / "checkpoints" / "model_2048_steps.zip").write_bytes(b"")
     for status, config, expected in (("interrupted", seen[0], "resume"), ("training", seen[0], "resume"),
                                      ("done", seen[0], "train"), ("interrupted", {**seen[0], "seed": 99}, "train"),
                                      # begun with another env thread count (a Ray task): continued
                                      ("interrupted", {**seen[0], "num_threads": 7}, "resume"),
                                      ("interrupted", {**seen[0], "checkpoint_every": 12345}, "resume"),
                                      ("interrupted", {**seen[0], "torch_threads": 3}, "train")):
+        (run / "checkpoints").mkdir(parents=True, exist_ok=True)
+        (run / "checkpoints" / "model_2048_steps.zip").write_bytes(b"")
         (run / "run.json").write_text(json.dumps({"status": status, "config": config}))
         with pytest.raises(Chosen, match=expected):
             benchmark.run_job(job, str(tmp_path), cfg["episodes"], cfg["num_envs"])
+        # A fresh start first moves the run it replaces to OUT/superseded, whole.
+        assert run.exists() == (expected == "resume")
     # Without a checkpoint an interrupted run starts afresh.
-    (run / "checkpoints" / "model_2048_steps.zip").unlink()
+    (run / "checkpoints").mkdir(parents=True)
     (run / "run.json").write_text(json.dumps({"status": "interrupted", "config": seen[0]}))
     with pytest.raises(Chosen, match="train"):
         benchmark.run_job(job, str(tmp_path), cfg["episodes"], cfg["num_envs"])
+    shelved = sorted(p.name for p in (tmp_path / "superseded").iterdir())
+    assert shelved == [f"{job.name}-{k}" for k in (1, 2, 3, 4)]
+    assert json.loads((tmp_path / "superseded" / f"{job.name}-2" / "run.json").read_text())["config"]["seed"] == 99
 
 
 def test_a_job_with_a_cpu_budget_keeps_its_gradient_updates_within_it(tmp_path, monkeypatch):

@@ -113,3 +113,48 @@ def test_the_first_signal_stops_at_the_next_env_step_and_a_second_one_at_once():
     assert stop.signal_name == "signal SIGTERM" and callback._on_step() is False
     with pytest.raises(KeyboardInterrupt):
         stop.handler(signal.SIGINT, None)
+
+
+def test_a_sweep_trial_rerun_reuses_its_training_and_continues_a_stopped_one(tmp_path):
+    from accd_gym.evals import sweep
+
+    cfg = training.validate_config(json.loads(_config(tmp_path, 256).read_text()))
+    run = tmp_path / "trials" / "trial"  # as a sweep lays out its trials: OUT/trials/<name>
+    meta, seconds = sweep.train_trial(cfg, run)
+    assert meta["status"] == "done" and meta["timesteps"] == 256 and seconds == meta["wall_time_s"]
+    model = run / "final_model.zip"
+    stamp = model.stat().st_mtime_ns
+    # The sweep rerun: nothing is trained again; the trial keeps its own training time.
+    again, seconds_again = sweep.train_trial(cfg, run)
+    assert model.stat().st_mtime_ns == stamp and again == meta and seconds_again == seconds
+    # A trial stopped after its last checkpoint (the machine went down before the final save)
+    # continues from that checkpoint instead of starting over.
+    stopped = json.loads((run / "run.json").read_text())
+    (run / "run.json").write_text(json.dumps({**stopped, "status": "interrupted"}))
+    model.unlink()
+    resumed, _ = sweep.train_trial(cfg, run)
+    assert resumed["status"] == "done" and resumed["timesteps"] == 256 and model.is_file()
+    # Another config in the folder is not this trial's training: it trains afresh, the earlier
+    # run kept whole beside the trials.
+    other = dict(cfg, seed=2)
+    fresh, _ = sweep.train_trial(other, run)
+    assert fresh["status"] == "done" and json.loads((run / "run.json").read_text())["config"]["seed"] == 2
+    kept = tmp_path / "superseded" / "trial-1"
+    assert json.loads((kept / "run.json").read_text())["config"]["seed"] == 1 and (kept / "final_model.zip").is_file()
+
+
+def test_training_into_a_folder_that_holds_a_run_is_refused(tmp_path, capsys):
+    cfg = _config(tmp_path, 128)
+    run = tmp_path / "run"
+    assert main(["train", "--config", str(cfg), "--out", str(run), "--quiet"]) == 0
+    model = (run / "final_model.zip").read_bytes()
+    capsys.readouterr()
+    assert main(["train", "--config", str(cfg), "--out", str(run), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "already holds a training run" in err and "--resume" in err, err
+    assert (run / "final_model.zip").read_bytes() == model
+    (run / "final_model.zip").unlink()
+    (run / "run.json").unlink()
+    (run / "vecnormalize.pkl").unlink()
+    with pytest.raises(accd_gym.ConfigError, match="checkpoints"):  # its checkpoints alone count too
+        training.train(json.loads(cfg.read_text()), run, progress=False)

@@ -445,7 +445,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_export_aero)
     p = sub.add_parser("train", help="train PPO or SAC on the capture task (stable-baselines3, or RLlib PPO for a config with \"trainer\": \"rllib\")")
     p.add_argument("--config", type=_path("--config"), help="training config, JSON (default: training/ppo.json)")
-    p.add_argument("--out", type=_path("--out"), help="run folder: model, VecNormalize statistics, checkpoints, TensorBoard logs")
+    p.add_argument("--out", type=_path("--out"), help="run folder: model, VecNormalize statistics, checkpoints, TensorBoard logs (one that holds no run yet; --resume continues one)")
     p.add_argument("--resume", type=_path("--resume"), metavar="RUN",
                    help="continue the interrupted run in folder RUN from its latest checkpoint to its total")
     p.add_argument("--timesteps", type=_positive("--timesteps", 10**12), help="override the config's total_timesteps")

@@ -247,6 +247,26 @@ RESERVE_NAME = ".accd-reserve"
 RESERVE_BYTES = 256 * 1024
 
 
+def shelve_folder(folder: str | Path, shelf: str | Path) -> Path:
+    """Moves ``folder`` whole into ``shelf`` (created if needed) as ``<name>-<k>``, ``k`` the first
+    number whose name is free, and returns its new path: what a command sets aside instead of
+    deleting or overwriting it. A rename on one file system (nothing copied, nothing lost
+    half-way); OutputError naming the folder when it cannot be moved."""
+    src, shelf = Path(folder), Path(shelf)
+    try:
+        shelf.mkdir(parents=True, exist_ok=True)
+        k = 1
+        while os.path.lexists(shelf / f"{src.name}-{k}"):
+            k += 1
+        target = shelf / f"{src.name}-{k}"
+        os.rename(src, target)
+    except OSError as e:
+        raise _output_error(src, e) from None
+    _fsync_folder(shelf)
+    _fsync_folder(src.parent)
+    return target
+
+
 def reserve_space(folder: str | Path, nbytes: int = RESERVE_BYTES) -> bool:
     """Writes a reserve file of ``nbytes`` zeros into ``folder`` (:data:`RESERVE_NAME`), so that a
     small file (a run summary) can still be written once the disk has filled up: the writer

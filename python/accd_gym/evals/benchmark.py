@@ -490,13 +490,12 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
     trained_now = not run_state.trained(run, cfg)
     if not trained_now:  # its evaluation is missing or stale (other code or episodes): not retrained
         meta = json.loads((run / "run.json").read_text())
-    elif distilled:
-        meta = (distill.resume(run, make_teacher=_teacher) if run_state.continues(run, cfg, distilled=True)
-                else distill.train(cfg, run, make_teacher=_teacher))
-    elif run_state.continues(run, cfg):
-        meta = training.resume(run, progress=False)
+    elif run_state.continues(run, cfg, distilled=distilled):
+        meta = distill.resume(run, make_teacher=_teacher) if distilled else training.resume(run, progress=False)
     else:
-        meta = training.train(cfg, run, progress=False)
+        run_state.set_aside(run)  # another recipe's training (or an unsaved one): kept under OUT/superseded
+        meta = (distill.train(cfg, run, make_teacher=_teacher) if distilled
+                else training.train(cfg, run, progress=False))
     if meta["status"] == "interrupted":  # Ctrl+C: its checkpoint is written; a rerun resumes it
         raise KeyboardInterrupt(f"{job.name}: training interrupted at {meta['timesteps']} steps")
     t1 = time.perf_counter()

@@ -222,6 +222,24 @@ def trial_name(seed: int, point: dict[str, Any]) -> str:
     return f"seed{seed}" + "".join(f"_{k.split('.')[-1]}={v}" for k, v in sorted(point.items()))
 
 
+def train_trial(cfg: dict[str, Any], run: Path) -> tuple[dict[str, Any], float]:
+    """Trains a trial's validated config into its run folder, or reuses the finished training of
+    that config there, or continues the one stopped with a checkpoint there (RLlib trials:
+    always afresh). Returns the run summary and the trial's own training time in seconds
+    (every resumed part, not only this call's)."""
+    t0 = time.perf_counter()
+    if rllib.is_rllib_config(cfg):
+        meta = rllib.train(cfg, run, progress=False, connect=False)
+    elif run_state.trained(run, cfg):  # the sweep rerun: this trial's training is done
+        meta = json.loads((run / "run.json").read_text())
+    elif run_state.continues(run, cfg):  # stopped with a checkpoint: continue from it
+        meta = training.resume(run, progress=False)
+    else:
+        run_state.set_aside(run)  # another config's training (or an unsaved one): kept under out/superseded
+        meta = training.train(cfg, run, progress=False)
+    return meta, meta.get("wall_time_s", time.perf_counter() - t0)
+
+
 def _trial(params: dict[str, Any]) -> None:
     """One Tune trial: trains into its own run folder, evaluates on the sweep's episodes
     (``eval_split``), reports."""
@@ -232,17 +250,7 @@ def _trial(params: dict[str, Any]) -> None:
     cfg = train_config(sweep, point, seed)
     name = trial_name(seed, point)
     run = Path(params["out"]) / "trials" / name
-    t0 = time.perf_counter()
-    if rllib.is_rllib_config(cfg):
-        meta = rllib.train(cfg, run, progress=False, connect=False)
-    elif run_state.trained(run, cfg):  # the sweep rerun: this trial's training is done
-        meta = json.loads((run / "run.json").read_text())
-    elif run_state.continues(run, cfg):  # stopped with a checkpoint: continue from it
-        meta = training.resume(run, progress=False)
-    else:
-        meta = training.train(cfg, run, progress=False)
-    # The trial's own training time (every resumed part), not this invocation's.
-    train_s = meta.get("wall_time_s", time.perf_counter() - t0)
+    meta, train_s = train_trial(cfg, run)
     if meta["status"] != "done":
         raise RuntimeError(f"trial {name}: training {meta['status']} at {meta['timesteps']} steps; "
                            "rerun the sweep to continue it from its checkpoint")
@@ -411,4 +419,4 @@ def run(config: dict[str, Any] | str | Path, out: str | Path, *, progress: bool 
 
 
 __all__ = ["DEFAULTS", "EVAL_SPLITS", "aggregate", "baseline_rates", "bootstrap_interval", "eval_episodes", "grid_points",
-           "iqm", "load_config", "run", "summary_markdown", "train_config", "trial_name", "validate_config"]
+           "iqm", "load_config", "run", "summary_markdown", "train_config", "train_trial", "trial_name", "validate_config"]

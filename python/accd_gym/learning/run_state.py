@@ -7,11 +7,12 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
+from typing import Any, Optional
 
+from accd_gym import files
 from accd_gym.learning import distill, training
 
-__all__ = ["continues", "read_meta", "same_recipe", "trained"]
+__all__ = ["continues", "read_meta", "same_recipe", "set_aside", "trained"]
 
 
 def same_recipe(stored: Any, cfg: dict[str, Any]) -> bool:
@@ -62,3 +63,14 @@ def continues(run: Path, cfg: dict[str, Any], *, distilled: bool = False) -> boo
     saved = distill.completed_rounds(run) > 0 if distilled else training.latest_checkpoint(run) is not None
     return (meta.get("status") != "done" and saved
             and (not distilled or meta.get("trainer") == "distill") and same_recipe(meta.get("config"), cfg))
+
+
+def set_aside(run: Path) -> Optional[Path]:
+    """Moves a run folder that holds another training than the one about to start there (another
+    recipe, a run without a checkpoint) to ``<run's grandparent>/superseded/<name>-<k>`` (the
+    benchmark's ``OUT/superseded``, a sweep's ``OUT/superseded``: beside ``runs/`` and
+    ``trials/``), so that training afresh loses nothing of it; returns the new place, or None
+    when ``run`` holds nothing (missing or empty)."""
+    if not run.is_dir() or not any(run.iterdir()):
+        return None
+    return files.shelve_folder(run, run.parent.parent / "superseded")

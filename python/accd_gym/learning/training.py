@@ -690,6 +690,11 @@ def train(
             raise ConfigError(f"invalid config: `timesteps` = {timesteps} is outside the allowed range >= 1")
         cfg["total_timesteps"] = int(timesteps)
     out = files.writable_folder(out, "--out", RUN_FILES)
+    held = [name for name in RUN_FILES if (out / name).exists()] + (["checkpoints"] if checkpoints(out) else [])
+    if held:
+        # Training afresh here would overwrite that run's model and mix its checkpoints with these.
+        raise ConfigError(f"invalid config: --out {str(out)!r} already holds a training run ({', '.join(held)}); "
+                          f"continue it with `accd-gym train --resume {out}`, or choose another --out")
     torch.set_num_threads(cfg["torch_threads"])
     _one_blas_thread()
     env, model = _new_model(cfg, out)
