@@ -338,3 +338,12 @@ def test_a_fine_tuning_learner_names_a_learner_with_its_tiers_and_seeds(tmp_path
                                                          "init_from": init_from}}}
     with pytest.raises(benchmark.ConfigError, match=rf"`learners.bc_ppo.init_from` = .*{needle}"):
         benchmark.validate_config(raw)
+
+
+def test_a_distillation_into_a_folder_that_holds_a_run_is_refused(tmp_path):
+    run = tmp_path / "s"
+    distill.train(_recipe(rounds=0), run, make_teacher=lambda *a: LinearTeacher())
+    model = (run / "final_model.zip").read_bytes()
+    with pytest.raises(distill.ConfigError, match="already holds a run.*--resume"):
+        distill.train(_recipe(rounds=0, seed=6), run, make_teacher=lambda *a: LinearTeacher())
+    assert (run / "final_model.zip").read_bytes() == model

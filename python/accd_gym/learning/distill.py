@@ -405,10 +405,13 @@ def train(recipe: dict[str, Any], out: str | Path, *, make_teacher: Optional[Tea
     (default: a registered controller); ``report`` gets one progress line per round."""
     cfg = validate_recipe(dict(recipe))
     out = files.writable_folder(out, "--out", RUN_FILES)
-    # A fresh run replaces the folder's run: the round checkpoints of an earlier one would be
-    # read as this run's by completed_rounds (and resume).
-    for stale in [*(out / "checkpoints").glob("data_*.npz"), *(out / "checkpoints").glob("student_*.zip")]:
-        stale.unlink()
+    # A fresh run would overwrite the folder's run, and that run's round checkpoints would be
+    # read as this one's (completed_rounds, resume): refused, nothing of it touched.
+    held = [name for name in RUN_FILES if (out / name).exists()]
+    held += ["checkpoints"] if [*(out / "checkpoints").glob("data_*.npz"), *(out / "checkpoints").glob("student_*.zip")] else []
+    if held:
+        raise ConfigError(f"invalid config: --out {str(out)!r} already holds a run ({', '.join(held)}); continue an "
+                          f"interrupted one with `accd-gym distill --resume {out}`, or choose another --out")
     meta = {"algo": "ppo", "trainer": "distill", "method": "bc" if cfg["rounds"] == 0 else "dagger",
             "config": cfg, "status": "training", "total_timesteps": cfg["total_timesteps"], "rounds": []}
     _write_meta(out, meta)
