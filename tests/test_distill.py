@@ -224,6 +224,7 @@ def test_benchmark_job_trains_and_evaluates_a_distillation_recipe(tmp_path):
     ({"beta": {"start": 2}}, [], "`beta.start` = 2"),
     ({"env": {"residual": "lqr"}}, [], "history"),
     ({"total_timesteps": 5}, [], "`total_timesteps` = 5"),
+    ({"device": "gpu0"}, [], "`device` = 'gpu0'"),
     ({}, ["--resume", "nowhere"], "--resume"),
 ])
 def test_cli_errors_are_one_line(tmp_path, capsys, recipe, args, needle):

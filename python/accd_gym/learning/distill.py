@@ -150,6 +150,22 @@ def _number(value: Any, name: str, low: float, high: float, *, open_low: bool = 
     return float(value)
 
 
+def _device_name(name: str) -> bool:
+    """Whether PyTorch names a device type ``name`` (``"auto"``: stable-baselines3's choice);
+    True without PyTorch installed (the run then stops at its import, saying so)."""
+    if name == "auto":
+        return True
+    try:
+        import torch
+    except ImportError:
+        return True
+    try:
+        torch.device(name)
+    except (RuntimeError, ValueError):
+        return False
+    return True
+
+
 def validate_recipe(raw: Any) -> dict[str, Any]:
     """Fills in defaults and checks every field; ConfigError names the field, the value and the
     allowed range."""
@@ -196,8 +212,9 @@ def validate_recipe(raw: Any) -> dict[str, Any]:
                           "student is a standalone network; `residual` and `true_observation` are outside the "
                           "allowed set)")
     check_training_env(cfg["env"])
-    if not isinstance(cfg["device"], str):
-        raise ConfigError(f"invalid config: `device` = {cfg['device']!r} is outside the allowed range: a device name")
+    if not isinstance(cfg["device"], str) or not _device_name(cfg["device"]):
+        raise ConfigError(f"invalid config: `device` = {cfg['device']!r} is outside the allowed range: a PyTorch "
+                          "device name (cpu, cuda, cuda:N, mps, auto)")
     total = cfg["teacher_steps"] + cfg["rounds"] * cfg["round_steps"]
     if cfg["total_timesteps"] is not None and cfg["total_timesteps"] != total:
         raise ConfigError(f"invalid config: `total_timesteps` = {cfg['total_timesteps']!r} is outside the allowed range: "
