@@ -65,6 +65,8 @@ def network_arrays(model: Any, algo: str, stats: Any, env: dict[str, Any]) -> di
     import torch.nn as nn
     from stable_baselines3.common.torch_layers import FlattenExtractor
 
+    from accd_gym.learning.asymmetric import ActorInputs
+
     policy = model.policy
     if algo == "sac":
         actor = policy.actor
@@ -79,7 +81,10 @@ def network_arrays(model: Any, algo: str, stats: Any, env: dict[str, Any]) -> di
         squash = "none"
     else:
         raise ConfigError(f"invalid config: algorithm {algo!r} is outside the allowed range ['ppo', 'sac']")
-    if not isinstance(extractor, FlattenExtractor):
+    dim = int(model.observation_space.shape[0])
+    if isinstance(extractor, ActorInputs):  # an asymmetric critic's run: the actor reads the first entries
+        dim = extractor.actor_dim
+    elif not isinstance(extractor, FlattenExtractor):
         raise ConfigError(f"invalid config: features extractor {type(extractor).__name__} is not exportable "
                           "(only flat observations)")
     if bool(policy.squash_output) != (squash == "tanh"):
@@ -95,8 +100,8 @@ def network_arrays(model: Any, algo: str, stats: Any, env: dict[str, Any]) -> di
     space = model.action_space
     norm = None
     if stats is not None and stats.norm_obs:
-        arrays["obs_mean"] = np.asarray(stats.obs_rms.mean, dtype=np.float64)
-        arrays["obs_var"] = np.asarray(stats.obs_rms.var, dtype=np.float64)
+        arrays["obs_mean"] = np.asarray(stats.obs_rms.mean, dtype=np.float64)[:dim].copy()
+        arrays["obs_var"] = np.asarray(stats.obs_rms.var, dtype=np.float64)[:dim].copy()
         norm = {"mean": "obs_mean", "var": "obs_var", "epsilon": float(stats.epsilon), "clip": float(stats.clip_obs)}
     import stable_baselines3
     import torch
@@ -105,7 +110,7 @@ def network_arrays(model: Any, algo: str, stats: Any, env: dict[str, Any]) -> di
         "format": FORMAT,
         "version": VERSION,
         "algo": algo,
-        "observation_dim": int(model.observation_space.shape[0]),
+        "observation_dim": dim,
         "action_dim": int(space.shape[0]),
         "normalization": norm,
         "layers": spec_layers,

@@ -18,6 +18,7 @@ from accd_gym.control.baselines import guidance_from_tuning
 from accd_gym.control.lqr import is_lqr_tuning, lqr_from_tuning
 from accd_gym.control.registry import CONTROLLERS, Policy, make_controller
 from accd_gym.envs.agent_io import AgentOptions, PolicyAgentIO, physics_config, split_agent_options
+from accd_gym.envs.task import OBS_DIM
 from accd_gym.errors import ConfigError
 from accd_gym.evals.network import NetworkPolicy
 from accd_gym.evals.shipped import available, is_trained, policy_dir
@@ -90,6 +91,9 @@ class SB3Policy:
             ) from e
         self._device = device
         self.agent_options = _agent_options_of(model_path)
+        #: Inputs the model reads beyond the actor's observation (an asymmetric critic's true
+        #: observation): zeros here, which the actor never reads.
+        self.critic_inputs = _critic_inputs_of(model_path)
         self._config = physics_config(config)
         self._agent = PolicyAgentIO(self.agent_options, self._config)
         self._model_path = str(model_path)
@@ -100,7 +104,7 @@ class SB3Policy:
         self._run_algo = _run_algo(model_path)
         self.algo = self._run_algo or model_algo(self._model_bytes, self._model_path)
         self._load()
-        expected = self.agent_options.observation_space().shape
+        expected = (self.agent_options.observation_space().shape[0] + self.critic_inputs,)
         if self.model.observation_space.shape != expected:
             raise ConfigError(
                 f"invalid config: policy {str(path)!r} observes shape {self.model.observation_space.shape}, the env "
@@ -114,7 +118,7 @@ class SB3Policy:
     def _load(self) -> None:
         """Builds the model and the normalizer from the files' bytes (kept for pickling);
         ConfigError naming the file that is damaged or of another env or algorithm."""
-        obs_dim = self.agent_options.observation_space().shape[0]
+        obs_dim = self.agent_options.observation_space().shape[0] + self.critic_inputs
         self.model = load_model(self._model_bytes, self._model_path, self._run_algo, obs_dim, device=self._device)
         self.normalizer = None
         if self._stats_bytes is not None:
@@ -136,6 +140,8 @@ class SB3Policy:
         o = np.asarray(obs, dtype=np.float32)
         if self.agent_options.enabled:
             o = self._agent.observation(o)
+        if self.critic_inputs:
+            o = np.concatenate([o, np.zeros((o.shape[0], self.critic_inputs), dtype=np.float32)], axis=1)
         if self.normalizer is not None and self.normalizer.norm_obs:
             o = self.normalizer.normalize_obs(o)
         actions, _ = self.model.predict(o, deterministic=True)
@@ -182,6 +188,18 @@ def _run_algo(model_path: Path) -> Optional[str]:
             return algo
     return None
 
+
+
+def _critic_inputs_of(model_path: Path) -> int:
+    """How many inputs the model's critic reads beyond the actor's observation: the true
+    observation's size for a run trained with ``asymmetric_critic``, else 0 (from its run.json)."""
+    for folder in (model_path.parent, model_path.parent.parent):
+        meta = folder / "run.json"
+        if meta.exists():
+            doc = read_user_json(meta, "run summary")
+            cfg = doc.get("config", {}) if isinstance(doc, dict) else {}
+            return OBS_DIM if isinstance(cfg, dict) and cfg.get("asymmetric_critic") is True else 0
+    return 0
 
 
 def _agent_options_of(model_path: Path) -> Any:

@@ -40,6 +40,12 @@ init_from          a run folder (``final_model.zip`` and ``vecnormalize.pkl``) o
 critic_warmup      with ``init_from``: environment steps at the start during which only the
                    critic learns, the actor frozen (:class:`accd_gym.learning.callbacks.CriticWarmup`;
                    default 0)
+asymmetric_critic  PPO, true: the critic also reads the true observation (perfect sensors' 25
+                   values), the actor only the agent's observation
+                   (:mod:`accd_gym.learning.asymmetric`); the run is evaluated and exported on
+                   the agent's observation like any other; with ``init_from`` the actor starts
+                   from the saved policy and keeps its input scaling, the critic starts afresh
+                   and learns the scaling of its extra inputs (default false)
 device             PyTorch device (default ``"cpu"``: the networks are small)
 ================== ================================================================================
 
@@ -110,7 +116,7 @@ DEFAULTS: dict[str, Any] = {
 }
 #: Optional keys of a training config that have no default value (absent: off), so that the
 #: configs of runs made before them validate to the same dict.
-OPTIONAL_KEYS = ("init_from", "critic_warmup")
+OPTIONAL_KEYS = ("init_from", "critic_warmup", "asymmetric_critic")
 _ALGOS = ("ppo", "sac")
 _ACTIVATIONS = ("tanh", "relu", "elu")
 
@@ -151,6 +157,7 @@ def validate_config(raw: dict[str, Any]) -> dict[str, Any]:
     if not isinstance(cfg["device"], str):
         raise ConfigError(f"invalid config: `device` = {cfg['device']!r} is outside the allowed range: a device name such as 'cpu'")
     _check_algo_kwargs(cfg["algo"], cfg["algo_kwargs"])
+    _check_asymmetric(cfg)
     _check_init_from(cfg)
     bad_policy = set(cfg["policy_kwargs"]) - {"net_arch", "activation_fn", "log_std_init"}
     if bad_policy:
@@ -189,6 +196,24 @@ def _check_net_arch(policy_kwargs: dict[str, Any]) -> None:
         raise ConfigError(f"invalid config: `policy_kwargs.log_std_init` = {std!r} is outside the allowed range: a finite number")
 
 
+def _check_asymmetric(cfg: dict[str, Any]) -> None:
+    """ConfigError for an ``asymmetric_critic`` that is not a bool, or true with another algorithm
+    than PPO or with the env option ``true_observation`` set by hand; a false one is dropped (the
+    config then validates to the same dict as before the key existed)."""
+    value = cfg.get("asymmetric_critic")
+    if value is None or value is False:
+        cfg.pop("asymmetric_critic", None)
+        return
+    if value is not True:
+        raise ConfigError(f"invalid config: `asymmetric_critic` = {value!r} is outside the allowed range: true or false")
+    if cfg["algo"] != "ppo":
+        raise ConfigError(f"invalid config: `asymmetric_critic` = true is outside the allowed range for algo "
+                          f"{cfg['algo']!r}: PPO only")
+    if isinstance(cfg["env"], dict) and "true_observation" in cfg["env"]:
+        raise ConfigError("invalid config: `env.true_observation` is set by `asymmetric_critic` (the critic's input); "
+                          "drop it from env")
+
+
 def _check_init_from(cfg: dict[str, Any]) -> None:
     """ConfigError for an ``init_from`` that is not a PPO run folder with its final model and
     statistics, or that is combined with SAC or ``zero_action_init``."""
@@ -216,17 +241,29 @@ def _check_init_from(cfg: dict[str, Any]) -> None:
             raise ConfigError(f"invalid config: `init_from` = {src!r} is not a finished run folder: no {name} in it")
 
 
+def actor_dim(cfg: dict[str, Any]) -> int:
+    """The size of the observation the policy acts on (the env's with the config's agent options:
+    history, the residual base's command); with ``asymmetric_critic`` the critic reads
+    :data:`accd_gym.learning.asymmetric.TRUE_DIM` more."""
+    options, _ = split_agent_options(cfg["env"])
+    return int(options.observation_space().shape[0])
+
+
 def _init_from(model: Any, env: Any, cfg: dict[str, Any]) -> None:
     """Starts ``model`` (PPO) from the policy and the observation statistics of the run folder
     ``init_from``; its ``log_std`` stays the config's. ConfigError when the shapes differ (a
-    policy of another observation or network)."""
+    policy of another observation or network). With ``asymmetric_critic`` the actor starts from
+    the saved policy's and the critic afresh (it reads other inputs), and the statistics of the
+    critic's extra inputs are learned while the actor's stay the saved policy's."""
     src = Path(cfg["init_from"])
-    obs_dim = env.observation_space.shape[0]
+    obs_dim = actor_dim(cfg)
+    asymmetric = bool(cfg.get("asymmetric_critic"))
     stats = load_statistics((src / "vecnormalize.pkl").read_bytes(), str(src / "vecnormalize.pkl"), obs_dim=obs_dim)
     saved = load_model((src / "final_model.zip").read_bytes(), str(src / "final_model.zip"), "ppo", obs_dim,
                        device=cfg["device"])
     own = model.policy.state_dict()
-    theirs = {k: v for k, v in saved.policy.state_dict().items() if k != "log_std"}
+    critic = ("mlp_extractor.value_net.", "value_net.") if asymmetric else ()
+    theirs = {k: v for k, v in saved.policy.state_dict().items() if k != "log_std" and not k.startswith(critic)}
     bad = sorted(k for k, v in theirs.items() if k not in own or own[k].shape != v.shape)
     if bad:
         raise ConfigError(f"invalid config: `init_from` = {str(src)!r} holds a policy of another network: its "
@@ -236,7 +273,12 @@ def _init_from(model: Any, env: Any, cfg: dict[str, Any]) -> None:
     # deferred: stable-baselines3, an optional dependency (accd_gym.learning.callbacks imports it)
     from accd_gym.learning.callbacks import FrozenStatistics
 
-    env.obs_rms = FrozenStatistics.of(stats.obs_rms)
+    if asymmetric:
+        from accd_gym.learning.asymmetric import PartlyFrozenStatistics
+
+        env.obs_rms = PartlyFrozenStatistics(stats.obs_rms, env.observation_space.shape[0])
+    else:
+        env.obs_rms = FrozenStatistics.of(stats.obs_rms)
 
 
 def check_training_env(env: dict[str, Any]) -> None:
@@ -286,15 +328,31 @@ def _policy_kwargs(cfg: dict[str, Any]) -> dict[str, Any]:
     return kw
 
 
-def make_training_env(cfg: dict[str, Any]):
-    """The AccdVecEnv (training wake seeds) wrapped in VecMonitor and VecNormalize per the config."""
-    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+def _unnormalized_env(cfg: dict[str, Any]) -> tuple[Any, Any]:
+    """The AccdVecEnv of the config (training wake seeds) and the same wrapped as VecNormalize
+    will wrap it: in VecMonitor and, with ``asymmetric_critic``, in the wrapper appending the
+    critic's true observation (:class:`accd_gym.learning.asymmetric.CriticObservation`)."""
+    from stable_baselines3.common.vec_env import VecMonitor
 
     # deferred: stable-baselines3, an optional dependency (accd_gym.envs.sb3 imports it)
     from accd_gym.envs.sb3 import AccdVecEnv
 
-    env = AccdVecEnv(num_envs=cfg["num_envs"], seed=cfg["seed"], num_threads=cfg["num_threads"], **cfg["env"])
-    env = VecMonitor(env, info_keywords=("captured",))
+    options = dict(cfg["env"], true_observation=True) if cfg.get("asymmetric_critic") else cfg["env"]
+    base = AccdVecEnv(num_envs=cfg["num_envs"], seed=cfg["seed"], num_threads=cfg["num_threads"], **options)
+    env = VecMonitor(base, info_keywords=("captured",))
+    if cfg.get("asymmetric_critic"):
+        from accd_gym.learning.asymmetric import CriticObservation
+
+        env = CriticObservation(env)
+    return base, env
+
+
+def make_training_env(cfg: dict[str, Any]):
+    """The AccdVecEnv (training wake seeds) wrapped in VecMonitor (and the asymmetric critic's
+    wrapper) and VecNormalize per the config."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    _, env = _unnormalized_env(cfg)
     gamma = cfg["algo_kwargs"].get("gamma", 0.99)
     return VecNormalize(env, gamma=gamma, **cfg["vec_normalize"])
 
@@ -710,14 +768,21 @@ def _new_model(cfg: dict[str, Any], out: Path) -> tuple[Any, Any]:
 
     env = make_training_env(cfg)
     cls = {"ppo": PPO, "sac": SAC}[cfg["algo"]]
+    policy: Any = "MlpPolicy"
+    policy_kwargs = _policy_kwargs(cfg)
+    if cfg.get("asymmetric_critic"):
+        from accd_gym.learning.asymmetric import AsymmetricActorCriticPolicy
+
+        policy = AsymmetricActorCriticPolicy
+        policy_kwargs["actor_dim"] = actor_dim(cfg)
     try:
         model = cls(
-            "MlpPolicy",
+            policy,
             env,
             seed=cfg["seed"],
             device=cfg["device"],
             tensorboard_log=str(out / "tb"),
-            policy_kwargs=_policy_kwargs(cfg),
+            policy_kwargs=policy_kwargs,
             verbose=0,
             **cfg["algo_kwargs"],
         )
@@ -825,18 +890,12 @@ def resume(run: str | Path, *, progress: bool = True, report: Optional[Callable[
 def _load_checkpoint(ckpt: dict[str, Any], cfg: dict[str, Any], out: Path) -> tuple[dict[str, Any], Any, Any]:
     """The env (wrapped, statistics restored, envs at their saved state) and model of one
     checkpoint; ConfigError or StateError naming the file that does not load."""
-    from stable_baselines3.common.vec_env import VecMonitor
-
-    # deferred: stable-baselines3, an optional dependency (accd_gym.envs.sb3 imports it)
-    from accd_gym.envs.sb3 import AccdVecEnv
-
     if ckpt["vecnormalize"] is None:
         raise ConfigError(f"invalid config: checkpoint {str(ckpt['model'])!r} has no VecNormalize statistics beside it")
-    base = AccdVecEnv(num_envs=cfg["num_envs"], seed=cfg["seed"], num_threads=cfg["num_threads"], **cfg["env"])
+    base, wrapped = _unnormalized_env(cfg)
     try:
-        obs_dim = base.observation_space.shape[0]
-        env = load_statistics(ckpt["vecnormalize"].read_bytes(), str(ckpt["vecnormalize"]),
-                              VecMonitor(base, info_keywords=("captured",)), obs_dim=obs_dim)
+        obs_dim = wrapped.observation_space.shape[0]
+        env = load_statistics(ckpt["vecnormalize"].read_bytes(), str(ckpt["vecnormalize"]), wrapped, obs_dim=obs_dim)
         env.training = True
         model = load_model(ckpt["model"].read_bytes(), str(ckpt["model"]), cfg["algo"], obs_dim, env=env,
                            device=cfg["device"],
