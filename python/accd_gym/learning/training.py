@@ -274,6 +274,7 @@ def _init_from(model: Any, env: Any, cfg: dict[str, Any]) -> None:
     from accd_gym.learning.callbacks import FrozenStatistics
 
     if asymmetric:
+        # deferred: stable-baselines3 and torch, optional dependencies (accd_gym.learning.asymmetric imports them)
         from accd_gym.learning.asymmetric import PartlyFrozenStatistics
 
         env.obs_rms = PartlyFrozenStatistics(stats.obs_rms, env.observation_space.shape[0])
@@ -341,6 +342,7 @@ def _unnormalized_env(cfg: dict[str, Any]) -> tuple[Any, Any]:
     base = AccdVecEnv(num_envs=cfg["num_envs"], seed=cfg["seed"], num_threads=cfg["num_threads"], **options)
     env = VecMonitor(base, info_keywords=("captured",))
     if cfg.get("asymmetric_critic"):
+        # deferred: stable-baselines3 and torch, optional dependencies (accd_gym.learning.asymmetric imports them)
         from accd_gym.learning.asymmetric import CriticObservation
 
         env = CriticObservation(env)
@@ -771,6 +773,7 @@ def _new_model(cfg: dict[str, Any], out: Path) -> tuple[Any, Any]:
     policy: Any = "MlpPolicy"
     policy_kwargs = _policy_kwargs(cfg)
     if cfg.get("asymmetric_critic"):
+        # deferred: stable-baselines3 and torch, optional dependencies (accd_gym.learning.asymmetric imports them)
         from accd_gym.learning.asymmetric import AsymmetricActorCriticPolicy
 
         policy = AsymmetricActorCriticPolicy
