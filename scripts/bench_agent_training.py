@@ -1,7 +1,8 @@
 """PPO training throughput (agent steps per second, ``run.json``'s ``steps_per_s``) of a recipe
 with the env plain, with residual control, with observation history and with both; short runs,
-interleaved rounds, median reported; also per CPU second of the process (every thread), the
-figure to read on a shared machine. ``residual (calling thread)``: the residual env with its LQR
+interleaved rounds, median reported, and the median of each round's ratio to the plain run of the
+same round; also per CPU second of the process (every thread), the figure to read on a shared
+machine. ``residual (calling thread)``: the residual env with its LQR
 base stepped from Python on the calling thread instead of in the batch's threads.
 
     python scripts/bench_agent_training.py [--config training/residual_ppo_hard.json] [--steps 20000] [--rounds 2]
@@ -58,7 +59,12 @@ def main() -> None:
     med_cpu = {k: float(np.median(v)) for k, v in per_cpu.items()}
     plain = med.get("plain", float("nan"))
     plain_cpu = med_cpu.get("plain", float("nan"))
+    # Rounds swing by up to 10 % on a shared machine: besides the ratio of the medians, the median
+    # of each round's ratio to the plain run of the same round (the two ran back to back).
+    paired = {k: (float(np.median(np.divide(v, rates["plain"]))) if "plain" in rates else float("nan"))
+              for k, v in rates.items()}
     print(json.dumps({k: {"steps_per_s": round(med[k], 1), "vs_plain": round(med[k] / plain, 3), "rounds": v,
+                          "vs_plain_paired_median": round(paired[k], 3),
                           "steps_per_cpu_s": round(med_cpu[k], 1), "vs_plain_per_cpu": round(med_cpu[k] / plain_cpu, 3)}
                       for k, v in rates.items()}))
     print(json.dumps({"config": args.config, "num_envs": base["num_envs"], "loadavg": os.getloadavg(),
