@@ -225,8 +225,9 @@ def trial_name(seed: int, point: dict[str, Any]) -> str:
 def train_trial(cfg: dict[str, Any], run: Path) -> tuple[dict[str, Any], float]:
     """Trains a trial's validated config into its run folder, or reuses the finished training of
     that config there, or continues the one stopped with a checkpoint there (RLlib trials:
-    always afresh). Returns the run summary and the trial's own training time in seconds
-    (every resumed part, not only this call's)."""
+    always afresh). Returns the run summary and the trial's training time in seconds as its
+    run.json records it (a part cut short by a killed process, which wrote no summary, is not
+    in it)."""
     t0 = time.perf_counter()
     if rllib.is_rllib_config(cfg):
         meta = rllib.train(cfg, run, progress=False, connect=False)
