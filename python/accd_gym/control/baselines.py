@@ -19,7 +19,7 @@ a small roll command spins it up to several rad/s, which is why roll is actively
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Mapping, Optional
 

@@ -62,7 +62,6 @@ steps automatically, so 0.01 s runs too and agrees with :data:`MAX_TENSION_TIME_
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
