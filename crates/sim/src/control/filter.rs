@@ -229,20 +229,8 @@ impl LqrFilter {
     ) {
         if fresh {
             out.fill(0.0);
-            return;
-        }
-        match <&mut [f64; LANES]>::try_from(&mut *out) {
-            Ok(out) => {
-                let mut acc = [0.0; LANES];
-                accumulate(&mut acc, i0, z, &self.ft);
-                accumulate(&mut acc, i0, u, &self.gt);
-                *out = acc;
-            }
-            Err(_) => {
-                out.fill(0.0);
-                accumulate_tail(out, i0, z, &self.ft);
-                accumulate_tail(out, i0, u, &self.gt);
-            }
+        } else {
+            sum_chunk(out, i0, [(z, &self.ft), (u, &self.gt)]);
         }
     }
 
@@ -268,23 +256,9 @@ impl LqrFilter {
         let z = &mut state.z;
         for (c, out) in z.chunks_mut(LANES).enumerate() {
             let i0 = c * LANES;
-            let before = &prior[i0..i0 + out.len()];
-            match <&mut [f64; LANES]>::try_from(&mut *out) {
-                Ok(out) => {
-                    let mut acc = [0.0; LANES];
-                    accumulate(&mut acc, i0, &innovation, &self.lt);
-                    for (a, p) in acc.iter_mut().zip(before) {
-                        *a += *p;
-                    }
-                    *out = acc;
-                }
-                Err(_) => {
-                    out.fill(0.0);
-                    accumulate_tail(out, i0, &innovation, &self.lt);
-                    for (a, p) in out.iter_mut().zip(before) {
-                        *a += *p;
-                    }
-                }
+            sum_chunk(out, i0, [(&innovation, &self.lt)]);
+            for (zi, pi) in out.iter_mut().zip(&prior[i0..]) {
+                *zi += *pi;
             }
         }
         for (j, zj) in z[..self.n].iter().enumerate() {
@@ -405,6 +379,28 @@ fn has_avx() -> bool {
     #[cfg(not(target_arch = "x86_64"))]
     {
         false
+    }
+}
+
+/// `out[l] = 0 + sum over the terms (a, m), in order, of a_j m[j][i0 + l]` (each `j` ascending):
+/// in registers for a whole chunk of [`LANES`] outputs, else (the last, shorter chunk) in memory,
+/// the same operations in the same order either way.
+#[inline(always)]
+fn sum_chunk<const T: usize>(out: &mut [f64], i0: usize, terms: [(&[f64], &Matrix); T]) {
+    match <&mut [f64; LANES]>::try_from(&mut *out) {
+        Ok(out) => {
+            let mut acc = [0.0; LANES];
+            for (a, m) in terms {
+                accumulate(&mut acc, i0, a, m);
+            }
+            *out = acc;
+        }
+        Err(_) => {
+            out.fill(0.0);
+            for (a, m) in terms {
+                accumulate_tail(out, i0, a, m);
+            }
+        }
     }
 }
 
