@@ -9,8 +9,10 @@
 # they end. Cargo's lock on the build folder orders the two builds that share it.
 #
 # The wheel job proves that the wheel works without Rust: it packs the extension the set-up built
-# into a wheel (scripts/wheel.sh with the `ci` profile: cargo finds the build unchanged; it waits
-# for cargo's lock on the build folder while a Rust check holds it), checks it
+# into a wheel (scripts/wheel.sh with the `ci` profile: cargo finds the build unchanged, unless the
+# Rust checks' clippy re-ran pyo3's build script after the set-up's build, with another Python
+# configuration, when it recompiles pyo3, numpy and the bindings crate; it waits for cargo's lock
+# on the build folder while a Rust check holds it), checks it
 # (auditwheel, twine), installs it into a fresh virtual environment of the newest Python on the
 # machine with the newest dependencies, and runs scripts/wheel_smoke.py there with no cargo or
 # rustc on PATH. Its downloads run from the start beside the set-up; its checks, as soon as the
@@ -29,10 +31,7 @@ rust_checks() {
   echo "== cargo fmt --check [$SECONDS s]"
   cargo fmt --all -- --check
   echo "== cargo clippy (warnings are errors) [$SECONDS s]"
-  # In a build folder of its own: pyo3's build script, run by clippy with the Python on PATH,
-  # would otherwise replace the configuration of the set-up's build (the venv's Python), and the
-  # wheel job would then recompile pyo3, numpy and the bindings crate (about 4 minutes).
-  CARGO_TARGET_DIR="$ROOT/target/clippy" cargo clippy --workspace --all-targets --profile ci -q -- -D warnings
+  cargo clippy --workspace --all-targets --profile ci -q -- -D warnings
   echo "== cargo test (profile ci: release optimisation, no LTO) [$SECONDS s]"
   # The bindings crate is a cdylib built and tested through Python below.
   cargo test --profile ci --workspace --exclude accd-py
