@@ -63,7 +63,7 @@ def test_jobs_follow_the_config():
     assert not sac  # plain SAC only in the quick run (docs/decisions.md)
     assert cfg["episodes"] == 500
     quick = benchmark.load_config(ROOT / "training" / "benchmark.json", quick=True)
-    assert quick["episodes"] == quick["validation_episodes"] == 8 and quick["learners"]["ppo"]["timesteps"] == 4096
+    assert quick["episodes"] == quick["validation_episodes"] == 4 and quick["learners"]["ppo"]["timesteps"] == 4096
     assert quick["learners"]["sac"]["tiers"] == ["nominal"] and quick["learners"]["sac"]["train_config"].endswith("training/sac.json")
     # residual learners: a recipe per tier (its env options kept), only in the full run
     res = [j for j in jobs if j.algo.startswith("residual_")]
