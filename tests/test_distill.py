@@ -104,6 +104,39 @@ def test_dagger_relabels_the_students_visited_states(tmp_path):
     assert teacher.offsets and np.abs(np.concatenate(teacher.offsets)).max() > 1e-3
 
 
+def test_action_noise_perturbs_the_commands_sent_and_keeps_the_labels_clean(tmp_path):
+    """DART: with ``action_noise`` every command sent (the teacher's in round 0, the mix in the DAgger
+    rounds) carries Gaussian noise of that standard deviation, the teacher is told it, and the labels
+    stay the teacher's own commands; without the key the recipe validates as before."""
+    assert "action_noise" not in distill.validate_recipe(_recipe())
+    teacher = LinearTeacher()
+    run = tmp_path / "dart"
+    distill.train(_recipe(action_noise=0.2, beta={"start": 1.0, "decay": 1.0}), run, make_teacher=lambda *a: teacher)
+    n = 4
+    told = np.concatenate(teacher.offsets)  # one row per env and step: every step's commands were perturbed
+    assert told.shape == (768, 4)  # rounds 0, 1 and 2
+    for k in (0, 1, 2):
+        with np.load(run / "checkpoints" / f"data_0{k}.npz") as z:
+            obs, labels = z["obs"], z["labels"]
+        np.testing.assert_array_equal(labels, np.clip(obs[:, :OBS_DIM] @ W, -1, 1))
+        # the command of step t (in step t+1's history) is the teacher's plus the noise ...
+        sent = obs[n:, -4:]
+        same_episode = np.any(sent != 0, axis=1)
+        noise = (sent - labels[:-n])[same_episode]
+        inside = np.abs(sent[same_episode]) < 1.0  # the clip at the flap range leaves these alone
+        assert noise.size > 400 and 0.17 < float(noise[inside].std()) < 0.23, float(noise[inside].std())
+        assert abs(float(noise[inside].mean())) < 0.03
+        # ... and the teacher was told exactly that offset
+        np.testing.assert_allclose(told[k * 256:(k + 1) * 256][:-n][same_episode], noise, atol=1e-6)
+    # the same seed draws the same noise; the noise is refused outside its range, named
+    distill.train(_recipe(action_noise=0.2, beta={"start": 1.0, "decay": 1.0}), tmp_path / "again",
+                  make_teacher=lambda *a: LinearTeacher())
+    a, b = _weights(run), _weights(tmp_path / "again")
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    with pytest.raises(distill.ConfigError, match="`action_noise` = -0.1"):
+        distill.validate_recipe(_recipe(action_noise=-0.1))
+
+
 def test_same_seed_same_weights_and_resume_gives_the_same_result(tmp_path):
     make = lambda *a: LinearTeacher()  # noqa: E731
     distill.train(_recipe(), tmp_path / "a", make_teacher=make)

@@ -42,6 +42,10 @@ teacher_steps      environment steps of round 0 (the teacher alone)
 rounds             DAgger rounds after round 0 (0: behaviour cloning)
 round_steps        environment steps per DAgger round
 beta               ``{"start", "decay"}``: the teacher's share of the commands in round ``i``
+action_noise       optional: standard deviation (flap units) of Gaussian noise added to every
+                   command sent, in every round, the labels staying the teacher's clean commands
+                   (DART, Laskey et al. 2017): the data then show the teacher recovering from
+                   the perturbations that an exploring or imperfect student meets (default: none)
 updates            Adam steps after each round
 batch_size         samples per Adam step
 learning_rate      Adam's step size
@@ -118,6 +122,10 @@ DEFAULTS: dict[str, Any] = {
 }
 _ACTIVATIONS = ("tanh", "relu", "elu")
 
+#: Recipe keys without a default: absent unless given, so that the validated recipe of a run
+#: made before the key existed is unchanged (and its stored results stay valid).
+OPTIONAL_KEYS = ("action_noise",)
+
 #: A function building the teacher: ``(spec, seed, config) -> Policy`` (config: the env's
 #: configuration overrides, without env options).
 TeacherFactory = Callable[[str, int, dict], Policy]
@@ -171,10 +179,10 @@ def validate_recipe(raw: Any) -> dict[str, Any]:
     allowed range."""
     if not isinstance(raw, dict):
         raise ConfigError(f"invalid config: a distillation recipe must be a JSON object, got {type(raw).__name__}")
-    unknown = set(raw) - set(DEFAULTS) - {"description"}
+    unknown = set(raw) - set(DEFAULTS) - set(OPTIONAL_KEYS) - {"description"}
     if unknown:
         raise ConfigError(f"invalid config: distillation recipe key(s) {sorted(unknown)} outside the allowed set "
-                          f"{sorted(DEFAULTS)}")
+                          f"{sorted([*DEFAULTS, *OPTIONAL_KEYS])}")
     cfg = json.loads(json.dumps(DEFAULTS))
     cfg.update(json.loads(json.dumps(raw)))
     if cfg["trainer"] != "distill":
@@ -196,6 +204,8 @@ def validate_recipe(raw: Any) -> dict[str, Any]:
     cfg["learning_rate"] = _number(cfg["learning_rate"], "learning_rate", 0.0, 1.0, open_low=True)
     cfg["clip_obs"] = _number(cfg["clip_obs"], "clip_obs", 0.0, 1e6, open_low=True)
     cfg["log_std_init"] = _number(cfg["log_std_init"], "log_std_init", -20.0, 2.0)
+    if "action_noise" in cfg:
+        cfg["action_noise"] = _number(cfg["action_noise"], "action_noise", 0.0, 2.0)
     arch = cfg["net_arch"]
     if not isinstance(arch, list) or not arch or not all(
             isinstance(w, int) and not isinstance(w, bool) and 1 <= w <= 65_536 for w in arch):
@@ -308,13 +318,16 @@ def fit(policy: Any, obs: np.ndarray, labels: np.ndarray, *, updates: int, batch
 
 
 def collect(env: Any, teacher: Policy, steps: int, beta: float, rng: np.random.Generator,
-            student: Optional[Callable[[np.ndarray], np.ndarray]] = None) -> dict[str, Any]:
+            student: Optional[Callable[[np.ndarray], np.ndarray]] = None, *, noise: float = 0.0,
+            noise_rng: Optional[np.random.Generator] = None) -> dict[str, Any]:
     """Runs ``env`` (an SB3 VecEnv; its observations' first 25 entries the current observation)
     from a reset for ``ceil(steps / num_envs)`` vector steps: each step the teacher labels every
     env's observation (its state advances along the trajectory actually flown), and the command
     sent is the teacher's with probability ``beta`` (per env and step, drawn from ``rng``), else
     the student's (``student``: observations -> commands; needed when ``beta < 1``). The teacher
     is told the commands sent (``sent(offset)``, when it has it) and restarted with each episode.
+    ``noise`` > 0 adds Gaussian noise of that standard deviation (from ``noise_rng``) to every
+    command sent, clipped to the flap range; the labels stay the teacher's own commands.
 
     Returns ``obs`` (the visited observations), ``labels`` (the teacher's commands for them),
     ``episodes`` and ``captures`` (of the episodes that ended) and ``agreement`` (the mean squared
@@ -348,9 +361,13 @@ def collect(env: Any, teacher: Policy, steps: int, beta: float, rng: np.random.G
             if acted.any():
                 diff_sum += float(np.sum((u_student[acted] - u_teacher[acted]) ** 2))
                 diff_n += int(acted.sum()) * 4
-            offset = sent.astype(np.float64) - u_teacher.astype(np.float64)
-            if can_sent and np.count_nonzero(offset):
-                teacher.sent(offset)
+        if noise > 0.0:
+            if noise_rng is None:
+                raise ValueError("collect with noise > 0 needs a noise_rng")
+            sent = np.clip(sent + noise * noise_rng.standard_normal((n, 4)), -1.0, 1.0).astype(np.float32)
+        offset = sent.astype(np.float64) - u_teacher.astype(np.float64)
+        if can_sent and np.count_nonzero(offset):
+            teacher.sent(offset)
         obs, _, dones, infos = env.step(sent)
         if dones.any():
             ended = np.flatnonzero(dones)
@@ -496,8 +513,10 @@ def _run(cfg: dict[str, Any], out: Path, meta: dict[str, Any], start: int, make_
                 rng = np.random.Generator(np.random.PCG64(round_seed(cfg["seed"], k, 1)))
                 env.seed(round_seed(cfg["seed"], k, 0, SEED_END - cfg["num_envs"]))
                 steps = cfg["teacher_steps"] if k == 0 else cfg["round_steps"]
+                noise = cfg.get("action_noise") or 0.0
                 data = collect(env, teacher, steps, beta, rng,
-                               student=lambda o: student_actions(model.policy, norm.normalize_obs(o)))
+                               student=lambda o: student_actions(model.policy, norm.normalize_obs(o)), noise=noise,
+                               noise_rng=np.random.Generator(np.random.PCG64(round_seed(cfg["seed"], k, 3))))
                 if k == 0:
                     x = data["obs"].astype(np.float64)
                     norm.obs_rms.mean = x.mean(axis=0)
@@ -539,5 +558,5 @@ def _run(cfg: dict[str, Any], out: Path, meta: dict[str, Any], start: int, make_
         env.close()
 
 
-__all__ = ["DEFAULTS", "RUN_FILES", "TeacherFactory", "beta_of", "collect", "completed_rounds", "default_teacher",
+__all__ = ["DEFAULTS", "OPTIONAL_KEYS", "RUN_FILES", "TeacherFactory", "beta_of", "collect", "completed_rounds", "default_teacher",
            "fit", "is_recipe", "load_recipe", "resume", "round_seed", "student_actions", "train", "validate_recipe"]
