@@ -355,6 +355,23 @@ def test_a_benchmark_fine_tuning_job_starts_from_the_run_of_its_tier_and_seed(tm
     moved = dict(meta["config"], init_from="/elsewhere/runs/nominal_bc_seed1")
     assert run_state.same_recipe(meta["config"], moved)
     assert not run_state.same_recipe(meta["config"], dict(moved, init_from="/elsewhere/runs/nominal_bc_seed0"))
+    # The run records the student it started from: the same student there, it is the job's
+    # training; the student trained again (other weights), it is not, and the benchmark trains
+    # the fine-tuning again, keeping the earlier one under OUT/superseded.
+    run = out / "runs" / "nominal_bc_ppo_seed1"
+    assert meta["init_from_digest"] == training.start_digest(out / "runs" / "nominal_bc_seed1")
+    assert run_state.trained(run, cfg_ft)
+    student_zip = out / "runs" / "nominal_bc_seed1" / "final_model.zip"
+    student_zip.write_bytes(student_zip.read_bytes() + b"\0")
+    assert not run_state.trained(run, cfg_ft)
+    fresh = benchmark.run_job(tuned, str(out), 2, 2, 1, validation_episodes=2)
+    assert fresh["trained_now"] and not fresh["reused"]
+    assert json.loads((run / "run.json").read_text())["init_from_digest"] == training.start_digest(student_zip.parent)
+    assert [p.name for p in (out / "superseded").iterdir()] == ["nominal_bc_ppo_seed1-1"]
+    # A fine-tuned run that recorded no digest (an earlier version's) is not taken for the job's.
+    old = dict(json.loads((run / "run.json").read_text()))
+    old.pop("init_from_digest")
+    assert not run_state.same_start(old, cfg_ft) and run_state.same_start(old, {})
     # The jobs that start afresh keep the keys they always had (no `init_from` entry).
     assert "init_from" not in benchmark.job_key(jobs[0], 2, 2)["job"]
     assert benchmark.job_key(tuned, 2, 2)["job"]["init_from"] == "bc"

@@ -440,13 +440,18 @@ def _portable(config: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _stored_result(run: Path, key: dict[str, Any]) -> Optional[dict[str, Any]]:
-    """The result stored in ``run`` when its key equals ``key`` (None otherwise or unreadable)."""
+def _stored_result(out: str | Path, job: Job, key: dict[str, Any]) -> Optional[dict[str, Any]]:
+    """The result stored in the job's run folder when its key equals ``key`` and, for a
+    fine-tuning, the run it started from is still there unchanged (None otherwise or unreadable)."""
+    run = Path(out) / "runs" / job.name
     try:
         stored = json.loads((run / RESULT_FILE).read_text())
     except (OSError, ValueError):
         return None
     if not isinstance(stored, dict) or stored.get("key") != json.loads(json.dumps(key)):
+        return None
+    if job.source is not None and not run_state.same_start(
+            run_state.read_meta(run) or {}, {"init_from": str(Path(out).resolve() / "runs" / job.source)}):
         return None
     return stored
 
@@ -465,16 +470,16 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
 
     run = Path(out) / "runs" / job.name
     key = job_key(job, episodes, num_envs, validation_episodes)
-    stored = _stored_result(run, key)
+    stored = _stored_result(out, job, key)
     if stored is not None:
         return stored["result"] | {"reused": True}
+    start = None if job.source is None else Path(out).resolve() / "runs" / job.source
     raw = read_json_object(job.train_config, "train_config (training config)")
     raw["env"] = {**(raw.get("env") or {}), "tier": job.tier}  # the recipe's env options (residual, history) stay
     raw["seed"] = job.seed
     raw["total_timesteps"] = job.timesteps
     raw["num_threads"] = num_threads
-    if job.source is not None:  # RL fine-tuning: from the finished run of the same tier and seed
-        start = Path(out).resolve() / "runs" / job.source
+    if start is not None:  # RL fine-tuning: from the finished run of the same tier and seed
         meta = run_state.read_meta(start)
         if not (isinstance(meta, dict) and meta.get("status") == "done"):
             raise ConfigError(f"{job.name} starts from {job.source}, which is not trained in {out}: run its learner "
@@ -1224,8 +1229,8 @@ def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] =
     results, missing = [], []
     for job in every:  # the report covers every finished run in OUT, chosen now or earlier
         if job.name not in by_name:
-            stored = _stored_result(out / "runs" / job.name, job_key(job, config["episodes"], config["num_envs"],
-                                                                                   config["validation_episodes"]))
+            stored = _stored_result(out, job, job_key(job, config["episodes"], config["num_envs"],
+                                                      config["validation_episodes"]))
             if stored is not None:
                 by_name[job.name] = stored["result"] | {"reused": True}
         if job.name in by_name:

@@ -12,7 +12,7 @@ from typing import Any, Optional
 from accd_gym import files
 from accd_gym.learning import distill, training
 
-__all__ = ["continues", "read_meta", "same_recipe", "set_aside", "trained"]
+__all__ = ["continues", "read_meta", "same_recipe", "same_start", "set_aside", "trained"]
 
 
 def same_recipe(stored: Any, cfg: dict[str, Any]) -> bool:
@@ -45,11 +45,25 @@ def read_meta(run: Path) -> Any:
         return None
 
 
+def same_start(meta: dict[str, Any], cfg: dict[str, Any]) -> bool:
+    """A fine-tuning (``init_from``) began from the policy that is in its starting folder now:
+    the digest its ``run.json`` recorded equals the folder's (a student trained again since, or a
+    run of an earlier version that recorded none, does not); true for a config without
+    ``init_from``."""
+    src = cfg.get("init_from")
+    if src is None:
+        return True
+    recorded = meta.get("init_from_digest")
+    return isinstance(recorded, str) and recorded == training.start_digest(src)
+
+
 def trained(run: Path, cfg: dict[str, Any]) -> bool:
-    """``run`` holds a finished training of the config ``cfg`` with its final model and statistics."""
+    """``run`` holds a finished training of the config ``cfg`` with its final model and statistics
+    (a fine-tuning: started from the policy in its ``init_from`` folder now)."""
     meta = read_meta(run)
     return (isinstance(meta, dict) and meta.get("status") == "done" and (run / "final_model.zip").is_file()
-            and (run / "vecnormalize.pkl").is_file() and same_recipe(meta.get("config"), cfg))
+            and (run / "vecnormalize.pkl").is_file() and same_recipe(meta.get("config"), cfg)
+            and same_start(meta, cfg))
 
 
 def continues(run: Path, cfg: dict[str, Any], *, distilled: bool = False) -> bool:
@@ -62,7 +76,8 @@ def continues(run: Path, cfg: dict[str, Any], *, distilled: bool = False) -> boo
         return False
     saved = distill.completed_rounds(run) > 0 if distilled else training.latest_checkpoint(run) is not None
     return (meta.get("status") != "done" and saved
-            and (not distilled or meta.get("trainer") == "distill") and same_recipe(meta.get("config"), cfg))
+            and (not distilled or meta.get("trainer") == "distill") and same_recipe(meta.get("config"), cfg)
+            and same_start(meta, cfg))
 
 
 def set_aside(run: Path) -> Optional[Path]:

@@ -76,6 +76,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import hashlib
 import json
 import math
 import re
@@ -247,6 +248,21 @@ def actor_dim(cfg: dict[str, Any]) -> int:
     :data:`accd_gym.learning.asymmetric.TRUE_DIM` more."""
     options, _ = split_agent_options(cfg["env"])
     return int(options.observation_space().shape[0])
+
+
+def start_digest(folder: str | Path) -> Optional[str]:
+    """SHA-256 of the policy a fine-tuning starts from (``init_from``): its ``final_model.zip`` and
+    ``vecnormalize.pkl``, or None where either is missing. A fine-tuned run records it
+    (``run.json``'s ``init_from_digest``), so that a run started from a student that has since
+    been trained again is told apart from one started from the student there now."""
+    digest = hashlib.sha256()
+    for name in ("final_model.zip", "vecnormalize.pkl"):
+        try:
+            data = (Path(folder) / name).read_bytes()
+        except OSError:
+            return None
+        digest.update(name.encode() + b"\0" + len(data).to_bytes(8, "little") + data)
+    return digest.hexdigest()
 
 
 def _init_from(model: Any, env: Any, cfg: dict[str, Any]) -> None:
@@ -759,6 +775,8 @@ def train(
     _one_blas_thread()
     env, model = _new_model(cfg, out)
     meta = {"algo": cfg["algo"], "config": cfg, "status": "training", "total_timesteps": cfg["total_timesteps"]}
+    if cfg.get("init_from") is not None:
+        meta["init_from_digest"] = start_digest(cfg["init_from"])
     _write_meta(out, meta)
     return _learn(model, env, cfg, out, meta, progress=progress, fresh=True)
 
@@ -864,6 +882,8 @@ def resume(run: str | Path, *, progress: bool = True, report: Optional[Callable[
         meta.setdefault("resumed", []).append({"from_steps": 0, "checkpoint": None})
         _note_checkpoint(meta, None)
         meta.update(status="training", timesteps=0)
+        if cfg.get("init_from") is not None:
+            meta["init_from_digest"] = start_digest(cfg["init_from"])
         _write_meta(out, meta)
         return _learn(model, env, cfg, out, meta, progress=progress, fresh=True)
     skipped: list[str] = []
