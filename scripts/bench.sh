@@ -20,13 +20,13 @@ EXACT='{"wake": {"sampling": "per_stage"}, "turbulence": {"normal_sampler": "box
 {
   echo "date: $(date -u +%FT%TZ)  load: $(cut -d' ' -f1-3 /proc/loadavg)  cores: $(nproc)"
   echo "== criterion: tether"
-  cargo bench -q -p accd-tether --bench tether -- --warm-up-time 1 --measurement-time 3 recursive 2>&1 | grep -E "time:|^[a-z_/0-9]+ *$|recursive" || true
+  cargo bench -q -p accd-tether --features bench --bench tether -- --warm-up-time 1 --measurement-time 3 recursive 2>&1 | grep -E "time:|^[a-z_/0-9]+ *$|recursive" || true
   echo "== criterion: capture-system physics step"
-  cargo bench -q -p accd-sim --bench capture -- --warm-up-time 1 --measurement-time 3 2>&1 | grep -E "time:|physics_step" || true
+  cargo bench -q -p accd-sim --features bench --bench capture -- --warm-up-time 1 --measurement-time 3 2>&1 | grep -E "time:|physics_step" || true
   echo "== capture-system step / tether alone, interleaved rounds (minimum per step)"
   cargo run -q --release -p accd-sim --example capture_ratio 2>&1 || true
   echo "== criterion: batch env"
-  cargo bench -q -p accd-batch --bench batch -- --warm-up-time 1 --measurement-time 4 2>&1 | grep -E "time:|thrpt:|batch_step" || true
+  cargo bench -q -p accd-batch --features bench --bench batch -- --warm-up-time 1 --measurement-time 4 2>&1 | grep -E "time:|thrpt:|batch_step" || true
   echo "== physics steps side by side (one process)"
   "$ACCD_PY" scripts/bench_physics.py --json "$OUT/physics.json"
   echo "== Python envs, default (fast) scheme"

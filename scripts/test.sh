@@ -31,7 +31,8 @@ rust_checks() {
   echo "== cargo fmt --check [$SECONDS s]"
   cargo fmt --all -- --check
   echo "== cargo clippy (warnings are errors) [$SECONDS s]"
-  cargo clippy --workspace --all-targets --profile ci -q -- -D warnings
+  # (the criterion benchmarks included: their crates' `bench` feature)
+  cargo clippy --workspace --all-targets --features accd-sim/bench,accd-batch/bench,accd-tether/bench --profile ci -q -- -D warnings
   echo "== cargo test (profile ci: release optimisation, no LTO) [$SECONDS s]"
   # The bindings crate is a cdylib built and tested through Python below.
   cargo test --profile ci --workspace --exclude accd-py

@@ -7,7 +7,7 @@
 //! default 0.01 s of explicit RK4 (attachment) beside the implicit scheme (attachment and
 //! distributed) at n = 30, 100.
 //!
-//! Run: `cargo bench -p accd-tether --bench tether -- --warm-up-time 1 --measurement-time 3`
+//! Run: `cargo bench -p accd-tether --features bench --bench tether -- --warm-up-time 1 --measurement-time 3`
 //! (results and machine in BENCHMARKS.md at the repository root).
 
 use std::hint::black_box;
