@@ -5,7 +5,7 @@
 # Does its own set-up.
 #
 # The Rust checks need no Python, so they run while scripts/setup.sh installs the Python side
-# (pip's downloads and unpacking leave the processors mostly idle); their output is printed when
+# (its downloads leave the processors mostly idle); their output is printed when
 # they end. Cargo's lock on the build folder orders the two builds that share it.
 #
 # The wheel job proves that the wheel works without Rust: it packs the extension the set-up built
@@ -33,8 +33,11 @@ rust_checks() {
   echo "== cargo clippy (warnings are errors) [$SECONDS s]"
   # (the criterion benchmarks included: their crates' `bench` feature)
   cargo clippy --workspace --all-targets --features accd-sim/bench,accd-batch/bench,accd-tether/bench --profile ci -q -- -D warnings
-  echo "== cargo test (profile ci: release optimisation, no LTO) [$SECONDS s]"
+  echo "== cargo test: build (profile ci: release optimisation, no LTO) [$SECONDS s]"
   # The bindings crate is a cdylib built and tested through Python below.
+  cargo test --profile ci --workspace --exclude accd-py --no-run -q
+  : >"$LOGS/rust-built"
+  echo "== cargo test: run [$SECONDS s]"
   cargo test --profile ci --workspace --exclude accd-py
   # The build of a processor without AVX2 and FMA must give the recorded fingerprint too.
   echo "== the Rust fingerprint with ACCD_GYM_ARITHMETIC=portable [$SECONDS s]"
@@ -180,8 +183,12 @@ echo "$ACCD_PY" >"$LOGS/setup-done"
 
 finish "$CHROMIUM" "chromium install" "$LOGS/chromium"
 
-# pytest starts as soon as the extension is installed; the Rust checks' last test binaries and
-# runs (they need no Python) end beside it, and their log is printed after it.
+# pytest starts once the extension is installed and the Rust checks' builds are done: pytest's
+# workers, several tests timing Ray's processes and subprocesses among them, run half as fast
+# beside a compiler. The Rust test runs (they need no Python) end beside it; their log is
+# printed after it.
+until [ -e "$LOGS/rust-built" ] || ! kill -0 "$RUST" 2>/dev/null; do sleep 2; done
+[ -e "$LOGS/rust-built" ] || finish "$RUST" "Rust checks" "$LOGS/rust"
 echo "== pytest (two workers; the slowest tests listed at the end; the Rust checks' end and the wheel job run meanwhile) [$SECONDS s]"
 "$ACCD_PY" -m pytest -q -n 2 --dist worksteal --durations=15 tests
 echo "== pytest done [$SECONDS s]"
