@@ -27,7 +27,9 @@ project = tomllib.load(open(sys.argv[1], "rb"))["project"]
 extras = [e for e in sys.argv[2].split(",") if e]
 print("\n".join(project["dependencies"] + [r for e in extras for r in project["optional-dependencies"][e]]))
 PY
-  "$VENV/bin/uv" pip install -q --python "$VENV/bin/python" -r "$VENV/accd-requirements.txt"
+  # --compile-bytecode as pip does: without the .pyc files every new process (Ray's workers, the
+  # tests' subprocesses) compiles the modules it imports again.
+  "$VENV/bin/uv" pip install -q --compile-bytecode --python "$VENV/bin/python" -r "$VENV/accd-requirements.txt"
 fi
 # The README's install command: the package in editable mode with its extras. pip builds the Rust
 # extension through maturin (release profile, pyproject.toml) and installs what is still missing.
