@@ -25,7 +25,7 @@ if "${PIP[@]}" install "uv>=0.5" >/dev/null 2>&1; then
 import sys, tomllib
 project = tomllib.load(open(sys.argv[1], "rb"))["project"]
 extras = [e for e in sys.argv[2].split(",") if e]
-print("\n".join(project["dependencies"] + [r for e in extras for r in project["optional-dependencies"][e]]))
+print("\n".join(project["dependencies"] + [r for e in extras for r in project["optional-dependencies"].get(e, [])]))
 PY
   # --compile-bytecode as pip does: without the .pyc files every new process (Ray's workers, the
   # tests' subprocesses) compiles the modules it imports again.
