@@ -371,7 +371,7 @@ def test_a_benchmark_fine_tuning_job_starts_from_the_run_of_its_tier_and_seed(tm
     # A fine-tuned run that recorded no digest (an earlier version's) is not taken for the job's.
     old = dict(json.loads((run / "run.json").read_text()))
     old.pop("init_from_digest")
-    assert not run_state.same_start(old, cfg_ft) and run_state.same_start(old, {})
+    assert not run_state.same_start(old, cfg_ft["init_from"]) and run_state.same_start(old, None)
     # The jobs that start afresh keep the keys they always had (no `init_from` entry).
     assert "init_from" not in benchmark.job_key(jobs[0], 2, 2)["job"]
     assert benchmark.job_key(tuned, 2, 2)["job"]["init_from"] == "bc"

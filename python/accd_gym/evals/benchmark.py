@@ -440,6 +440,12 @@ def _portable(config: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def _start_folder(out: str | Path, job: Job) -> Optional[Path]:
+    """The run folder a fine-tuning job starts from (its learner's ``init_from``: the run of the
+    same tier and seed in ``out``), or None for a job that starts afresh."""
+    return None if job.source is None else Path(out).resolve() / "runs" / job.source
+
+
 def _stored_result(out: str | Path, job: Job, key: dict[str, Any]) -> Optional[dict[str, Any]]:
     """The result stored in the job's run folder when its key equals ``key`` and, for a
     fine-tuning, the run it started from is still there unchanged (None otherwise or unreadable)."""
@@ -450,8 +456,7 @@ def _stored_result(out: str | Path, job: Job, key: dict[str, Any]) -> Optional[d
         return None
     if not isinstance(stored, dict) or stored.get("key") != json.loads(json.dumps(key)):
         return None
-    if job.source is not None and not run_state.same_start(
-            run_state.read_meta(run) or {}, {"init_from": str(Path(out).resolve() / "runs" / job.source)}):
+    if not run_state.same_start(run_state.read_meta(run), _start_folder(out, job)):
         return None
     return stored
 
@@ -473,7 +478,7 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
     stored = _stored_result(out, job, key)
     if stored is not None:
         return stored["result"] | {"reused": True}
-    start = None if job.source is None else Path(out).resolve() / "runs" / job.source
+    start = _start_folder(out, job)
     raw = read_json_object(job.train_config, "train_config (training config)")
     raw["env"] = {**(raw.get("env") or {}), "tier": job.tier}  # the recipe's env options (residual, history) stay
     raw["seed"] = job.seed

@@ -365,9 +365,10 @@ def collect(env: Any, teacher: Policy, steps: int, beta: float, rng: np.random.G
             if noise_rng is None:
                 raise ValueError("collect with noise > 0 needs a noise_rng")
             sent = np.clip(sent + noise * noise_rng.standard_normal((n, 4)), -1.0, 1.0).astype(np.float32)
-        offset = sent.astype(np.float64) - u_teacher.astype(np.float64)
-        if can_sent and np.count_nonzero(offset):
-            teacher.sent(offset)
+        if can_sent and sent is not u_teacher:  # the teacher's own command unperturbed: nothing to tell
+            offset = sent.astype(np.float64) - u_teacher.astype(np.float64)
+            if np.count_nonzero(offset):
+                teacher.sent(offset)
         obs, _, dones, infos = env.step(sent)
         if dones.any():
             ended = np.flatnonzero(dones)

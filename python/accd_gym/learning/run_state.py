@@ -45,15 +45,14 @@ def read_meta(run: Path) -> Any:
         return None
 
 
-def same_start(meta: dict[str, Any], cfg: dict[str, Any]) -> bool:
-    """A fine-tuning (``init_from``) began from the policy that is in its starting folder now:
-    the digest its ``run.json`` recorded equals the folder's (a student trained again since, or a
-    run of an earlier version that recorded none, does not); true for a config without
-    ``init_from``."""
-    src = cfg.get("init_from")
+def same_start(meta: Any, src: Optional[str | Path]) -> bool:
+    """A run (its ``run.json`` summary ``meta``) of a fine-tuning that starts from the folder
+    ``src`` (``init_from``) began from the policy that is there now: the digest it recorded
+    equals the folder's (a student trained again since, or a run of an earlier version that
+    recorded none, does not); true where ``src`` is None (no fine-tuning)."""
     if src is None:
         return True
-    recorded = meta.get("init_from_digest")
+    recorded = meta.get("init_from_digest") if isinstance(meta, dict) else None
     return isinstance(recorded, str) and recorded == training.start_digest(src)
 
 
@@ -63,7 +62,7 @@ def trained(run: Path, cfg: dict[str, Any]) -> bool:
     meta = read_meta(run)
     return (isinstance(meta, dict) and meta.get("status") == "done" and (run / "final_model.zip").is_file()
             and (run / "vecnormalize.pkl").is_file() and same_recipe(meta.get("config"), cfg)
-            and same_start(meta, cfg))
+            and same_start(meta, cfg.get("init_from")))
 
 
 def continues(run: Path, cfg: dict[str, Any], *, distilled: bool = False) -> bool:
@@ -77,7 +76,7 @@ def continues(run: Path, cfg: dict[str, Any], *, distilled: bool = False) -> boo
     saved = distill.completed_rounds(run) > 0 if distilled else training.latest_checkpoint(run) is not None
     return (meta.get("status") != "done" and saved
             and (not distilled or meta.get("trainer") == "distill") and same_recipe(meta.get("config"), cfg)
-            and same_start(meta, cfg))
+            and same_start(meta, cfg.get("init_from")))
 
 
 def set_aside(run: Path) -> Optional[Path]:

@@ -36,7 +36,8 @@ init_from          a run folder (``final_model.zip`` and ``vecnormalize.pkl``) o
                    ``policy_kwargs.log_std_init`` sets) and its observation statistics, which
                    then stay fixed (:class:`accd_gym.learning.callbacks.FrozenStatistics`; the
                    rewards are still normalised as configured): RL fine-tuning (default null:
-                   a fresh policy)
+                   a fresh policy). The run records a digest of that policy
+                   (``run.json``'s ``init_from_digest``, :func:`start_digest`)
 critic_warmup      with ``init_from``: environment steps at the start during which only the
                    critic learns, the actor frozen (:class:`accd_gym.learning.callbacks.CriticWarmup`;
                    default 0)
