@@ -309,3 +309,36 @@ def test_the_lqr_filter_predicts_with_the_command_sent():
         robs, *_ = res.step(a)
         assert np.array_equal(robs[:, :OBS_DIM], obs), t
     assert differs  # the filter's input matters
+
+
+
+@pytest.mark.parametrize("kind", ["residual", "history"])
+def test_a_policy_told_the_commands_sent_continues_as_the_env_that_sent_them(kind):
+    """``sent(offset)`` on a policy's agent side (a teacher whose student flew): its base
+    controller's filter and its history continue exactly as those of the env that sent the
+    commands, bit for bit; a policy not told keeps its own commands and drifts away."""
+    from accd_gym.envs.agent_io import AgentOptions, PolicyAgentIO
+
+    n = 3
+    options = {"residual": RESIDUAL} if kind == "residual" else {"history": 3}
+    env = InAirCaptureVectorEnv(n, **options, **SHORT)
+    plain = InAirCaptureVectorEnv(n, **SHORT)
+    told = PolicyAgentIO(AgentOptions.parse(**options), plain.config)
+    untold = PolicyAgentIO(AgentOptions.parse(**options), plain.config)
+    obs, _ = env.reset(seed=11)
+    pobs, _ = plain.reset(seed=11)
+    rng = np.random.default_rng(5)
+    differs = False
+    for t in range(20):  # within the first episode
+        assert np.array_equal(told.observation(pobs), obs), t
+        differs |= not np.array_equal(untold.observation(pobs), obs)
+        zero = np.zeros((n, ACT_DIM), dtype=np.float32)
+        own = told.command(zero)
+        untold.command(zero)
+        a = rng.uniform(-1, 1, (n, ACT_DIM)).astype(np.float32)
+        sent = np.clip(obs[:, OBS_DIM:OBS_DIM + ACT_DIM] + np.float32(0.3) * a, -1, 1) if kind == "residual" else a
+        told.sent(sent.astype(np.float64) - own.astype(np.float64))
+        obs, *_ = env.step(a)
+        pobs, *_ = plain.step(sent)
+        assert np.array_equal(obs[:, :OBS_DIM], pobs), t
+    assert differs

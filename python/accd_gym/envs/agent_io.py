@@ -186,6 +186,20 @@ class AgentIO:
         self._sent = np.clip(self._base_u + correction, -1.0, 1.0) if self._corrected else self._base_u
         return self._sent
 
+    def sent(self, offset: np.ndarray) -> None:
+        """The commands actually sent differ from :meth:`command`'s by ``offset`` ((N, 4),
+        flap-limit units; e.g. a teacher whose student flew): the base controller's filter and the
+        history take the commands sent at the next :meth:`advance`. A zero offset changes
+        nothing, bit for bit."""
+        offset = np.asarray(offset, dtype=np.float64)
+        if offset.shape != self._sent.shape:
+            raise ValueError(f"offset has shape {offset.shape}, expected {self._sent.shape}")
+        if not np.count_nonzero(offset):
+            return
+        self._sent = np.clip(self._sent.astype(np.float64) + offset, -1.0, 1.0).astype(np.float32)
+        if self._base is not None:
+            self._corrected = True
+
     def advance(
         self,
         obs: np.ndarray,
@@ -331,6 +345,13 @@ class PolicyAgentIO:
         """The flap commands for the network's ``actions`` (unchanged without residual control)."""
         return actions if self._io is None else self._io.command(actions)
 
+    def sent(self, offset: np.ndarray) -> None:
+        """The commands actually sent differ from the last :meth:`command`'s by ``offset``
+        ((N, 4)): the base controller and the history continue with the commands sent
+        (:meth:`AgentIO.sent`; nothing before the first observation)."""
+        if self._io is not None:
+            self._io.sent(offset)
+
     def reset(self, mask: Optional[np.ndarray] = None) -> None:
         """The envs ``mask`` selects (all when None) start new episodes: their base controller and
         history restart at the next :meth:`observation`."""
@@ -357,6 +378,35 @@ class PolicyAgentIO:
             self._io = AgentIO(self.options, self._config, n)
         self._io.set_state(state)
         self._started = None
+
+class AgentSideMethods:
+    """The per-env methods of a policy that runs a trained network through a
+    :class:`PolicyAgentIO` kept in ``self._agent`` (stable-baselines3 models, exported networks):
+    episode restarts, the commands actually sent, and the state, all delegated to it."""
+
+    _agent: PolicyAgentIO
+
+    def reset(self, mask: Optional[np.ndarray] = None) -> None:
+        """The envs ``mask`` selects (all when None) start new episodes: their base controller and
+        history restart at the next ``predict`` (nothing to do without env options)."""
+        self._agent.reset(mask)
+
+    def sent(self, offset: np.ndarray) -> None:
+        """The commands actually sent differ from the last ``predict``'s by ``offset`` ((N, 4)):
+        a network trained with residual/history options continues with the commands sent (its
+        base controller's filter, its history), as a teacher whose student flew must; nothing to
+        do without env options."""
+        self._agent.sent(offset)
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        """The per-env agent state (the base controller, the history;
+        :meth:`AgentIO.get_state`), empty without env options or before the first ``predict``."""
+        return self._agent.get_state()
+
+    def set_state(self, state: Mapping[str, np.ndarray]) -> None:
+        """Restores a state of :meth:`get_state` (of a batch of the same size)."""
+        self._agent.set_state(state)
+
 
 class AgentInterface(gym.Wrapper):
     """Residual control and observation history around a single env (``InAirCaptureEnv``, or

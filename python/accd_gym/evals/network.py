@@ -34,11 +34,11 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Any, Mapping, Optional
+from typing import Any, Optional
 
 import numpy as np
 
-from accd_gym.envs.agent_io import PolicyAgentIO, physics_config, split_agent_options
+from accd_gym.envs.agent_io import AgentSideMethods, PolicyAgentIO, physics_config, split_agent_options
 from accd_gym.errors import ConfigError
 
 #: The file name of an exported network in a shipped policy's folder.
@@ -207,7 +207,7 @@ class Network:
         return np.clip(a, self._low, self._high)
 
 
-class NetworkPolicy:
+class NetworkPolicy(AgentSideMethods):
     """A shipped policy evaluated from its exported network (:class:`Network`), without PyTorch or
     stable-baselines3: ``predict(obs) -> flap commands`` on the plain env, as
     :class:`accd_gym.evals.policies.SB3Policy` does with the stable-baselines3 model.
@@ -246,17 +246,3 @@ class NetworkPolicy:
             o = self._agent.observation(o)
         actions = np.clip(self.network.actions(o), -1.0, 1.0)
         return self._agent.command(actions)
-
-    def reset(self, mask: Optional[np.ndarray] = None) -> None:
-        """The envs ``mask`` selects (all when None) start new episodes: their base controller and
-        history restart at the next :meth:`predict` (nothing to do without env options)."""
-        self._agent.reset(mask)
-
-    def get_state(self) -> dict[str, np.ndarray]:
-        """The per-env agent state (the base controller, the history), empty without env options
-        or before the first :meth:`predict`."""
-        return self._agent.get_state()
-
-    def set_state(self, state: Mapping[str, np.ndarray]) -> None:
-        """Restores a state of :meth:`get_state` (of a batch of the same size)."""
-        self._agent.set_state(state)

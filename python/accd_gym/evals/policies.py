@@ -10,14 +10,14 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
-from typing import Any, Optional, Mapping
+from typing import Any, Optional
 
 import numpy as np
 
 from accd_gym.control.baselines import guidance_from_tuning
 from accd_gym.control.lqr import is_lqr_tuning, lqr_from_tuning
 from accd_gym.control.registry import CONTROLLERS, Policy, make_controller
-from accd_gym.envs.agent_io import AgentOptions, PolicyAgentIO, physics_config, split_agent_options
+from accd_gym.envs.agent_io import AgentOptions, AgentSideMethods, PolicyAgentIO, physics_config, split_agent_options
 from accd_gym.envs.task import OBS_DIM
 from accd_gym.errors import ConfigError
 from accd_gym.evals.network import NetworkPolicy
@@ -26,7 +26,8 @@ from accd_gym.files import read_user_json
 from accd_gym.learning.rllib import RLlibPolicy, is_rllib_run
 from accd_gym.learning.training import latest_checkpoint, load_model, load_statistics, model_algo
 
-class SB3Policy:
+
+class SB3Policy(AgentSideMethods):
     """A trained stable-baselines3 model (PPO or SAC) with its VecNormalize statistics, deterministic.
 
     ``path``: a run folder (``final_model.zip`` and ``vecnormalize.pkl`` in it; for a run that was
@@ -148,21 +149,6 @@ class SB3Policy:
         actions = np.clip(np.asarray(actions, dtype=np.float32), -1.0, 1.0)
         return self._agent.command(actions)
 
-    def reset(self, mask: Optional[np.ndarray] = None) -> None:
-        """The envs ``mask`` selects (all when None) start new episodes: their base controller and
-        history restart at the next :meth:`predict` (nothing to do without env options)."""
-        self._agent.reset(mask)
-
-    def get_state(self) -> dict[str, np.ndarray]:
-        """The per-env agent state of a model trained with env options (the base controller, the
-        history; :meth:`accd_gym.envs.agent_io.AgentIO.get_state`), empty without them or before
-        the first :meth:`predict`."""
-        return self._agent.get_state()
-
-    def set_state(self, state: Mapping[str, np.ndarray]) -> None:
-        """Restores a state of :meth:`get_state` (of a batch of the same size)."""
-        self._agent.set_state(state)
-
 
 def _run_status(run: Path) -> str:
     """The ``status`` of a run folder's run.json ("unknown" without one or with a damaged one)."""
@@ -187,7 +173,6 @@ def _run_algo(model_path: Path) -> Optional[str]:
                                   f"`algo` = {algo!r} is outside the allowed range ['ppo', 'sac']")
             return algo
     return None
-
 
 
 def _critic_inputs_of(model_path: Path) -> int:
