@@ -72,6 +72,10 @@ def test_jobs_follow_the_config():
     assert {j.timesteps for j in res if j.algo == "residual_ppo"} == {3_000_000}
     assert {j.timesteps for j in res if j.algo == "residual_sac"} == {500_000}
     assert set(quick["learners"]) == {"ppo", "sac"}
+    # standalone students of the validation-chosen residual SAC run, on the tiers that have it
+    students = [j for j in jobs if j.algo == "dagger_residual_sac"]
+    assert {(j.tier, j.teacher_from) for j in students} == {(t, "residual_sac") for t in ("precision", "hard")}
+    assert len(students) == 10 and all(j.teacher is None for j in students)
 
 
 @pytest.mark.timeout(1800)  # trains every tier with PPO and SAC

@@ -391,6 +391,108 @@ def test_a_fine_tuning_learner_names_a_learner_with_its_tiers_and_seeds(tmp_path
         benchmark.validate_config(raw)
 
 
+def test_a_benchmark_distillation_learns_from_the_validation_chosen_run_of_its_teacher_learner(tmp_path):
+    """``teacher_from``: the student's teacher is the other learner's run of its tier with the
+    best validation record, named by its folder and recorded by its digest; a teacher trained
+    again makes the student stale; the job waits for the teacher learner's runs."""
+    from accd_gym.evals import benchmark
+    from accd_gym.learning import run_state
+
+    bc = tmp_path / "bc.json"
+    bc.write_text(json.dumps(_recipe(teacher="lqr", rounds=0, env={"history": 1}, updates=20)))
+    student = tmp_path / "student.json"
+    student.write_text(json.dumps(_recipe(teacher="lqr", rounds=1, env={"history": 2}, beta={"start": 0.5}, updates=20)))
+    raw = {"tiers": ["nominal"], "baselines": ["zero"], "episodes": 2, "validation_episodes": 2, "num_envs": 2,
+           "learners": {"bc": {"train_config": str(bc), "seeds": [0, 1], "timesteps": 256},
+                        "bc_dagger": {"train_config": str(student), "seeds": [3], "timesteps": 512, "teacher_from": "bc"}}}
+    cfg = benchmark.validate_config(raw)
+    (job,) = [j for j in benchmark.jobs(cfg) if j.algo == "bc_dagger"]
+    assert job.teacher_from == "bc" and job.teacher is None
+    out = tmp_path / "bench"
+    with pytest.raises(benchmark.ConfigError, match="not every bc run of nominal is finished.*--algos bc"):
+        benchmark.run_job(job, str(out), 2, 2, 1, validation_episodes=2)
+    assert benchmark.with_teacher(job, out, cfg) == job  # nothing finished: no teacher
+    doc = benchmark.run(cfg, out, progress=lambda _: None)
+    assert {r["name"] for r in doc["runs"]} >= {"nominal_bc_seed0", "nominal_bc_seed1", "nominal_bc_dagger_seed3"}
+    records = {}
+    for name in ("nominal_bc_seed0", "nominal_bc_seed1"):
+        stored = json.loads((out / "runs" / name / "result.json").read_text())["result"]
+        records[name] = stored["validation"]["captured"]
+    chosen = benchmark.choose_run(records)
+    resolved = benchmark.with_teacher(job, out, cfg)
+    assert resolved.teacher == chosen and resolved.name == job.name
+    run = out / "runs" / "nominal_bc_dagger_seed3"
+    meta = json.loads((run / "run.json").read_text())
+    teacher = out.resolve() / "runs" / chosen
+    assert meta["config"]["teacher"] == str(teacher) and meta["teacher_digest"] == training.start_digest(teacher)
+    key = benchmark.job_key(resolved, 2, 2, 2)["job"]
+    assert key["teacher_from"] == "bc" and key["teacher"] == chosen
+    assert "teacher" not in benchmark.job_key(benchmark.jobs(cfg)[0], 2, 2)["job"]
+    # The folder moved: the same training (the teacher by its folder's name and digest).
+    assert run_state.same_recipe(meta["config"], dict(meta["config"], teacher=f"/elsewhere/runs/{chosen}"))
+    # The teacher trained again (other weights): the student is stale and trained again, the
+    # earlier one kept under OUT/superseded.
+    cfg_student = distill.validate_recipe(meta["config"])
+    assert run_state.trained(run, cfg_student)
+    model = teacher / "final_model.zip"
+    model.write_bytes(model.read_bytes() + b"\0")
+    assert not run_state.trained(run, cfg_student)
+    fresh = benchmark.run_job(resolved, str(out), 2, 2, 1, validation_episodes=2)
+    assert fresh["trained_now"] and not fresh["reused"]
+    assert json.loads((run / "run.json").read_text())["teacher_digest"] == training.start_digest(teacher)
+    assert [p.name for p in (out / "superseded").iterdir()] == ["nominal_bc_dagger_seed3-1"]
+
+
+def test_an_interrupted_distillation_resumes_only_with_its_teacher_unchanged(tmp_path):
+    from accd_gym.evals import benchmark
+
+    teacher = tmp_path / "teacher"
+    distill.train(_recipe(teacher="lqr", rounds=0, env={"history": 1}, updates=20), teacher,
+                  make_teacher=benchmark._teacher)
+    run = tmp_path / "s"
+    cfg = _recipe(teacher=str(teacher), rounds=2, env={"history": 1}, beta={"start": 0.5}, updates=20)
+    meta = distill.train(cfg, run, make_teacher=benchmark._teacher)
+    assert meta["teacher_digest"] == distill.teacher_digest(str(teacher)) == training.start_digest(teacher)
+    # An interruption after round 1: the run continues with the same teacher, not another.
+    data = json.loads((run / "run.json").read_text())
+    data["status"] = "interrupted"
+    (run / "run.json").write_text(json.dumps(data))
+    (run / "checkpoints" / "student_02.zip").unlink()
+    model = teacher / "final_model.zip"
+    saved = model.read_bytes()
+    model.write_bytes(saved + b"\0")
+    with pytest.raises(distill.ConfigError, match="taught by another policy than the teacher"):
+        distill.resume(run, make_teacher=benchmark._teacher)
+    model.write_bytes(saved)
+    assert distill.resume(run, make_teacher=benchmark._teacher)["status"] == "done"
+    assert distill.teacher_digest("lqr") is None
+
+
+@pytest.mark.parametrize("learner, needle", [
+    ({"teacher_from": "dagger"}, "another learner of this config that starts afresh"),
+    ({"teacher_from": "bc", "init_from": "bc"}, "sets both `init_from` and `teacher_from`"),
+    ({"teacher_from": "bc", "train_config": "SB3"}, "needs distillation recipes"),
+    ({"teacher_from": "bc", "tiers": ["nominal", "hard"], "train_config": None}, r"no run on the tiers \['hard'\]"),
+])
+def test_a_distillation_learner_names_a_teacher_learner_with_its_tiers(tmp_path, learner, needle):
+    from accd_gym.evals import benchmark
+
+    recipe = tmp_path / "r.json"
+    recipe.write_text(json.dumps(_recipe(teacher="lqr")))
+    sb3 = tmp_path / "sb3.json"
+    sb3.write_text("{}")
+    spec = {"train_config": str(recipe), "seeds": [0], "timesteps": 768, "tiers": ["nominal"], **learner}
+    if spec["train_config"] == "SB3":
+        spec["train_config"] = str(sb3)
+    elif spec["train_config"] is None:
+        spec["train_config"] = str(recipe)
+    raw = {"tiers": ["nominal", "hard"],
+           "learners": {"bc": {"train_config": str(recipe), "seeds": [0], "timesteps": 768, "tiers": ["nominal"]},
+                        "student": spec}}
+    with pytest.raises(benchmark.ConfigError, match=needle):
+        benchmark.validate_config(raw)
+
+
 def test_a_distillation_into_a_folder_that_holds_a_run_is_refused(tmp_path):
     run = tmp_path / "s"
     distill.train(_recipe(rounds=0), run, make_teacher=lambda *a: LinearTeacher())

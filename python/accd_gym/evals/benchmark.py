@@ -65,7 +65,10 @@ learners              ``{"ppo": {"train_config", "seeds", "timesteps", "tiers"},
                       options (residual, history) are kept, its tier set to the job's;
                       ``init_from`` another learner's name: each job starts from that learner's
                       run of the same tier and seed (RL fine-tuning of a distilled student), after
-                      the jobs that start afresh
+                      the jobs that start afresh; ``teacher_from`` another learner's name (for a
+                      distillation recipe): each job's teacher is that learner's run of the same
+                      tier chosen on the validation episodes (e.g. DAgger from the best residual
+                      policy), after the jobs that start afresh
 baselines             baseline names (default ``["zero", "random", "guidance", "lqr"]``; unknown ones
                       are refused)
 episodes              held-out episodes per tier (default 500)
@@ -80,6 +83,7 @@ quick                 overrides for ``--quick`` (its ``learners`` are the quick 
 from __future__ import annotations
 
 import copy
+import dataclasses
 import functools
 import json
 import platform
@@ -121,7 +125,7 @@ DEFAULTS: dict[str, Any] = {
 #: Bootstrap resamples and the seed of their generator.
 BOOTSTRAP_RESAMPLES = 10_000
 BOOTSTRAP_SEED = 0
-_LEARNER_KEYS = ("train_config", "seeds", "timesteps", "tiers", "init_from")
+_LEARNER_KEYS = ("train_config", "seeds", "timesteps", "tiers", "init_from", "teacher_from")
 
 
 def validate_config(raw: Any, *, quick: bool = False, root: Optional[Path] = None) -> dict[str, Any]:
@@ -186,6 +190,7 @@ def validate_config(raw: Any, *, quick: bool = False, root: Optional[Path] = Non
             resolved[tier_name] = str(path)
         spec["train_config"] = resolved if isinstance(recipes, dict) else resolved[None]
     for algo, spec in cfg["learners"].items():
+        _check_teacher_from(algo, spec, cfg["learners"], tiers)
         _check_init_from(algo, spec, cfg["learners"], tiers)
     if not isinstance(cfg["baselines"], list) or [b for b in cfg["baselines"] if b not in CONTROLLERS]:
         raise ConfigError(f"invalid config: `baselines` = {cfg['baselines']!r} is outside the allowed values: a list of {list(CONTROLLERS)}")
@@ -209,15 +214,51 @@ def _check_init_from(algo: str, spec: dict[str, Any], learners: dict[str, Any], 
     source = spec.get("init_from")
     if source is None:
         return
-    other = learners.get(source) if isinstance(source, str) else None
-    if other is None or source == algo or other.get("init_from") is not None:
-        raise ConfigError(f"invalid config: `learners.{algo}.init_from` = {source!r} is outside the allowed values: "
-                          f"another learner of this config that starts afresh ({sorted(k for k, v in learners.items() if k != algo and v.get('init_from') is None)})")
+    other = _fresh_source(algo, "init_from", source, learners)
     mine, theirs = spec["tiers"] or tiers, other["tiers"] or tiers
     missing = [t for t in mine if t not in theirs] + [f"seed {s}" for s in spec["seeds"] if s not in other["seeds"]]
     if missing:
         raise ConfigError(f"invalid config: `learners.{algo}.init_from` = {source!r} has no run for {missing}: "
                           f"each of {algo}'s jobs starts from the {source} run of its tier and seed")
+
+
+def _starts_afresh(spec: dict[str, Any]) -> bool:
+    """A learner whose jobs depend on no other learner's runs."""
+    return spec.get("init_from") is None and spec.get("teacher_from") is None
+
+
+def _fresh_source(algo: str, key: str, source: Any, learners: dict[str, Any]) -> dict[str, Any]:
+    """The learner ``learners.<algo>.<key>`` names; ConfigError unless it is another learner of
+    the config that starts afresh."""
+    other = learners.get(source) if isinstance(source, str) else None
+    if other is None or source == algo or not _starts_afresh(other):
+        raise ConfigError(f"invalid config: `learners.{algo}.{key}` = {source!r} is outside the allowed values: "
+                          f"another learner of this config that starts afresh "
+                          f"({sorted(k for k, v in learners.items() if k != algo and _starts_afresh(v))})")
+    return other
+
+
+def _check_teacher_from(algo: str, spec: dict[str, Any], learners: dict[str, Any], tiers: list[str]) -> None:
+    """ConfigError unless ``learners.<algo>.teacher_from`` (when set) names another learner of
+    the config, itself started afresh, with runs on each of this learner's tiers, and this
+    learner's recipes are distillation recipes (their ``teacher`` is what the option replaces)."""
+    source = spec.get("teacher_from")
+    if source is None:
+        return
+    if spec.get("init_from") is not None:
+        raise ConfigError(f"invalid config: `learners.{algo}` sets both `init_from` and `teacher_from`: a "
+                          "distillation starts afresh from its teacher's labels, a fine-tuning from a run")
+    other = _fresh_source(algo, "teacher_from", source, learners)
+    mine, theirs = spec["tiers"] or tiers, other["tiers"] or tiers
+    missing = [t for t in mine if t not in theirs]
+    if missing:
+        raise ConfigError(f"invalid config: `learners.{algo}.teacher_from` = {source!r} has no run on the tiers {missing}: "
+                          f"each of {algo}'s jobs learns from the {source} run of its tier")
+    recipes = spec["train_config"].values() if isinstance(spec["train_config"], dict) else [spec["train_config"]]
+    for recipe in recipes:
+        if not distill.is_recipe(read_json_object(recipe, "train_config (training config)")):
+            raise ConfigError(f"invalid config: `learners.{algo}.teacher_from` = {source!r} needs distillation recipes "
+                              f"(\"trainer\": \"distill\"); {recipe!r} is not one")
 
 
 def load_config(path: str | Path, *, quick: bool = False) -> dict[str, Any]:
@@ -233,7 +274,9 @@ def load_config(path: str | Path, *, quick: bool = False) -> dict[str, Any]:
 class Job:
     """One training run of the benchmark: an algorithm's recipe on a tier with a seed;
     ``init_from``: the learner whose run of the same tier and seed it starts from (RL
-    fine-tuning of a distilled student), or None."""
+    fine-tuning of a distilled student), or None; ``teacher_from``: the learner whose run of the
+    same tier, chosen on the validation episodes, teaches it (a distillation), or None, and
+    ``teacher`` that run's folder name once chosen (:func:`with_teacher`)."""
 
     tier: str
     algo: str
@@ -241,6 +284,8 @@ class Job:
     train_config: str
     timesteps: int
     init_from: Optional[str] = None
+    teacher_from: Optional[str] = None
+    teacher: Optional[str] = None
 
     @property
     def name(self) -> str:
@@ -261,7 +306,8 @@ def jobs(cfg: dict[str, Any]) -> list[Job]:
             if spec["tiers"] is not None and tier not in spec["tiers"]:
                 continue
             recipe = spec["train_config"][tier] if isinstance(spec["train_config"], dict) else spec["train_config"]
-            out += [Job(tier, algo, s, recipe, spec["timesteps"], spec.get("init_from")) for s in spec["seeds"]]
+            out += [Job(tier, algo, s, recipe, spec["timesteps"], spec.get("init_from"), spec.get("teacher_from"))
+                    for s in spec["seeds"]]
     return out
 
 
@@ -409,8 +455,10 @@ def job_key(job: Job, episodes: int, num_envs: int, validation_episodes: Optiona
     result with another key is not reused."""
     # The recipe by its name and bytes, not its path: a benchmark folder stays valid for a moved
     # or freshly cloned checkout.
-    # (init_from only where set: the keys of the jobs that start afresh are those they always had)
-    fields = {k: v for k, v in job.__dict__.items() if not (k == "init_from" and v is None)}
+    # (init_from and the teacher only where set: the keys of the jobs that start afresh are those
+    # they always had)
+    optional = ("init_from", "teacher_from", "teacher")
+    fields = {k: v for k, v in job.__dict__.items() if not (k in optional and v is None)}
     return {"job": {**fields, "train_config": Path(job.train_config).name},
             "train_config_sha256": _sha256(job.train_config),
             "tier_config": _tier(job.tier).config(), "build": build_digest(), "episodes": episodes,
@@ -446,9 +494,35 @@ def _start_folder(out: str | Path, job: Job) -> Optional[Path]:
     return None if job.source is None else Path(out).resolve() / "runs" / job.source
 
 
+def _teacher_folder(out: str | Path, job: Job) -> Optional[Path]:
+    """The run folder that teaches a distillation job (its learner's ``teacher_from``: the run
+    :func:`with_teacher` chose in ``out``), or None for a job without one."""
+    return None if job.teacher is None else Path(out).resolve() / "runs" / job.teacher
+
+
+def with_teacher(job: Job, out: str | Path, cfg: dict[str, Any]) -> Job:
+    """``job`` with its teacher chosen, for a learner with ``teacher_from``: the run of that
+    learner on the job's tier with the highest capture rate on the validation episodes
+    (:func:`choose_run`; every seed of the config, each with a stored result of the current
+    key). Unchanged when the learner has no ``teacher_from`` or any of those runs is not
+    finished in ``out`` (then ``teacher`` stays None and :func:`run_job` refuses the job)."""
+    if job.teacher_from is None:
+        return job
+    records: dict[str, Sequence[bool]] = {}
+    for source in jobs(cfg):
+        if source.tier == job.tier and source.algo == job.teacher_from:
+            stored = _stored_result(out, source, job_key(source, cfg["episodes"], cfg["num_envs"],
+                                                         cfg["validation_episodes"]))
+            if stored is None or "validation" not in stored["result"]:
+                return job
+            records[source.name] = stored["result"]["validation"]["captured"]
+    return dataclasses.replace(job, teacher=choose_run(records)) if records else job
+
+
 def _stored_result(out: str | Path, job: Job, key: dict[str, Any]) -> Optional[dict[str, Any]]:
     """The result stored in the job's run folder when its key equals ``key`` and, for a
-    fine-tuning, the run it started from is still there unchanged (None otherwise or unreadable)."""
+    fine-tuning, the run it started from is still there unchanged, for a distillation from a
+    trained run, that teacher (None otherwise or unreadable)."""
     run = Path(out) / "runs" / job.name
     try:
         stored = json.loads((run / RESULT_FILE).read_text())
@@ -456,7 +530,11 @@ def _stored_result(out: str | Path, job: Job, key: dict[str, Any]) -> Optional[d
         return None
     if not isinstance(stored, dict) or stored.get("key") != json.loads(json.dumps(key)):
         return None
-    if not run_state.same_start(run_state.read_meta(run), _start_folder(out, job)):
+    meta = run_state.read_meta(run)
+    if not run_state.same_start(meta, _start_folder(out, job)):
+        return None
+    teacher = _teacher_folder(out, job)
+    if not run_state.same_teacher(meta, None if teacher is None else str(teacher)):
         return None
     return stored
 
@@ -490,6 +568,12 @@ def run_job(job: Job, out: str, episodes: int, num_envs: int, num_threads: int =
             raise ConfigError(f"{job.name} starts from {job.source}, which is not trained in {out}: run its learner "
                               f"{job.init_from!r} first (`--algos {job.init_from}`)")
         raw["init_from"] = str(start)
+    if job.teacher_from is not None:  # a distillation taught by another learner's validation-chosen run
+        if job.teacher is None:
+            raise ConfigError(f"{job.name} learns from the {job.teacher_from} run of {job.tier} chosen on the validation "
+                              f"episodes, and not every {job.teacher_from} run of {job.tier} is finished in {out}: run "
+                              f"its learner first (`--algos {job.teacher_from}`)")
+        raw["teacher"] = str(_teacher_folder(out, job))
     distilled = distill.is_recipe(raw)  # a distillation recipe (behaviour cloning, DAgger): its own trainer
     updates = raw.get("update_threads", 0)
     # (A value that is not an integer is left for validate_config to refuse, naming it.)
@@ -533,16 +617,18 @@ def _teacher(spec: str, seed: int, config: dict) -> Any:
 def _run_jobs(todo: list[Job], cfg: dict[str, Any], out: Path, ray_address: Optional[str],
               progress: Callable[[str], None]) -> list[dict[str, Any]]:
     """Runs the jobs locally or as Ray tasks; returns their results in job order. Jobs that
-    start from another run (``init_from``) run after every job that starts afresh."""
-    waves = [[j for j in todo if j.init_from is None], [j for j in todo if j.init_from is not None]]
-    results: dict[Job, dict[str, Any]] = {}
-    for wave in waves:
+    depend on another learner's runs (``init_from``, ``teacher_from``) run after every job that
+    starts afresh, their teachers chosen then (:func:`with_teacher`)."""
+    fresh = [j for j in todo if j.init_from is None and j.teacher_from is None]
+    results: dict[str, dict[str, Any]] = {}
+    for k in range(2):
+        wave = fresh if k == 0 else [with_teacher(j, out, cfg) for j in todo if j not in fresh]
         if wave:
             try:
-                results.update(zip(wave, _run_wave(wave, cfg, out, ray_address, progress)))
+                results.update(zip((j.name for j in wave), _run_wave(wave, cfg, out, ray_address, progress)))
             except _Interrupted as e:
-                raise _Interrupted([results[j] for j in todo if j in results] + e.results, str(e)) from None
-    return [results[j] for j in todo]
+                raise _Interrupted([results[j.name] for j in todo if j.name in results] + e.results, str(e)) from None
+    return [results[j.name] for j in todo]
 
 
 def _run_wave(todo: list[Job], cfg: dict[str, Any], out: Path, ray_address: Optional[str],
@@ -1234,6 +1320,7 @@ def run(config: dict[str, Any], out: str | Path, *, ray_address: Optional[str] =
     results, missing = [], []
     for job in every:  # the report covers every finished run in OUT, chosen now or earlier
         if job.name not in by_name:
+            job = with_teacher(job, out, config)
             stored = _stored_result(out, job, job_key(job, config["episodes"], config["num_envs"],
                                                       config["validation_episodes"]))
             if stored is not None:

@@ -30,7 +30,10 @@ key                meaning
 ================== ================================================================================
 trainer            ``"distill"`` (what tells a recipe from an SB3 or RLlib training config)
 teacher            the teacher policy's spec (default ``"lqr"``; the CLI resolves it like
-                   ``accd-gym evaluate --policy``), built for the env's configuration
+                   ``accd-gym evaluate --policy``: a controller, a shipped policy, a run folder),
+                   built for the env's configuration; a trained teacher (a residual policy) is
+                   told the commands sent too. A teacher given as a path is recorded by its
+                   digest (``run.json``'s ``teacher_digest``): a run resumes only with it unchanged
 env                environment config overrides and env options, as in a training config; the
                    student observes what ``history`` gives (``true_observation`` is not taken)
 seed               seed of the envs (training wake seeds only), the mixing and the network
@@ -77,6 +80,7 @@ RL fine-tuning from the student: a training config with ``init_from`` naming the
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import re
@@ -92,7 +96,7 @@ from accd_gym.envs.agent_io import physics_config, split_agent_options
 from accd_gym.envs.task import OBS_DIM, SEED_END
 from accd_gym.errors import ConfigError, StateError
 from accd_gym.envs.config import read_json_object
-from accd_gym.learning.training import save_model, save_statistics, check_training_env, load_statistics
+from accd_gym.learning.training import save_model, save_statistics, check_training_env, load_statistics, start_digest
 
 #: The files a distillation run folder gets beside ``checkpoints/`` (checked before it starts).
 RUN_FILES = ("run.json", "final_model.zip", "vecnormalize.pkl")
@@ -428,6 +432,20 @@ def _save_data(path: Path, obs: np.ndarray, labels: np.ndarray) -> None:
     files.write_bytes(path, buf.getvalue())
 
 
+def teacher_digest(spec: str) -> Optional[str]:
+    """SHA-256 of a teacher given as a path: a run folder's policy (its model and statistics,
+    :func:`accd_gym.learning.training.start_digest`) or a model file's bytes; None for a name (a
+    registered controller, a shipped policy: the package's own). A run records it, so that a
+    run taught by a teacher trained again since is told apart from one taught by the teacher
+    there now."""
+    path = Path(spec)
+    if path.is_dir():
+        return start_digest(path)
+    if path.is_file():
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+    return None
+
+
 def default_teacher(spec: str, seed: int, config: dict) -> Policy:
     """A registered controller as the teacher (the CLI resolves any policy spec instead)."""
     return make_controller(spec, seed, config)
@@ -449,6 +467,9 @@ def train(recipe: dict[str, Any], out: str | Path, *, make_teacher: Optional[Tea
                           f"interrupted one with `accd-gym distill --resume {out}`, or choose another --out")
     meta = {"algo": "ppo", "trainer": "distill", "method": "bc" if cfg["rounds"] == 0 else "dagger",
             "config": cfg, "status": "training", "total_timesteps": cfg["total_timesteps"], "rounds": []}
+    digest = teacher_digest(cfg["teacher"])
+    if digest is not None:  # (absent for a named teacher: the summaries of runs made before stay as they were)
+        meta["teacher_digest"] = digest
     _write_meta(out, meta)
     return _run(cfg, out, meta, 0, make_teacher, report)
 
@@ -471,6 +492,10 @@ def resume(run: str | Path, *, make_teacher: Optional[TeacherFactory] = None,
         cfg = validate_recipe(meta["config"])
     except ConfigError as e:
         raise ConfigError(f"invalid config: {str(meta_path)!r} holds an invalid recipe: {e}") from None
+    if meta.get("teacher_digest") != teacher_digest(cfg["teacher"]):
+        raise ConfigError(f"invalid config: run {str(run)!r} was taught by another policy than the teacher "
+                          f"{cfg['teacher']!r} there now (trained again or replaced since): its rounds would mix two "
+                          "teachers; start the run afresh in another --out")
     files.writable_folder(out, "--resume", RUN_FILES)
     start = min(completed_rounds(out), cfg["rounds"] + 1)
     meta["rounds"] = [r for r in meta.get("rounds", []) if r.get("round", 0) < start]

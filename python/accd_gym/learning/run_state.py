@@ -20,17 +20,19 @@ def same_recipe(stored: Any, cfg: dict[str, Any]) -> bool:
     that change no result: ``num_threads``, the env-stepping thread count (the batch is bitwise
     identical for any thread count), and ``checkpoint_every``, how often the run is saved. A run
     begun as a Ray task (one thread per job) thus continues or is reused locally (one thread per
-    core), and the other way round. ``init_from`` counts by the name of the run folder it
-    starts from, not its path: a benchmark folder moved or cloned elsewhere keeps its
-    fine-tuned runs."""
+    core), and the other way round. ``init_from`` and a distillation's ``teacher`` count by the
+    name of the run folder they name, not its path: a benchmark folder moved or cloned elsewhere
+    keeps its fine-tuned and distilled runs (their digests, :func:`same_start` and
+    :func:`same_teacher`, tell a policy trained again apart)."""
     if not isinstance(stored, dict):
         return False
     ignore = {"num_threads", "checkpoint_every"}
 
     def comparable(c: dict[str, Any]) -> dict[str, Any]:
         out = {k: v for k, v in c.items() if k not in ignore}
-        if isinstance(out.get("init_from"), str):
-            out["init_from"] = Path(out["init_from"]).name
+        for key in ("init_from", "teacher"):
+            if isinstance(out.get(key), str):
+                out[key] = Path(out[key]).name
         return out
 
     return comparable(stored) == comparable(json.loads(json.dumps(cfg)))
@@ -56,13 +58,24 @@ def same_start(meta: Any, src: Optional[str | Path]) -> bool:
     return isinstance(recorded, str) and recorded == training.start_digest(src)
 
 
+def same_teacher(meta: Any, teacher: Optional[str]) -> bool:
+    """A distillation run (its ``run.json`` summary ``meta``) was taught by the teacher ``teacher``
+    names now: the digest it recorded equals the teacher's now (:func:`distill.teacher_digest`;
+    neither has one for a named teacher); true where ``teacher`` is None (no distillation)."""
+    if teacher is None:
+        return True
+    recorded = meta.get("teacher_digest") if isinstance(meta, dict) else None
+    return recorded == distill.teacher_digest(teacher)
+
+
 def trained(run: Path, cfg: dict[str, Any]) -> bool:
     """``run`` holds a finished training of the config ``cfg`` with its final model and statistics
-    (a fine-tuning: started from the policy in its ``init_from`` folder now)."""
+    (a fine-tuning: started from the policy in its ``init_from`` folder now; a distillation:
+    taught by its teacher as it is now)."""
     meta = read_meta(run)
     return (isinstance(meta, dict) and meta.get("status") == "done" and (run / "final_model.zip").is_file()
             and (run / "vecnormalize.pkl").is_file() and same_recipe(meta.get("config"), cfg)
-            and same_start(meta, cfg.get("init_from")))
+            and same_start(meta, cfg.get("init_from")) and same_teacher(meta, cfg.get("teacher")))
 
 
 def continues(run: Path, cfg: dict[str, Any], *, distilled: bool = False) -> bool:
@@ -76,7 +89,7 @@ def continues(run: Path, cfg: dict[str, Any], *, distilled: bool = False) -> boo
     saved = distill.completed_rounds(run) > 0 if distilled else training.latest_checkpoint(run) is not None
     return (meta.get("status") != "done" and saved
             and (not distilled or meta.get("trainer") == "distill") and same_recipe(meta.get("config"), cfg)
-            and same_start(meta, cfg.get("init_from")))
+            and same_start(meta, cfg.get("init_from")) and same_teacher(meta, cfg.get("teacher")))
 
 
 def set_aside(run: Path) -> Optional[Path]:
