@@ -421,6 +421,13 @@ def test_a_benchmark_distillation_learns_from_the_validation_chosen_run_of_its_t
     chosen = benchmark.choose_run(records)
     resolved = benchmark.with_teacher(job, out, cfg)
     assert resolved.teacher == chosen and resolved.name == job.name
+    # The held-out records play no part: made to favour the other run, the choice stays.
+    for name, value in records.items():
+        path = out / "runs" / name / "result.json"
+        doc = json.loads(path.read_text())
+        doc["result"]["episodes"]["captured"] = [name != chosen] * 2
+        path.write_text(json.dumps(doc))
+    assert benchmark.with_teacher(job, out, cfg).teacher == chosen
     run = out / "runs" / "nominal_bc_dagger_seed3"
     meta = json.loads((run / "run.json").read_text())
     teacher = out.resolve() / "runs" / chosen
