@@ -60,7 +60,13 @@ def test_jobs_follow_the_config():
     ppo = [j for j in jobs if j.algo == "ppo"]
     sac = [j for j in jobs if j.algo == "sac"]
     assert len(ppo) == 5 * len(cfg["tiers"]) and {j.seed for j in ppo} == {0, 1, 2, 3, 4}
-    assert not sac  # plain SAC only in the quick run (docs/decisions.md)
+    assert not sac  # the untuned plain SAC recipe only in the quick run (docs/decisions.md)
+    # plain PPO and SAC tuned on validation episodes, at the rl-zoo3 budgets, on precision and hard
+    tuned = [j for j in jobs if j.algo in ("ppo_tuned", "sac_tuned")]
+    assert {(j.algo, j.tier) for j in tuned} == {(a, t) for a in ("ppo_tuned", "sac_tuned") for t in ("precision", "hard")}
+    assert all(j.train_config.endswith(f"{j.algo[:3]}_{j.tier}.json") for j in tuned) and len(tuned) == 20
+    assert {j.timesteps for j in tuned if j.algo == "ppo_tuned"} == {3_000_000}
+    assert {j.timesteps for j in tuned if j.algo == "sac_tuned"} == {500_000}
     assert cfg["episodes"] == 500
     quick = benchmark.load_config(ROOT / "training" / "benchmark.json", quick=True)
     assert quick["episodes"] == quick["validation_episodes"] == 4 and quick["learners"]["ppo"]["timesteps"] == 4096
