@@ -187,3 +187,26 @@ def test_a_sweeps_baselines_run_on_its_episodes_without_the_agents_options(tmp_p
         assert rates[name]["captures"] == sum(e.captured for e in eps) and rates[name]["episodes"] == 4
     with pytest.raises(accd_gym.ConfigError, match=r"`baselines` = \['pid'\] is outside the allowed values"):
         sweep.validate_config({"train_config": str(train), "baselines": ["pid"]})
+
+
+def test_a_sweeps_trials_are_reported_finished_failed_or_unfinished():
+    """A trial that stopped without an error (the sweep interrupted) is said to be unfinished
+    and resumable, not 'failed: None'; an error is reported by its text."""
+    from accd_gym.evals import sweep
+
+    params = {"seed": 1, "point": {"algo_kwargs.learning_rate": 1e-4}}
+    metrics = {"capture_rate": 0.5, "captures": 10, "episodes": 20, "seed": 1, "trainer": "sb3", "algo": "ppo",
+               "timesteps": 64, "train_wall_s": 1.0, "steps_per_s": 64.0, "miss_distance_median_m": 0.2,
+               "trial": sweep.trial_name(1, params["point"]), "status": "done", "run": "x"}
+    finished, record = sweep.trial_record(params, metrics, None)
+    assert finished and record["capture_rate"] == 0.5 and record["point"] == params["point"]
+    assert record["capture_rate_ci95"][0] < 0.5 < record["capture_rate_ci95"][1]
+    stopped, record = sweep.trial_record(params, {}, None)
+    assert not stopped and record["error"] == sweep.UNFINISHED and record["trial"] == metrics["trial"]
+    failed, record = sweep.trial_record(params, None, ValueError("bad\n  value"))
+    assert not failed and record["error"] == "bad value"
+    doc = {"config": {"train_config": "r.json", "eval_split": "validation", "episodes": 20}, "trials": [],
+           "failed": [sweep.trial_record(params, {}, None)[1], record], "aggregates": [], "baselines": {},
+           "wall_time_s": 1.0}
+    table = sweep.summary_markdown(doc)
+    assert f"| {sweep.UNFINISHED} |" in table and "| failed: bad value |" in table and "failed: None" not in table

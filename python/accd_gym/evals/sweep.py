@@ -60,7 +60,7 @@ import itertools
 import json
 import time
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Optional, Sequence
 
 import numpy as np
 
@@ -331,7 +331,8 @@ def summary_markdown(doc: dict[str, Any]) -> str:
                      f"| {t['captures']}/{t['episodes']} = {t['capture_rate']:.1%} | {lo:.1%} - {hi:.1%} "
                      f"| {t['miss_distance_median_m']:.2f} | {t['steps_per_s']} |")
     for f in doc["failed"]:
-        lines.append(f"| {f['trial']} | {f['seed']} | {f['point']} | failed: {f['error']} | | | | | |")
+        outcome = f["error"] if f["error"] == UNFINISHED else f"failed: {f['error']}"
+        lines.append(f"| {f['trial']} | {f['seed']} | {f['point']} | {outcome} | | | | | |")
     for name, b in doc.get("baselines", {}).items():
         lo, hi = b["capture_rate_ci95"]
         lines.append(f"| baseline {name} | - | - | - | - | {b['captures']}/{b['episodes']} = {b['capture_rate']:.1%} "
@@ -369,6 +370,25 @@ def _restore_signal_handlers(kept: dict[int, Any]) -> None:
             signal.signal(sig, handler)
 
 
+#: What the sweep document says of a trial that neither finished nor raised: the sweep stopped
+#: (Ctrl+C) before or while it ran.
+UNFINISHED = "unfinished: the sweep stopped before this trial ended (a rerun into the same --out resumes it)"
+
+
+def trial_record(params: dict[str, Any], metrics: Optional[dict[str, Any]], error: Any) -> tuple[bool, dict[str, Any]]:
+    """A Tune trial's entry in the sweep document: ``(True, its reported metrics)`` for a trial
+    that finished with its evaluation, else ``(False, {"trial", "seed", "point", "error"})``,
+    the error its exception's text or :data:`UNFINISHED` when it raised none."""
+    m = metrics or {}
+    if error is None and "capture_rate" in m:
+        t = {k: m[k] for k in _REPORTED if k in m}
+        t.update(point=params["point"], capture_rate_ci95=list(wilson_interval(int(m["captures"]), int(m["episodes"]))))
+        return True, t
+    text = UNFINISHED if error is None else " ".join(str(error).split())[:200]
+    return False, {"trial": trial_name(params["seed"], params["point"]), "seed": params["seed"], "point": params["point"],
+                   "error": text}
+
+
 def run(config: dict[str, Any] | str | Path, out: str | Path, *, progress: bool = True) -> dict[str, Any]:
     """Runs a sweep (a validated config or its file) into ``out``; returns the sweep document
     (also ``out/sweep.json``; the table in ``out/summary.md``)."""
@@ -400,16 +420,8 @@ def run(config: dict[str, Any] | str | Path, out: str | Path, *, progress: bool 
         _restore_signal_handlers(kept)
     trials, failed = [], []
     for result in grid:
-        params = result.config
-        name = trial_name(params["seed"], params["point"])
-        m = result.metrics or {}
-        if result.error is None and "capture_rate" in m:
-            t = {k: m[k] for k in _REPORTED if k in m}
-            t.update(point=params["point"], capture_rate_ci95=list(wilson_interval(int(m["captures"]), int(m["episodes"]))))
-            trials.append(t)
-        else:
-            failed.append({"trial": name, "seed": params["seed"], "point": params["point"],
-                           "error": " ".join(str(result.error).split())[:200]})
+        finished, record = trial_record(result.config, result.metrics, result.error)
+        (trials if finished else failed).append(record)
     trials.sort(key=lambda t: (json.dumps(t["point"], sort_keys=True), t["seed"]))
     doc = {"config": cfg, "trials": trials, "failed": failed, "aggregates": aggregate(trials) if trials else [],
            "baselines": baseline_rates(cfg),
@@ -419,5 +431,6 @@ def run(config: dict[str, Any] | str | Path, out: str | Path, *, progress: bool 
     return doc
 
 
-__all__ = ["DEFAULTS", "EVAL_SPLITS", "aggregate", "baseline_rates", "bootstrap_interval", "eval_episodes", "grid_points",
-           "iqm", "load_config", "run", "summary_markdown", "train_config", "train_trial", "trial_name", "validate_config"]
+__all__ = ["DEFAULTS", "EVAL_SPLITS", "UNFINISHED", "aggregate", "baseline_rates", "bootstrap_interval", "eval_episodes", "grid_points",
+           "iqm", "load_config", "run", "summary_markdown", "train_config", "train_trial", "trial_name", "trial_record",
+           "validate_config"]
