@@ -379,6 +379,7 @@ class PolicyAgentIO:
         self._io.set_state(state)
         self._started = None
 
+
 class AgentSideMethods:
     """The per-env methods of a policy that runs a trained network through a
     :class:`PolicyAgentIO` kept in ``self._agent`` (stable-baselines3 models, exported networks):
