@@ -293,6 +293,11 @@ class Job:
         return f"{self.tier}_{self.algo}_seed{self.seed}"
 
     @property
+    def starts_afresh(self) -> bool:
+        """Whether the job depends on no other learner's runs (no ``init_from``, no ``teacher_from``)."""
+        return self.init_from is None and self.teacher_from is None
+
+    @property
     def source(self) -> Optional[str]:
         """The folder name of the run it starts from (None: it starts afresh)."""
         return None if self.init_from is None else f"{self.tier}_{self.init_from}_seed{self.seed}"
@@ -530,11 +535,7 @@ def _stored_result(out: str | Path, job: Job, key: dict[str, Any]) -> Optional[d
         return None
     if not isinstance(stored, dict) or stored.get("key") != json.loads(json.dumps(key)):
         return None
-    meta = run_state.read_meta(run)
-    if not run_state.same_start(meta, _start_folder(out, job)):
-        return None
-    teacher = _teacher_folder(out, job)
-    if not run_state.same_teacher(meta, None if teacher is None else str(teacher)):
+    if not run_state.same_sources(run_state.read_meta(run), _start_folder(out, job), _teacher_folder(out, job)):
         return None
     return stored
 
@@ -619,15 +620,18 @@ def _run_jobs(todo: list[Job], cfg: dict[str, Any], out: Path, ray_address: Opti
     """Runs the jobs locally or as Ray tasks; returns their results in job order. Jobs that
     depend on another learner's runs (``init_from``, ``teacher_from``) run after every job that
     starts afresh, their teachers chosen then (:func:`with_teacher`)."""
-    fresh = [j for j in todo if j.init_from is None and j.teacher_from is None]
     results: dict[str, dict[str, Any]] = {}
-    for k in range(2):
-        wave = fresh if k == 0 else [with_teacher(j, out, cfg) for j in todo if j not in fresh]
+
+    def run_wave(wave: list[Job]) -> None:
         if wave:
             try:
                 results.update(zip((j.name for j in wave), _run_wave(wave, cfg, out, ray_address, progress)))
             except _Interrupted as e:
                 raise _Interrupted([results[j.name] for j in todo if j.name in results] + e.results, str(e)) from None
+
+    run_wave([j for j in todo if j.starts_afresh])
+    # (the teachers are chosen once the runs they are chosen from are finished)
+    run_wave([with_teacher(j, out, cfg) for j in todo if not j.starts_afresh])
     return [results[j.name] for j in todo]
 
 

@@ -12,7 +12,7 @@ from typing import Any, Optional
 from accd_gym import files
 from accd_gym.learning import distill, training
 
-__all__ = ["continues", "read_meta", "same_recipe", "same_start", "set_aside", "trained"]
+__all__ = ["continues", "read_meta", "same_recipe", "same_sources", "same_start", "same_teacher", "set_aside", "trained"]
 
 
 def same_recipe(stored: Any, cfg: dict[str, Any]) -> bool:
@@ -58,14 +58,21 @@ def same_start(meta: Any, src: Optional[str | Path]) -> bool:
     return isinstance(recorded, str) and recorded == training.start_digest(src)
 
 
-def same_teacher(meta: Any, teacher: Optional[str]) -> bool:
+def same_teacher(meta: Any, teacher: Optional[str | Path]) -> bool:
     """A distillation run (its ``run.json`` summary ``meta``) was taught by the teacher ``teacher``
     names now: the digest it recorded equals the teacher's now (:func:`distill.teacher_digest`;
     neither has one for a named teacher); true where ``teacher`` is None (no distillation)."""
     if teacher is None:
         return True
     recorded = meta.get("teacher_digest") if isinstance(meta, dict) else None
-    return recorded == distill.teacher_digest(teacher)
+    return recorded == distill.teacher_digest(str(teacher))
+
+
+def same_sources(meta: Any, init_from: Optional[str | Path], teacher: Optional[str | Path]) -> bool:
+    """The policies a run (its ``run.json`` summary ``meta``) learned from are those there now:
+    the one a fine-tuning started from (:func:`same_start`) and a distillation's teacher
+    (:func:`same_teacher`); None for either: the run has none."""
+    return same_start(meta, init_from) and same_teacher(meta, teacher)
 
 
 def trained(run: Path, cfg: dict[str, Any]) -> bool:
@@ -75,7 +82,7 @@ def trained(run: Path, cfg: dict[str, Any]) -> bool:
     meta = read_meta(run)
     return (isinstance(meta, dict) and meta.get("status") == "done" and (run / "final_model.zip").is_file()
             and (run / "vecnormalize.pkl").is_file() and same_recipe(meta.get("config"), cfg)
-            and same_start(meta, cfg.get("init_from")) and same_teacher(meta, cfg.get("teacher")))
+            and same_sources(meta, cfg.get("init_from"), cfg.get("teacher")))
 
 
 def continues(run: Path, cfg: dict[str, Any], *, distilled: bool = False) -> bool:
@@ -89,7 +96,7 @@ def continues(run: Path, cfg: dict[str, Any], *, distilled: bool = False) -> boo
     saved = distill.completed_rounds(run) > 0 if distilled else training.latest_checkpoint(run) is not None
     return (meta.get("status") != "done" and saved
             and (not distilled or meta.get("trainer") == "distill") and same_recipe(meta.get("config"), cfg)
-            and same_start(meta, cfg.get("init_from")) and same_teacher(meta, cfg.get("teacher")))
+            and same_sources(meta, cfg.get("init_from"), cfg.get("teacher")))
 
 
 def set_aside(run: Path) -> Optional[Path]:
