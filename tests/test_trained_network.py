@@ -96,9 +96,9 @@ def test_actions_are_independent_of_the_batch(name):
 #: forward pass uses IEEE operations alone, so every machine gives these bits.
 ACTIONS_SHA256 = {
     "residual_ppo_hard": "4802e79c20f9b3e3c21b9463b8f546c0abecde9f9758ad1e68675ef6f7664755",
-    "residual_ppo_precision": "7880474a04d9539b5579edce55278fc3becab85ea52d8e4e7fb59fbb58799044",
+    "residual_ppo_precision": "902f078f972bfd5296b737bef2984b54ac77384d1e98a1e5f04868c2420951a7",
     "residual_sac_hard": "8ca231e2c3ff2d640549d5feb99998e7a6e9ae2f6900043d0ff5285bb368c2ae",
-    "residual_sac_precision": "875472c23eda29f4ec5a0573e6e9d2be7aad1e22c93f901bd3ebf5b305e9a710",
+    "residual_sac_precision": "0e87bc1f59497ec1ccc664c8cabac70dc828e3c30a65f567b2ebb102af0fe8cb",
 }
 
 
