@@ -95,6 +95,8 @@ def test_actions_are_independent_of_the_batch(name):
 #: sha256 of the float32 actions of each shipped network on :func:`observations` (64 rows): the
 #: forward pass uses IEEE operations alone, so every machine gives these bits.
 ACTIONS_SHA256 = {
+    "dagger_residual_sac_hard": "1a3d5a0119572c0d09cd94a68f7c2efd4e631f0758a303021431dcf049a6740a",
+    "dagger_residual_sac_precision": "05d2b31190e696dde1607a01deed913f8cf2a58dfb5f97cc7fde465c2432e5de",
     "residual_ppo_hard": "d09924b87ebd355c34a7f879fe1233208198c6be0bb543e5a259497800a4144a",
     "residual_ppo_precision": "902f078f972bfd5296b737bef2984b54ac77384d1e98a1e5f04868c2420951a7",
     "residual_sac_hard": "e6e26fe28a112a1ceae5e9af7d73a6b48bc174c42225e80b1052f8337494440f",

@@ -14,18 +14,23 @@ import pytest
 from accd_gym import ConfigError, trained
 from accd_gym.evals.policies import load_policy
 
-SHIPPED = ["residual_ppo_hard", "residual_ppo_precision", "residual_sac_hard", "residual_sac_precision"]
+SHIPPED = ["dagger_residual_sac_hard", "dagger_residual_sac_precision", "residual_ppo_hard", "residual_ppo_precision",
+           "residual_sac_hard", "residual_sac_precision"]
 #: A shipped policy's files at most (bytes): SAC's model holds its actor, two critics and their
 #: targets (256 x 256 each), PPO's one actor-critic; the exported actor (network.npz) adds about
-#: a sixth.
-MAX_BYTES = {"ppo": 700_000, "sac": 3_000_000}
+#: a sixth. A distilled student is a PPO model (its critic untrained) whose input is the last 8
+#: observations and commands, so its first layers are wider, and its exported actor a third.
+MAX_BYTES = {"ppo": 700_000, "sac": 3_000_000, "distill": 1_800_000}
 
 
 def test_catalog_lists_the_shipped_policies_and_their_metadata():
     assert trained.available() == SHIPPED
     for name in SHIPPED:
         doc = trained.info(name)
-        assert doc["name"] == name and doc["tier"] in name and doc["algo"] in name
+        # Named for the benchmark's method and tier the policy was chosen from.
+        assert doc["name"] == name == f"{doc['selection']['method']}_{doc['tier']}"
+        distilled = json.loads((trained.policy_dir(name) / "run.json").read_text()).get("trainer") == "distill"
+        assert distilled or doc["algo"] in name
         held = doc["held_out"]
         assert held["episodes"] == len(held["captured"]) == 500
         assert held["captures"] == held["captured"].count("1")
@@ -35,7 +40,7 @@ def test_catalog_lists_the_shipped_policies_and_their_metadata():
         folder = trained.policy_dir(name)
         sizes = {f.name: f.stat().st_size for f in folder.iterdir()}
         assert set(sizes) == {"final_model.zip", "vecnormalize.pkl", "run.json", "policy.json", "network.npz"}
-        assert sum(sizes.values()) < MAX_BYTES[doc["algo"]], sizes
+        assert sum(sizes.values()) < MAX_BYTES["distill" if distilled else doc["algo"]], sizes
 
 
 def test_unknown_name_is_one_error_naming_the_value_and_the_shipped_names():
